@@ -1,0 +1,216 @@
+"""TOML configuration: defaults, ``--config FILE``, ``--set key=value``, validation.
+
+Layout of a config file::
+
+    [trial]                      # settings of `symfuse trial` (see TrialSettings)
+    object = "cd_drive"
+
+    [segmenter]                  # one section per stage (pipeline.stages.STAGES)
+    use = "table-cluster"        # the implementation, by name: swap a stage here
+
+    [segmenter.table-cluster]    # parameters of one implementation (its Params)
+    min_height_m = 0.02
+
+Files and overrides are deep-merged over the shipped ``default.toml``. Every key is checked:
+an unknown section, key or implementation name, or a value of the wrong type, is a
+:class:`~pipeline.errors.ConfigError` naming the dotted key. Parameters of implementations
+that are not selected are validated too, so a typo never waits for the day it is used.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import importlib.resources
+import tomllib
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+import tomli_w
+
+from .errors import ConfigError
+from .params import build, param, to_toml
+from .registry import StageRegistry
+from .stages import STAGES
+
+
+@dataclasses.dataclass(frozen=True)
+class TrialSettings:
+    """The ``[trial]`` section: the simulated scene of ``symfuse trial``."""
+
+    object: str = param("cd_drive", "catalogue name or path of an OBJ/STL/PLY mesh (metres)")
+    gripper: Literal["pg70", "sdh"] = param("pg70", "hand: Schunk PG-70 or SDH-2")
+    seed: int = param(0, "seed of every random choice in the trial")
+    x_m: float = param(0.0, "object position on the table, robot frame x (m)")
+    y_m: float = param(0.0, "object position on the table, robot frame y (m)")
+    yaw_deg: float = param(0.0, "object rotation about the table normal (deg)")
+
+
+#: Sections that are not stages, and the dataclass each one is validated against.
+SETTINGS_SECTIONS: dict[str, type] = {"trial": TrialSettings}
+
+
+def default_config_text() -> str:
+    """The shipped default config file's text."""
+    return importlib.resources.files("pipeline").joinpath("default.toml").read_text()
+
+
+def _deep_merge(base: dict[str, Any], update: Mapping[str, Any]) -> dict[str, Any]:
+    merged = copy.deepcopy(base)
+    for key, value in update.items():
+        if isinstance(value, Mapping) and isinstance(merged.get(key), dict):
+            merged[key] = _deep_merge(merged[key], value)
+        else:
+            merged[key] = copy.deepcopy(value)
+    return merged
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """Parse a TOML file, turning every failure into a one-line :class:`ConfigError`."""
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"config file '{path}' does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"config file '{path}' cannot be read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"config file '{path}' is not valid TOML: {exc}") from None
+
+
+def parse_override(text: str) -> dict[str, Any]:
+    """Turn ``section.key=value`` into a nested dict.
+
+    The value is read as a TOML value (``20``, ``0.5``, ``true``, ``[1, 2]``, ``"text"``);
+    anything that is not valid TOML is taken as a plain string, so ``estimator.use=icp``
+    works without quotes.
+    """
+    key, sep, raw = text.partition("=")
+    parts = key.strip().split(".")
+    if not sep or not all(p.strip() for p in parts) or len(parts) < 2:
+        raise ConfigError(f"--set '{text}': expected section.key=value")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    nested: dict[str, Any] = {parts[-1].strip(): value}
+    for part in reversed(parts[:-1]):
+        nested = {part.strip(): nested}
+    return nested
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+    """A validated, fully resolved configuration.
+
+    Attributes:
+        settings: the non-stage sections, validated (e.g. ``settings["trial"]``).
+        choices: stage -> selected implementation name.
+        params: stage -> implementation name -> validated ``Params`` instance, for the
+            selected implementation and every implementation the files mention.
+    """
+
+    settings: Mapping[str, Any]
+    choices: Mapping[str, str]
+    params: Mapping[str, Mapping[str, Any]]
+
+    @property
+    def trial(self) -> TrialSettings:
+        return self.settings["trial"]
+
+    def stage_params(self, stage: str) -> Any:
+        """The ``Params`` of the implementation selected for ``stage``."""
+        return self.params[stage][self.choices[stage]]
+
+    def create(self, registry: StageRegistry, stage: str) -> Any:
+        """Instantiate the selected implementation of ``stage`` with its parameters."""
+        name = self.choices[stage]
+        return registry.create(stage, name, to_toml(self.stage_params(stage)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Everything, defaults included, as TOML-ready nested dicts (re-loadable)."""
+        out: dict[str, Any] = {name: to_toml(value) for name, value in self.settings.items()}
+        for stage in STAGES:
+            section: dict[str, Any] = {"use": self.choices[stage]}
+            for impl, params in sorted(self.params[stage].items()):
+                section[impl] = to_toml(params)
+            out[stage] = section
+        return out
+
+    def to_toml(self) -> str:
+        return tomli_w.dumps(self.to_dict())
+
+    def write(self, path: Path) -> Path:
+        """Write the resolved config as TOML; ``--config`` on it reproduces the run."""
+        path = Path(path)
+        path.write_text(
+            "# Resolved symfuse configuration: pass it with --config to repeat this run.\n"
+            + self.to_toml()
+        )
+        return path
+
+
+def _validate(raw: Mapping[str, Any], registry: StageRegistry) -> Config:
+    known_sections = [*SETTINGS_SECTIONS, *STAGES]
+    for section in raw:
+        if section not in known_sections:
+            raise ConfigError(
+                f"unknown config section '{section}' (known: {', '.join(known_sections)})"
+            )
+    settings = {}
+    for section, settings_cls in SETTINGS_SECTIONS.items():
+        values = raw.get(section, {})
+        if not isinstance(values, Mapping):
+            raise ConfigError(f"config key '{section}' must be a table")
+        settings[section] = build(settings_cls, values, section)
+
+    choices: dict[str, str] = {}
+    params: dict[str, dict[str, Any]] = {}
+    for stage in STAGES:
+        section = raw.get(stage, {})
+        if not isinstance(section, Mapping):
+            raise ConfigError(f"config key '{stage}' must be a table")
+        use = section.get("use")
+        if not isinstance(use, str):
+            raise ConfigError(f"config key '{stage}.use' must name a {stage} implementation")
+        params[stage] = {}
+        for key, value in section.items():
+            if key == "use":
+                continue
+            if not isinstance(value, Mapping):
+                raise ConfigError(
+                    f"unknown config key '{stage}.{key}' ({stage} takes 'use' and one table "
+                    "of parameters per implementation)"
+                )
+            registration = _registration(registry, stage, key, f"{stage}.{key}")
+            params[stage][key] = build(registration.cls.Params, value, f"{stage}.{key}")
+        registration = _registration(registry, stage, use, f"{stage}.use")
+        choices[stage] = use
+        params[stage].setdefault(use, registration.cls.Params())
+    return Config(settings=settings, choices=choices, params=params)
+
+
+def _registration(registry: StageRegistry, stage: str, name: str, key: str):
+    names = registry.names(stage)
+    if name not in names:
+        available = ", ".join(names) or "none installed"
+        raise ConfigError(f"config key '{key}': no {stage} named '{name}' (available: {available})")
+    return registry.get(stage, name)
+
+
+def load_config(
+    registry: StageRegistry,
+    files: Iterable[Path] = (),
+    overrides: Iterable[str] = (),
+) -> Config:
+    """Merge the defaults, ``files`` (in order) and ``--set`` ``overrides``; validate.
+
+    Raises:
+        ConfigError: naming the file or dotted key at fault.
+    """
+    raw = tomllib.loads(default_config_text())
+    for path in files:
+        raw = _deep_merge(raw, read_toml(path))
+    for override in overrides:
+        raw = _deep_merge(raw, parse_override(override))
+    return _validate(raw, registry)

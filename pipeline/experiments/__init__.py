@@ -1,0 +1,64 @@
+"""Experiments that ``symfuse sweep NAME`` runs: the paper's figures and tables.
+
+Each experiment is a module in this package exposing::
+
+    NAME: str                 # the name users type after ``symfuse sweep``
+    DESCRIPTION: str          # one line for ``symfuse sweep --help``
+    def tasks(options: ExperimentOptions) -> list[SweepTask]
+    def run_one(params: dict) -> dict          # top-level, picklable, JSON in and out
+    def report(rows: list[dict], out_dir: Path) -> list[Path]
+
+``tasks`` enumerates the grid (each task's ``key`` is unique and stable, so a re-run can skip
+finished ones); ``run_one`` runs a single trial from its JSON parameters and returns one
+JSON-serialisable result row; ``report`` turns all rows into the CSV, the figure PNG(s) and
+``report.md``. :mod:`pipeline.sweep` runs the tasks locally or on Dask.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+#: Experiment name -> module that implements it.
+EXPERIMENTS: dict[str, str] = {
+    "fig8": "pipeline.experiments.fig8",
+    "fig9": "pipeline.experiments.fig9",
+    "fig10": "pipeline.experiments.fig10",
+}
+
+
+@dataclass(frozen=True)
+class SweepTask:
+    """One trial of a sweep: a stable unique ``key`` and the JSON ``params`` for ``run_one``."""
+
+    key: str
+    params: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class ExperimentOptions:
+    """What the user chose on the ``symfuse sweep`` command line.
+
+    Attributes:
+        estimator: estimator implementation name (``iekf``, ``icp``, ``mirror-only``, ...).
+        estimator_params: parameter overrides for it (``[estimator.<name>]`` config values).
+        quick: a reduced grid (a few points per axis) for smoke tests and CI.
+        seed: base seed; every task derives its own seed from this and its key.
+        repeats: trials per grid point where the experiment repeats (None: the paper's).
+    """
+
+    estimator: str = "iekf"
+    estimator_params: Mapping[str, Any] = field(default_factory=dict)
+    quick: bool = False
+    seed: int = 0
+    repeats: int | None = None
+
+
+def experiment_descriptions() -> dict[str, str]:
+    """Experiment name -> its one-line description."""
+    return {
+        name: importlib.import_module(module).DESCRIPTION
+        for name, module in sorted(EXPERIMENTS.items())
+    }

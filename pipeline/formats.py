@@ -1,0 +1,309 @@
+"""Every file format symfuse reads or writes, in one place.
+
+* Point clouds: PLY and PCD (via open3d) or ``.npy`` (an ``(N, 3)`` array); frame R, metres.
+* Contacts: JSON, ``{"frame": "robot", "units": "m", "grasps": [{"taxels": [{"position":
+  [x, y, z], "normal": [nx, ny, nz], "pad": "left", "index": 17}, ...], "plan": {...}},
+  ...]}``, one entry per grasp in the order the grasps happened; ``index`` (the taxel's
+  row-major index within its pad) is optional. Normals point out of the pad into the object
+  and are normalised on reading. The optional ``plan`` records the grasp plan (see
+  :func:`plan_to_json`); PS initialisation uses its predicted contacts for the initial bias.
+* Results: ``result.json`` (see :func:`estimate_to_json`) and ``completed_stage{0,1,2}.ply``.
+
+Readers validate what they read and raise :class:`~pipeline.errors.InputError` with a
+one-line message naming the file and, for JSON, the key path at fault.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError
+from .types import (
+    Bias,
+    Contacts,
+    EstimateResult,
+    GraspPlan,
+    PointCloud,
+    StageEstimate,
+    SymmetryPlane,
+)
+
+CLOUD_SUFFIXES = (".ply", ".pcd", ".npy")
+
+
+def _require_file(path: Path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if not path.is_file():
+        raise InputError(f"{path}: not a file")
+    return path
+
+
+def read_cloud(path: Path) -> PointCloud:
+    """Read an object cloud (frame R, metres) from PLY, PCD or NPY.
+
+    Raises:
+        InputError: missing/unreadable file, unknown suffix, no points, wrong shape, or
+            non-finite coordinates.
+    """
+    path = _require_file(path)
+    suffix = path.suffix.lower()
+    if suffix not in CLOUD_SUFFIXES:
+        raise InputError(f"{path}: unknown cloud format '{suffix}' (use .ply, .pcd or .npy)")
+    if suffix == ".npy":
+        try:
+            points = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{path}: cannot read as .npy: {exc}") from None
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise InputError(f"{path}: expected an (N, 3) array, got shape {points.shape}")
+    else:
+        from .open3d_loader import open3d
+
+        o3d = open3d()
+        with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+            cloud = o3d.io.read_point_cloud(str(path))
+        points = np.asarray(cloud.points)
+    if len(points) == 0:
+        raise InputError(f"{path}: the cloud has no points (empty or unreadable file)")
+    points = np.asarray(points, dtype=np.float64)
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        raise InputError(
+            f"{path}: {int(bad.sum())} point(s) have NaN or infinite coordinates "
+            f"(first at row {int(np.flatnonzero(bad)[0])})"
+        )
+    return PointCloud(points=points, frame="robot")
+
+
+def write_cloud(path: Path, points: np.ndarray) -> Path:
+    """Write ``(N, 3)`` points as PLY/PCD (binary, via open3d) or NPY, by suffix."""
+    path = Path(path)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if path.suffix.lower() == ".npy":
+        np.save(path, points)
+        return path
+    from .open3d_loader import open3d
+
+    o3d = open3d()
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    if not o3d.io.write_point_cloud(str(path), cloud):
+        raise InputError(f"{path}: open3d could not write the cloud")
+    return path
+
+
+def _vector(value: Any, where: str, path: Path) -> np.ndarray:
+    if not (isinstance(value, list) and len(value) == 3):
+        raise InputError(f"{path}: {where} must be a list of 3 numbers")
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+        raise InputError(f"{path}: {where} must be a list of 3 numbers")
+    vector = np.array(value, dtype=np.float64)
+    if not np.isfinite(vector).all():
+        raise InputError(f"{path}: {where} has a NaN or infinite value")
+    return vector
+
+
+@dataclass(frozen=True)
+class RecordedGrasps:
+    """The grasps of a contacts file: contacts per grasp and, when recorded, its plan."""
+
+    contacts: tuple[Contacts, ...]
+    plans: tuple[GraspPlan | None, ...]
+
+
+def contacts_from_json(document: Any, path: Path) -> RecordedGrasps:
+    """Validate a parsed contacts document (see the module docstring)."""
+    if not isinstance(document, dict):
+        raise InputError(f"{path}: the top level must be a JSON object")
+    if document.get("frame", "robot") != "robot":
+        raise InputError(f'{path}: frame must be "robot", got {document.get("frame")!r}')
+    if document.get("units") != "m":
+        raise InputError(f'{path}: units must be "m" (metres), got {document.get("units")!r}')
+    grasps = document.get("grasps")
+    if not isinstance(grasps, list) or not grasps:
+        raise InputError(f"{path}: 'grasps' must be a non-empty list (one entry per grasp)")
+    contacts, plans = [], []
+    for g, grasp in enumerate(grasps):
+        taxels = grasp.get("taxels") if isinstance(grasp, dict) else None
+        if not isinstance(taxels, list) or not taxels:
+            raise InputError(f"{path}: grasps[{g}].taxels must be a non-empty list")
+        positions, normals, pads, indices = [], [], [], []
+        for t, taxel in enumerate(taxels):
+            where = f"grasps[{g}].taxels[{t}]"
+            if not isinstance(taxel, dict):
+                raise InputError(f"{path}: {where} must be an object")
+            positions.append(_vector(taxel.get("position"), f"{where}.position", path))
+            normal = _vector(taxel.get("normal"), f"{where}.normal", path)
+            length = float(np.linalg.norm(normal))
+            if length < 1e-9:
+                raise InputError(f"{path}: {where}.normal has zero length")
+            normals.append(normal / length)
+            pad = taxel.get("pad")
+            if not isinstance(pad, str) or not pad:
+                raise InputError(f"{path}: {where}.pad must be a non-empty string")
+            pads.append(pad)
+            index = taxel.get("index", t)
+            if not isinstance(index, int) or isinstance(index, bool) or index < 0:
+                raise InputError(f"{path}: {where}.index must be a non-negative integer")
+            indices.append(index)
+        contacts.append(Contacts(np.array(positions), np.array(normals), pads, indices))
+        plan = grasp.get("plan")
+        plans.append(None if plan is None else plan_from_json(plan, f"grasps[{g}].plan", path))
+    return RecordedGrasps(tuple(contacts), tuple(plans))
+
+
+def read_contacts(path: Path) -> RecordedGrasps:
+    """Read a contacts JSON file (one entry per grasp, in order)."""
+    path = _require_file(path)
+    try:
+        document = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON: {exc}") from None
+    return contacts_from_json(document, path)
+
+
+def contacts_to_json(
+    grasps: Sequence[Contacts], plans: Sequence[GraspPlan | None] | None = None
+) -> dict[str, Any]:
+    """The contacts document for ``grasps`` (what :func:`read_contacts` reads back)."""
+    plans = list(plans) if plans is not None else [None] * len(grasps)
+    return {
+        "frame": "robot",
+        "units": "m",
+        "grasps": [
+            {
+                "taxels": [
+                    {
+                        "position": [float(v) for v in position],
+                        "normal": [float(v) for v in normal],
+                        "pad": str(pad),
+                        "index": int(index),
+                    }
+                    for position, normal, pad, index in zip(
+                        contacts.positions,
+                        contacts.normals,
+                        contacts.pads,
+                        contacts.taxel_indices,
+                        strict=True,
+                    )
+                ],
+                **({"plan": plan_to_json(plan)} if plan is not None else {}),
+            }
+            for contacts, plan in zip(grasps, plans, strict=True)
+        ],
+    }
+
+
+def plan_to_json(plan: GraspPlan) -> dict[str, Any]:
+    """A grasp plan as JSON (frame R, metres, radians)."""
+    return {
+        "gripper": plan.gripper,
+        "status": plan.status,
+        "T_robot_hand": np.asarray(plan.T_robot_hand).tolist(),
+        "pregrasp_height_m": float(plan.pregrasp_height_m),
+        "opening_m": float(plan.opening_m),
+        "closing_direction": [float(v) for v in plan.closing_direction],
+        "predicted_contacts": np.asarray(plan.predicted_contacts).reshape(-1, 3).tolist(),
+        "spread_rad": float(plan.spread_rad),
+        "reason": plan.reason,
+    }
+
+
+def plan_from_json(document: Any, where: str, path: Path) -> GraspPlan:
+    """Read what :func:`plan_to_json` wrote; errors name ``where`` in ``path``."""
+    try:
+        transform = np.array(document["T_robot_hand"], dtype=np.float64)
+        predicted = np.array(document.get("predicted_contacts", []), dtype=np.float64)
+        plan = GraspPlan(
+            gripper=str(document["gripper"]),
+            status=document.get("status", "ok"),
+            T_robot_hand=transform,
+            pregrasp_height_m=float(document["pregrasp_height_m"]),
+            opening_m=float(document["opening_m"]),
+            closing_direction=np.array(document["closing_direction"], dtype=np.float64),
+            predicted_contacts=predicted.reshape(-1, 3),
+            spread_rad=float(document.get("spread_rad", 0.0)),
+            reason=str(document.get("reason", "")),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: {where} is not a valid grasp plan: {exc}") from None
+    if transform.shape != (4, 4) or not np.isfinite(transform).all():
+        raise InputError(f"{path}: {where}.T_robot_hand must be a finite 4x4 matrix")
+    return plan
+
+
+def write_json(path: Path, document: Any) -> Path:
+    """Write JSON with NaN/inf turned into null (strict JSON readers reject them)."""
+    path = Path(path)
+    path.write_text(json.dumps(_jsonable(document), indent=2) + "\n")
+    return path
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        return _jsonable(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def plane_to_json(plane: SymmetryPlane) -> dict[str, Any]:
+    """``{"normal": [nx, ny], "offset": d, "theta_deg": ...}``: the plane nx x + ny y = d."""
+    return {
+        "normal": [float(plane.normal[0]), float(plane.normal[1])],
+        "offset": float(plane.offset_m),
+        "theta_deg": float(np.degrees(plane.theta_rad)),
+    }
+
+
+def bias_to_json(bias: Bias) -> dict[str, Any]:
+    """Yaw (rad and deg), translation (m) and the pivot it rotates about (m)."""
+    return {
+        "yaw": float(bias.yaw_rad),
+        "yaw_deg": float(np.degrees(bias.yaw_rad)),
+        "translation": [float(v) for v in bias.translation_m],
+        "pivot": [float(v) for v in bias.pivot_m],
+    }
+
+
+def stage_to_json(stage: StageEstimate) -> dict[str, Any]:
+    """One stage of a result as JSON (without the clouds, which go to PLY files)."""
+    return {
+        "stage": stage.stage,
+        "plane": plane_to_json(stage.plane),
+        "bias": bias_to_json(stage.bias),
+        "covariance": np.asarray(stage.covariance).tolist(),
+        "status": stage.status,
+        "iterations": int(stage.iterations),
+        "seconds": float(stage.seconds),
+        "active_points": int(stage.active_points),
+    }
+
+
+def estimate_to_json(result: EstimateResult) -> list[dict[str, Any]]:
+    """The per-stage list that ``result.json`` holds under ``"stages"``."""
+    return [stage_to_json(stage) for stage in result.stages]
+
+
+def write_completed_clouds(out_dir: Path, result: EstimateResult) -> list[Path]:
+    """Write ``completed_stage{0,1,2}.ply`` into ``out_dir``."""
+    return [
+        write_cloud(Path(out_dir) / f"completed_stage{stage.stage}.ply", stage.completed)
+        for stage in result.stages
+    ]

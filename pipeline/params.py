@@ -1,0 +1,128 @@
+"""Typed plugin parameters: declaration, validation and conversion to and from TOML values.
+
+A stage implementation declares its parameters as a frozen dataclass named ``Params``::
+
+    @dataclass(frozen=True)
+    class Params:
+        min_height_m: float = param(0.02, "drop points closer than this to the table (m)")
+        method: Literal["dbscan", "euclidean"] = param("dbscan", "clustering algorithm")
+
+Supported field types: ``bool``, ``int``, ``float``, ``str``, ``Literal[...]`` of str/int,
+and ``tuple[float, ...]`` / ``tuple[int, ...]`` / ``tuple[str, ...]``. An ``int`` is accepted
+where a ``float`` is declared; nothing else is converted silently.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from collections.abc import Mapping
+from typing import Any, Literal, get_args, get_origin
+
+from .errors import ConfigError
+
+
+def param(default: Any, doc: str) -> Any:
+    """Declare a parameter with its default and a one-line description (with units)."""
+    return dataclasses.field(default=default, metadata={"doc": doc})
+
+
+@dataclasses.dataclass(frozen=True)
+class NoParams:
+    """Parameters of an implementation that has none."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ParamInfo:
+    """One declared parameter, as ``symfuse plugins --params`` and the docs show it."""
+
+    name: str
+    type_name: str
+    default: Any
+    doc: str
+
+
+def _field_types(params_cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(params_cls)
+
+
+def _type_name(annotation: Any) -> str:
+    if get_origin(annotation) is Literal:
+        return " | ".join(repr(a) for a in get_args(annotation))
+    if get_origin(annotation) is tuple:
+        return f"list of {get_args(annotation)[0].__name__}"
+    return getattr(annotation, "__name__", str(annotation))
+
+
+def describe(params_cls: type) -> list[ParamInfo]:
+    """List the declared parameters of a ``Params`` dataclass."""
+    hints = _field_types(params_cls)
+    return [
+        ParamInfo(f.name, _type_name(hints[f.name]), f.default, f.metadata.get("doc", ""))
+        for f in dataclasses.fields(params_cls)
+    ]
+
+
+def defaults(params_cls: type) -> dict[str, Any]:
+    """The defaults of a ``Params`` dataclass as TOML-ready values."""
+    return to_toml(params_cls())
+
+
+def to_toml(params: Any) -> dict[str, Any]:
+    """A ``Params`` instance as a dict of TOML-ready values (tuples become lists)."""
+    return {
+        f.name: list(value) if isinstance(value := getattr(params, f.name), tuple) else value
+        for f in dataclasses.fields(params)
+    }
+
+
+def _convert(value: Any, annotation: Any, key: str) -> Any:
+    origin = get_origin(annotation)
+    if origin is Literal:
+        choices = get_args(annotation)
+        if value not in choices:
+            allowed = ", ".join(repr(c) for c in choices)
+            raise ConfigError(f"config key '{key}': {value!r} is not one of {allowed}")
+        return value
+    if origin is tuple:
+        item_type = get_args(annotation)[0]
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"config key '{key}': expected a list, got {type(value).__name__}")
+        return tuple(_convert(item, item_type, f"{key}[{i}]") for i, item in enumerate(value))
+    if annotation is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"config key '{key}': expected float, got {type(value).__name__}")
+        return float(value)
+    if annotation is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"config key '{key}': expected int, got {type(value).__name__}")
+        return value
+    if annotation in (bool, str):
+        if not isinstance(value, annotation):
+            raise ConfigError(
+                f"config key '{key}': expected {annotation.__name__}, got {type(value).__name__}"
+            )
+        return value
+    raise TypeError(f"unsupported parameter type {annotation!r} for '{key}'")
+
+
+def build(params_cls: type, values: Mapping[str, Any], section: str) -> Any:
+    """Validate ``values`` against ``params_cls`` and build an instance.
+
+    Args:
+        params_cls: the implementation's ``Params`` dataclass.
+        values: TOML values for (a subset of) its fields; missing ones take the default.
+        section: dotted config section the values came from, used in error messages.
+
+    Raises:
+        ConfigError: an unknown key or a value of the wrong type; the message names the
+            full dotted key.
+    """
+    hints = _field_types(params_cls)
+    known = [f.name for f in dataclasses.fields(params_cls)]
+    for key in values:
+        if key not in hints:
+            listing = ", ".join(known) if known else "none"
+            raise ConfigError(f"unknown config key '{section}.{key}' (known keys: {listing})")
+    converted = {k: _convert(v, hints[k], f"{section}.{k}") for k, v in values.items()}
+    return params_cls(**converted)

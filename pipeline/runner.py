@@ -1,0 +1,101 @@
+"""Running the stages in order: fusion on recorded data (:func:`fuse`).
+
+The runner talks to stages only through their contracts (``pipeline.stages``) and the
+registry; which implementation runs is the config's business.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+
+from .config import Config
+from .errors import ConfigError, StageFailure
+from .registry import StageRegistry
+from .types import (
+    Bias,
+    Contacts,
+    EstimateResult,
+    EstimationProblem,
+    GraspPlan,
+    PointCloud,
+    SymmetryInit,
+    SymmetryPlane,
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class FusionRun:
+    """The initial state handed to the estimator and what it returned."""
+
+    init: SymmetryInit
+    result: EstimateResult
+
+
+def initialise_from_recording(
+    config: Config,
+    registry: StageRegistry,
+    cloud: PointCloud,
+    grasps: Sequence[Contacts],
+    plans: Sequence[GraspPlan | None],
+) -> SymmetryInit:
+    """Run the configured initialiser on a bare cloud plus the first grasp's contacts.
+
+    Raises:
+        ConfigError: the initialiser needs a depth image, which a recording does not have.
+    """
+    name = config.choices["initialiser"]
+    initialiser = config.create(registry, "initialiser")
+    if initialiser.needs_observation:
+        usable = [
+            n
+            for n in registry.names("initialiser")
+            if not registry.get("initialiser", n).cls.needs_observation
+        ]
+        raise ConfigError(
+            f"initialiser '{name}' needs a depth image, which recorded data does not have; "
+            f"give --plane NX,NY,D or --init one of: {', '.join(usable)}"
+        )
+    proposal = initialiser.propose(cloud, None)
+    return initialiser.refine(proposal, cloud, plans[0] if plans else None, grasps[0])
+
+
+def estimate(
+    config: Config,
+    registry: StageRegistry,
+    cloud: PointCloud,
+    init: SymmetryInit,
+    grasps: Sequence[Contacts],
+) -> EstimateResult:
+    """Run the configured estimator from ``init`` over ``grasps`` (in order).
+
+    Raises:
+        StageFailure: the initialiser rejected every hypothesis.
+    """
+    if init.status != "ok":
+        raise StageFailure(f"initialiser gave no usable symmetry plane: {init.reason}")
+    estimator = config.create(registry, "estimator")
+    return estimator.estimate(EstimationProblem(cloud=cloud, init=init, grasps=tuple(grasps)))
+
+
+def fuse(
+    config: Config,
+    registry: StageRegistry,
+    cloud: PointCloud,
+    grasps: Sequence[Contacts],
+    plans: Sequence[GraspPlan | None] = (),
+    plane: SymmetryPlane | None = None,
+) -> FusionRun:
+    """Fuse a recorded cloud (frame R) with recorded contacts.
+
+    Args:
+        plane: the initial symmetry plane; when None the configured initialiser guesses it.
+        plans: the recorded grasp plan of each grasp, where known (PS uses it for the bias).
+    """
+    if plane is not None:
+        init = SymmetryInit(plane=plane, bias=Bias(pivot_m=np.mean(cloud.points, axis=0)))
+    else:
+        init = initialise_from_recording(config, registry, cloud, grasps, plans)
+    return FusionRun(init=init, result=estimate(config, registry, cloud, init, grasps))

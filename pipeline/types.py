@@ -1,0 +1,399 @@
+"""Data types exchanged between the pipeline's stages.
+
+Conventions used everywhere in symfuse:
+
+* Units are SI: metres, radians, seconds. Reports may print mm and degrees.
+* The **robot frame** ``R`` is the base frame everything is estimated in: z points up, the
+  table top is the plane ``z = table_height_m`` with normal +z.
+* The **camera optical frame** ``C`` follows OpenCV: x right, y down, z along the optical
+  axis. ``T_robot_camera`` maps homogeneous camera-frame points into the robot frame.
+* Homogeneous transforms are 4x4 ``float64`` arrays named ``T_<to>_<from>``.
+* Point arrays are ``(N, 3) float64``.
+
+The estimator's parameter order, used by every covariance in these types, is
+``(b_theta, b_x, b_y, b_z, m_r, m_theta)`` (METHOD.md section 1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+#: Parameter names of the 6x6 bias-and-plane covariance, in order.
+BIAS_PLANE_PARAMETERS = ("b_theta", "b_x", "b_y", "b_z", "m_r", "m_theta")
+
+EstimateStatus = Literal["initial", "converged", "max_iterations", "no_correspondence", "diverged"]
+PlanStatus = Literal["ok", "refused"]
+
+
+def _as_points(array: np.ndarray, what: str) -> np.ndarray:
+    points = np.asarray(array, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"{what} must have shape (N, 3), got {points.shape}")
+    return points
+
+
+def _as_transform(array: np.ndarray, what: str) -> np.ndarray:
+    transform = np.asarray(array, dtype=np.float64)
+    if transform.shape != (4, 4):
+        raise ValueError(f"{what} must be a 4x4 homogeneous transform, got {transform.shape}")
+    return transform
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics of a depth (or colour) image, in pixels.
+
+    ``(cx, cy)`` is the principal point measured from the centre of the top-left pixel,
+    columns to the right and rows down.
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """The 3x3 calibration matrix ``K``."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class DepthObservation:
+    """One depth (and colour) image of the scene, as a sensor source delivers it.
+
+    Attributes:
+        depth_m: ``(H, W) float32`` metric depth along the optical axis (z in frame ``C``),
+            ``NaN`` where the sensor returned nothing (out of range, shadow, edge).
+        rgb: ``(H, W, 3) uint8`` colour image registered to the depth image.
+        intrinsics: the depth camera's intrinsics.
+        T_robot_camera: the camera pose the pipeline *believes* (it may carry a calibration
+            error relative to the truth, which the estimator's bias absorbs).
+        table_height_m: z of the table top in frame ``R`` when the source knows it, else None.
+        object_mask: ``(H, W) bool`` ground-truth object pixels (simulation only), else None.
+    """
+
+    depth_m: np.ndarray
+    rgb: np.ndarray
+    intrinsics: CameraIntrinsics
+    T_robot_camera: np.ndarray
+    table_height_m: float | None = None
+    object_mask: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        shape = (self.intrinsics.height, self.intrinsics.width)
+        if self.depth_m.shape != shape:
+            raise ValueError(f"depth image shape {self.depth_m.shape} != intrinsics {shape}")
+        _as_transform(self.T_robot_camera, "T_robot_camera")
+
+
+@dataclass(frozen=True)
+class PointCloud:
+    """A set of 3-D points in a named frame.
+
+    Attributes:
+        points: ``(N, 3) float64`` coordinates in metres.
+        frame: name of the frame the points are expressed in (``"robot"`` for every cloud
+            that crosses a stage boundary).
+        pixels: optional ``(N, 2) int`` (row, column) of the depth pixel each point came
+            from; lets visibility reasoning go back to the image.
+    """
+
+    points: np.ndarray
+    frame: str = "robot"
+    pixels: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "points", _as_points(self.points, "PointCloud.points"))
+        if self.pixels is not None and len(self.pixels) != len(self.points):
+            raise ValueError("PointCloud.pixels must have one row per point")
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+@dataclass(frozen=True)
+class SymmetryPlane:
+    """A vertical mirror plane ``{p : n . p = offset_m}`` in frame ``R``.
+
+    The unit normal is horizontal, ``n = (cos theta_rad, sin theta_rad, 0)`` (METHOD.md
+    section 1: ``m_theta`` is the normal's angle about +z, ``m_r`` the offset).
+    """
+
+    theta_rad: float
+    offset_m: float
+
+    @property
+    def normal(self) -> np.ndarray:
+        """The unit normal ``(3,)`` in frame ``R``."""
+        return np.array([np.cos(self.theta_rad), np.sin(self.theta_rad), 0.0])
+
+    @classmethod
+    def from_normal(cls, normal_xy: np.ndarray, offset_m: float) -> SymmetryPlane:
+        """Build from any non-zero horizontal normal ``(nx, ny)``; it is normalised and the
+        offset scaled with it, so ``{nx x + ny y = offset_m}`` is the same set of points."""
+        nx, ny = (float(v) for v in normal_xy)
+        length = float(np.hypot(nx, ny))
+        if not np.isfinite(length) or length == 0.0:
+            raise ValueError("symmetry plane normal must be a finite, non-zero (nx, ny)")
+        return cls(theta_rad=float(np.arctan2(ny, nx)), offset_m=float(offset_m) / length)
+
+    def mirror(self, points: np.ndarray) -> np.ndarray:
+        """Reflect ``(N, 3)`` points across the plane: ``p - 2 (n.p - offset) n``."""
+        n = self.normal
+        return points - 2.0 * (points @ n - self.offset_m)[:, None] * n[None, :]
+
+
+@dataclass(frozen=True)
+class Bias:
+    """Rigid planar motion between the camera's view and the hand's frame (METHOD.md §1).
+
+    ``f_b(p) = R_z(yaw_rad) (p - pivot_m) + pivot_m + translation_m``. It absorbs both the
+    object's motion during the grasp and the camera-to-robot calibration error. The pivot is
+    fixed during estimation (symfuse uses the centroid of the segmented cloud).
+    """
+
+    yaw_rad: float = 0.0
+    translation_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    pivot_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "translation_m", np.asarray(self.translation_m, float).reshape(3))
+        object.__setattr__(self, "pivot_m", np.asarray(self.pivot_m, float).reshape(3))
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """Move ``(N, 3)`` robot-frame points by the bias."""
+        c, s = np.cos(self.yaw_rad), np.sin(self.yaw_rad)
+        rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return (points - self.pivot_m) @ rotation.T + self.pivot_m + self.translation_m
+
+
+@dataclass(frozen=True)
+class PadLayout:
+    """Geometry of one tactile pad: a ``rows x cols`` grid of taxels at ``pitch_m``.
+
+    Attributes:
+        name: pad id as it appears in :class:`Contacts` (e.g. ``"left"``, ``"f1_distal"``).
+        link: name of the URDF link the pad is fixed to.
+        rows, cols: taxel grid size (rows run along the finger, cols across it).
+        pitch_m: centre-to-centre taxel distance.
+    """
+
+    name: str
+    link: str
+    rows: int
+    cols: int
+    pitch_m: float
+
+
+@dataclass(frozen=True)
+class GripperSpec:
+    """What grasp planners need to know about a hand.
+
+    Attributes:
+        name: ``"pg70"`` or ``"sdh"`` (or a user hand's name).
+        fingers: number of fingers (2 for a parallel gripper).
+        max_aperture_m: widest opening between the pad surfaces.
+        pads: the tactile pads.
+        finger_length_m: reach of the fingers below the palm, used to place top grasps.
+    """
+
+    name: str
+    fingers: int
+    max_aperture_m: float
+    pads: tuple[PadLayout, ...]
+    finger_length_m: float
+
+
+@dataclass(frozen=True)
+class GraspPlan:
+    """A planned top grasp, in frame ``R``.
+
+    Attributes:
+        gripper: name of the hand the plan is for.
+        status: ``"ok"`` or ``"refused"`` (then ``reason`` says why and nothing is executed).
+        T_robot_hand: hand (palm) pose at the grasp; its z axis points down the approach
+            direction (toward the table), its x axis is the closing direction.
+        pregrasp_height_m: how far above ``T_robot_hand`` the hand starts its descent.
+        opening_m: aperture to open to before the descent.
+        closing_direction: ``(3,)`` unit vector along which the fingers close.
+        predicted_contacts: ``(K, 3)`` points on the cloud where the pads are expected to
+            touch first (used by PS initialisation for the initial bias).
+        spread_rad: SDH base rotation (0 for a parallel gripper).
+        reason: why a plan was refused, else empty.
+    """
+
+    gripper: str
+    status: PlanStatus
+    T_robot_hand: np.ndarray
+    pregrasp_height_m: float
+    opening_m: float
+    closing_direction: np.ndarray
+    predicted_contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    spread_rad: float = 0.0
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class Contacts:
+    """The taxels in contact after one grasp, in frame ``R`` (forward kinematics of the
+    hand's final configuration).
+
+    Attributes:
+        positions: ``(M, 3)`` taxel centres, metres.
+        normals: ``(M, 3)`` unit normals pointing out of the pad, into the object.
+        pads: ``(M,)`` pad id of each taxel (str).
+        taxel_indices: ``(M,)`` index of the taxel within its pad, row-major.
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray
+    pads: np.ndarray
+    taxel_indices: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "positions", _as_points(self.positions, "Contacts.positions"))
+        object.__setattr__(self, "normals", _as_points(self.normals, "Contacts.normals"))
+        object.__setattr__(self, "pads", np.asarray(self.pads, dtype=str).reshape(-1))
+        object.__setattr__(
+            self, "taxel_indices", np.asarray(self.taxel_indices, dtype=np.int64).reshape(-1)
+        )
+        m = len(self.positions)
+        if not (len(self.normals) == len(self.pads) == len(self.taxel_indices) == m):
+            raise ValueError("Contacts fields must all have one row per taxel")
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+
+@dataclass(frozen=True)
+class SymmetryHypothesis:
+    """One scored plane hypothesis (VC initialisation keeps all of them, ranked)."""
+
+    plane: SymmetryPlane
+    score: float
+    violations: int
+
+
+@dataclass(frozen=True)
+class SymmetryInit:
+    """What a symmetry initialiser hands the estimator: the Stage 0 state.
+
+    Attributes:
+        plane: initial symmetry plane.
+        bias: initial bias (zero unless the initialiser saw contacts, as PS does).
+        hypotheses: ranked hypotheses, best first (empty when not applicable).
+        status: ``"ok"`` or ``"rejected"`` (every hypothesis was hopeless).
+        reason: explanation for a rejection, else empty.
+    """
+
+    plane: SymmetryPlane
+    bias: Bias
+    hypotheses: tuple[SymmetryHypothesis, ...] = ()
+    status: Literal["ok", "rejected"] = "ok"
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class StageEstimate:
+    """The estimate after one stage: 0 (initial), 1 (bias + plane), 2 (+ points).
+
+    Attributes:
+        stage: 0, 1 or 2.
+        plane, bias: the estimated symmetry plane and bias.
+        covariance: ``(6, 6)`` covariance of ``(b_theta, b_x, b_y, b_z, m_r, m_theta)``.
+        points: ``(N, 3)`` the estimated object points ``p_n`` (unbiased, camera view).
+        completed: ``(2N, 3)`` the completed model ``{f_b(p_n)} U {f_mb(p_n)}`` in frame R.
+        iterations: IEKF iterations used (summed over grasps; 0 for stage 0).
+        status: see :data:`EstimateStatus`.
+        seconds: wall time spent on this stage.
+        active_points: number of points inside some taxel's gate at the end.
+    """
+
+    stage: int
+    plane: SymmetryPlane
+    bias: Bias
+    covariance: np.ndarray
+    points: np.ndarray
+    completed: np.ndarray
+    iterations: int
+    status: EstimateStatus
+    seconds: float
+    active_points: int = 0
+
+
+@dataclass(frozen=True)
+class EstimateResult:
+    """Stages 0, 1 and 2 of one estimation run, in that order."""
+
+    stages: tuple[StageEstimate, ...]
+
+    def stage(self, index: int) -> StageEstimate:
+        return self.stages[index]
+
+    @property
+    def final(self) -> StageEstimate:
+        return self.stages[-1]
+
+
+@dataclass(frozen=True)
+class EstimationProblem:
+    """Everything an estimator is given.
+
+    Attributes:
+        cloud: the segmented object cloud in frame ``R``.
+        init: the Stage 0 state from the symmetry initialiser.
+        grasps: one :class:`Contacts` per grasp, in the order they happened.
+    """
+
+    cloud: PointCloud
+    init: SymmetryInit
+    grasps: tuple[Contacts, ...]
+
+
+@dataclass(frozen=True)
+class ObjectPose:
+    """Planar pose of an object standing on the table, frame ``R``: position of its mesh
+    origin and full orientation as a quaternion ``(x, y, z, w)``."""
+
+    position_m: np.ndarray
+    quaternion_xyzw: np.ndarray
+
+    @property
+    def transform(self) -> np.ndarray:
+        """``T_robot_object`` as a 4x4 matrix."""
+        from scipy.spatial.transform import Rotation
+
+        transform = np.eye(4)
+        transform[:3, :3] = Rotation.from_quat(self.quaternion_xyzw).as_matrix()
+        transform[:3, 3] = self.position_m
+        return transform
+
+
+@dataclass(frozen=True)
+class GraspOutcome:
+    """What executing a :class:`GraspPlan` did, as the simulator (or robot) reports it.
+
+    Attributes:
+        executed: False when the plan was refused or the hand could not reach it.
+        aperture_m: final distance between the pad surfaces (parallel gripper) or the
+            final finger joint angles' equivalent; NaN when not applicable.
+        joint_positions: final joint positions of the hand by joint name (rad or m).
+        T_robot_hand: final palm pose.
+        object_before: true object pose before the grasp.
+        object_after: true object pose after the grasp settled.
+        reason: why it was not executed, else empty.
+    """
+
+    executed: bool
+    aperture_m: float
+    joint_positions: dict[str, float]
+    T_robot_hand: np.ndarray
+    object_before: ObjectPose
+    object_after: ObjectPose
+    reason: str = ""

@@ -1,0 +1,138 @@
+"""TOML config: defaults, files, --set overrides, validation messages, round trip."""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from typing import Literal
+
+import pytest
+
+from pipeline.config import load_config, parse_override
+from pipeline.errors import ConfigError
+from pipeline.params import param
+from pipeline.registry import load_registry
+from pipeline.stages import STAGES
+
+
+@pytest.fixture(scope="module")
+def registry():
+    return load_registry()
+
+
+def write(tmp_path, text, name="run.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_defaults_select_one_installed_implementation_per_stage(registry):
+    config = load_config(registry)
+    for stage in STAGES:
+        assert config.choices[stage] in registry.names(stage)
+    assert config.trial.object == "cd_drive"
+
+
+def test_file_then_overrides_in_order(registry, tmp_path):
+    path = write(tmp_path, '[trial]\nseed = 5\nobject = "salt_cylinder"\n')
+    config = load_config(registry, [path], ["trial.seed=7", "trial.yaw_deg=30"])
+    assert config.trial.seed == 7
+    assert config.trial.object == "salt_cylinder"
+    assert config.trial.yaw_deg == 30.0
+
+
+def test_swapping_a_stage_is_one_line(registry):
+    other = [n for n in registry.names("estimator") if n != "iekf"][0]
+    config = load_config(registry, overrides=[f"estimator.use={other}"])
+    assert config.choices["estimator"] == other
+
+
+def test_unknown_key_is_named(registry, tmp_path):
+    path = write(tmp_path, "[trial]\nsede = 5\n")
+    with pytest.raises(ConfigError) as error:
+        load_config(registry, [path])
+    assert str(error.value) == (
+        "unknown config key 'trial.sede' (known keys: object, gripper, seed, x_m, y_m, yaw_deg)"
+    )
+
+
+def test_unknown_section_is_named(registry):
+    with pytest.raises(ConfigError) as error:
+        load_config(registry, overrides=["segmentor.use=x"])
+    assert str(error.value).startswith("unknown config section 'segmentor' (known: trial, ")
+
+
+def test_unknown_implementation_is_named_with_alternatives(registry):
+    with pytest.raises(ConfigError) as error:
+        load_config(registry, overrides=["estimator.use=kalman9000"])
+    available = ", ".join(registry.names("estimator"))
+    assert str(error.value) == (
+        f"config key 'estimator.use': no estimator named 'kalman9000' (available: {available})"
+    )
+
+
+def test_unknown_plugin_parameter_is_named(registry):
+    name = registry.names("estimator")[0]
+    with pytest.raises(ConfigError, match=rf"unknown config key 'estimator\.{name}\.nope'"):
+        load_config(registry, overrides=[f"estimator.{name}.nope=1"])
+
+
+def test_wrong_type_is_named(registry):
+    with pytest.raises(ConfigError) as error:
+        load_config(registry, overrides=["trial.seed=1.5"])
+    assert str(error.value) == "config key 'trial.seed': expected int, got float"
+    with pytest.raises(ConfigError) as error:
+        load_config(registry, overrides=["trial.gripper=robotiq"])
+    assert str(error.value) == "config key 'trial.gripper': 'robotiq' is not one of 'pg70', 'sdh'"
+
+
+def test_bad_files_are_named(registry, tmp_path):
+    with pytest.raises(ConfigError, match=r"config file '.*missing.toml' does not exist"):
+        load_config(registry, [tmp_path / "missing.toml"])
+    path = write(tmp_path, "[trial\nseed = 1\n", "broken.toml")
+    with pytest.raises(ConfigError, match=r"config file '.*broken.toml' is not valid TOML"):
+        load_config(registry, [path])
+
+
+def test_override_syntax():
+    assert parse_override("a.b=3") == {"a": {"b": 3}}
+    assert parse_override("a.b.c=[1, 2.5]") == {"a": {"b": {"c": [1, 2.5]}}}
+    assert parse_override("a.b=icp") == {"a": {"b": "icp"}}
+    assert parse_override('a.b="x y"') == {"a": {"b": "x y"}}
+    with pytest.raises(ConfigError, match="expected section.key=value"):
+        parse_override("seed=3")
+    with pytest.raises(ConfigError, match="expected section.key=value"):
+        parse_override("trial.seed")
+
+
+def test_resolved_config_round_trips(registry, tmp_path):
+    first = load_config(registry, overrides=["trial.seed=11", "trial.yaw_deg=12.5"])
+    written = first.write(tmp_path / "config.toml")
+    second = load_config(registry, [written])
+    assert second == first
+    assert second.to_dict() == tomllib.loads(written.read_text())
+
+
+def test_every_parameter_is_in_the_resolved_config(registry):
+    config = load_config(registry)
+    document = config.to_dict()
+    for stage in STAGES:
+        name = config.choices[stage]
+        params = registry.get(stage, name).cls.Params
+        assert set(document[stage][name]) == set(params.__dataclass_fields__)
+
+
+def test_params_reject_bool_for_number_and_accept_int_for_float():
+    from pipeline.params import build
+
+    @dataclass(frozen=True)
+    class P:
+        gain: float = param(1.0, "gain")
+        mode: Literal["a", "b"] = param("a", "mode")
+        sizes: tuple[int, ...] = param((1, 2), "sizes")
+
+    assert build(P, {"gain": 2, "sizes": [3]}, "s") == P(gain=2.0, sizes=(3,))
+    with pytest.raises(ConfigError, match=r"'s.gain': expected float, got bool"):
+        build(P, {"gain": True}, "s")
+    with pytest.raises(ConfigError, match=r"'s.sizes\[1\]': expected int, got str"):
+        build(P, {"sizes": [1, "x"]}, "s")

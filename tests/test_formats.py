@@ -1,0 +1,134 @@
+"""File formats: clouds (PLY, PCD, NPY), contacts JSON, result JSON."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.formats import (
+    contacts_to_json,
+    plan_to_json,
+    read_cloud,
+    read_contacts,
+    write_cloud,
+    write_json,
+)
+from pipeline.types import Contacts, GraspPlan
+
+POINTS = np.random.default_rng(0).normal(size=(50, 3))
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".pcd", ".npy"])
+def test_cloud_round_trip(tmp_path, suffix):
+    path = write_cloud(tmp_path / f"cloud{suffix}", POINTS)
+    cloud = read_cloud(path)
+    assert cloud.frame == "robot"
+    np.testing.assert_allclose(cloud.points, POINTS, atol=1e-12)
+
+
+def test_cloud_errors_name_the_file(tmp_path):
+    with pytest.raises(InputError, match=r"nope\.ply: no such file"):
+        read_cloud(tmp_path / "nope.ply")
+    (tmp_path / "c.xyz").write_text("1 2 3\n")
+    with pytest.raises(InputError, match=r"c\.xyz: unknown cloud format '\.xyz'"):
+        read_cloud(tmp_path / "c.xyz")
+    (tmp_path / "junk.ply").write_text("this is not a ply file")
+    with pytest.raises(InputError, match=r"junk\.ply: the cloud has no points"):
+        read_cloud(tmp_path / "junk.ply")
+    np.save(tmp_path / "flat.npy", np.zeros((4, 2)))
+    with pytest.raises(InputError, match=r"flat\.npy: expected an \(N, 3\) array"):
+        read_cloud(tmp_path / "flat.npy")
+    bad = POINTS.copy()
+    bad[7, 1] = np.nan
+    np.save(tmp_path / "nan.npy", bad)
+    with pytest.raises(InputError, match=r"nan\.npy: 1 point\(s\) have NaN .* row 7"):
+        read_cloud(tmp_path / "nan.npy")
+    np.save(tmp_path / "empty.npy", np.zeros((0, 3)))
+    with pytest.raises(InputError, match="no points"):
+        read_cloud(tmp_path / "empty.npy")
+
+
+def contacts(n=3):
+    return Contacts(
+        positions=np.arange(3 * n, dtype=float).reshape(n, 3) / 100,
+        normals=np.tile([0.0, 2.0, 0.0], (n, 1)),
+        pads=["left"] * n,
+        taxel_indices=np.arange(n),
+    )
+
+
+def plan():
+    return GraspPlan(
+        gripper="pg70",
+        status="ok",
+        T_robot_hand=np.eye(4),
+        pregrasp_height_m=0.1,
+        opening_m=0.065,
+        closing_direction=np.array([0.0, 1.0, 0.0]),
+        predicted_contacts=np.array([[0.0, -0.02, 0.05], [0.0, 0.02, 0.05]]),
+    )
+
+
+def test_contacts_round_trip_with_plan(tmp_path):
+    path = write_json(tmp_path / "contacts.json", contacts_to_json([contacts()], [plan()]))
+    recorded = read_contacts(path)
+    assert len(recorded.contacts) == 1
+    got = recorded.contacts[0]
+    np.testing.assert_allclose(got.positions, contacts().positions)
+    np.testing.assert_allclose(got.normals, np.tile([0.0, 1.0, 0.0], (3, 1)))  # normalised
+    assert list(got.pads) == ["left"] * 3
+    assert plan_to_json(recorded.plans[0]) == plan_to_json(plan())
+
+
+def test_minimal_contacts_document(tmp_path):
+    path = tmp_path / "c.json"
+    taxel = {"position": [0, 0, 0.1], "normal": [1, 0, 0], "pad": "left"}
+    path.write_text(json.dumps({"frame": "robot", "units": "m", "grasps": [{"taxels": [taxel]}]}))
+    recorded = read_contacts(path)
+    assert recorded.plans == (None,)
+    assert recorded.contacts[0].taxel_indices.tolist() == [0]
+
+
+@pytest.mark.parametrize(
+    ("document", "message"),
+    [
+        ({"frame": "robot", "units": "mm", "grasps": []}, r"units must be \"m\""),
+        ({"frame": "camera", "units": "m", "grasps": []}, r"frame must be \"robot\""),
+        ({"frame": "robot", "units": "m", "grasps": []}, "'grasps' must be a non-empty list"),
+        ({"frame": "robot", "units": "m", "grasps": [{"taxels": []}]}, r"grasps\[0\]\.taxels"),
+        (
+            {
+                "units": "m",
+                "grasps": [{"taxels": [{"position": [0, 0, 0], "normal": [0, 0, 0], "pad": "l"}]}],
+            },
+            r"grasps\[0\]\.taxels\[0\]\.normal has zero length",
+        ),
+        (
+            {
+                "units": "m",
+                "grasps": [{"taxels": [{"position": [0, 0], "normal": [0, 0, 1], "pad": "l"}]}],
+            },
+            r"grasps\[0\]\.taxels\[0\]\.position must be a list of 3 numbers",
+        ),
+    ],
+)
+def test_contacts_errors_name_file_and_key(tmp_path, document, message):
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(document))
+    with pytest.raises(InputError, match=rf"bad\.json: .*{message}"):
+        read_contacts(path)
+
+
+def test_contacts_not_json(tmp_path):
+    path = tmp_path / "c.json"
+    path.write_text("{oops")
+    with pytest.raises(InputError, match=r"c\.json: not valid JSON"):
+        read_contacts(path)
+
+
+def test_nan_becomes_null_in_json(tmp_path):
+    path = write_json(tmp_path / "r.json", {"a": float("nan"), "b": np.float32(1.5)})
+    assert json.loads(path.read_text()) == {"a": None, "b": 1.5}
