@@ -407,6 +407,10 @@ def build_parser() -> argparse.ArgumentParser:
     trial.set_defaults(run=_cmd_trial)
 
     _add_sweep_parser(verbs)
+
+    from . import cli_objects
+
+    cli_objects.add_parser(verbs).set_defaults(run=cli_objects.run)
     return parser
 
 

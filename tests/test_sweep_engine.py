@@ -1,0 +1,217 @@
+"""The sweep engine: append-and-skip results file, resume, error rows, crash safety, CSV."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import threading
+from concurrent.futures.process import BrokenProcessPool
+
+import numpy as np
+import pytest
+import sweep_toy
+
+from pipeline.errors import InputError
+from pipeline.experiments import SweepTask
+from pipeline.sweep import read_rows, run_sweep, write_csv
+
+
+def make_tasks(count: int, **extra_by_x: dict) -> list[SweepTask]:
+    """Tasks t00, t01, ... with x = index and a per-task seed; extra params by x."""
+    return [
+        SweepTask(f"t{x:02d}", {"x": x, "seed": 1000 + 7 * x, **extra_by_x.get(f"x{x}", {})})
+        for x in range(count)
+    ]
+
+
+def expected_row(task: SweepTask) -> dict:
+    """The row the engine must record: key, params and the toy's own result, via JSON."""
+    return json.loads(
+        json.dumps(
+            {"key": task.key, "params": dict(task.params)} | sweep_toy.run_one(dict(task.params))
+        )
+    )
+
+
+class CountingRunOne:
+    """Wraps the toy in-process, recording which x it ran; can raise KeyboardInterrupt."""
+
+    def __init__(self, interrupt_at_x: int | None = None) -> None:
+        self.calls: list[int] = []
+        self.interrupt_at_x = interrupt_at_x
+
+    def __call__(self, params: dict) -> dict:
+        if params["x"] == self.interrupt_at_x:
+            raise KeyboardInterrupt
+        self.calls.append(params["x"])
+        return sweep_toy.run_one(params)
+
+
+def file_lines(path) -> list[str]:
+    text = path.read_text()
+    assert text.endswith("\n")
+    return text.splitlines()
+
+
+def test_rows_follow_task_order_and_every_row_is_one_json_line(tmp_path):
+    tasks = make_tasks(4)
+    results = tmp_path / "out" / "results.jsonl"
+    rows = run_sweep(tasks, sweep_toy.run_one, results, workers=1, progress=False)
+    assert rows == [expected_row(task) for task in tasks]
+    assert sorted(json.loads(line)["key"] for line in file_lines(results)) == [t.key for t in tasks]
+
+
+def test_rerun_skips_finished_keys_and_runs_only_new_ones(tmp_path):
+    results = tmp_path / "results.jsonl"
+    first = CountingRunOne()
+    run_sweep(make_tasks(5), first, results, workers=1, progress=False)
+    assert first.calls == [0, 1, 2, 3, 4]
+
+    second = CountingRunOne()
+    rows = run_sweep(make_tasks(8), second, results, workers=1, progress=False)
+    assert second.calls == [5, 6, 7]
+    assert rows == [expected_row(task) for task in make_tasks(8)]
+    assert len(file_lines(results)) == 8
+
+    third = CountingRunOne()
+    run_sweep(make_tasks(8), third, results, workers=1, progress=False)
+    assert third.calls == []
+
+
+def test_interrupt_keeps_finished_rows_and_reraises(tmp_path):
+    results = tmp_path / "results.jsonl"
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(make_tasks(6), CountingRunOne(interrupt_at_x=3), results, progress=False,
+                  workers=1)  # fmt: skip
+    assert [row["key"] for row in read_rows(results)] == ["t00", "t01", "t02"]
+
+    resumed = CountingRunOne()
+    rows = run_sweep(make_tasks(6), resumed, results, workers=1, progress=False)
+    assert resumed.calls == [3, 4, 5]
+    assert rows == [expected_row(task) for task in make_tasks(6)]
+
+
+def test_a_raising_task_becomes_an_error_row_and_the_sweep_goes_on(tmp_path):
+    tasks = make_tasks(4, x2={"fail": True})
+    rows = run_sweep(tasks, sweep_toy.run_one, tmp_path / "r.jsonl", workers=1, progress=False)
+    assert rows[2] == {"key": "t02", "params": dict(tasks[2].params),
+                       "error": "ValueError: x=2 is not allowed"}  # fmt: skip
+    assert [row for i, row in enumerate(rows) if i != 2] == [
+        expected_row(task) for i, task in enumerate(tasks) if i != 2
+    ]
+
+
+def test_a_result_that_is_not_a_dict_becomes_an_error_row(tmp_path):
+    rows = run_sweep(make_tasks(1), lambda params: [params["x"]], tmp_path / "r.jsonl",
+                     workers=1, progress=False)  # fmt: skip
+    assert rows[0]["error"] == "TypeError: run_one returned list, not a dict"
+
+
+def test_numpy_values_in_results_are_written_as_plain_json(tmp_path):
+    def run_one(params: dict) -> dict:
+        return {"scalar": np.float64(0.25), "count": np.int64(3), "vector": np.array([1.5, 2.0])}
+
+    rows = run_sweep(make_tasks(1), run_one, tmp_path / "r.jsonl", workers=1, progress=False)
+    assert rows[0] == {"key": "t00", "params": {"x": 0, "seed": 1000}, "scalar": 0.25,
+                       "count": 3, "vector": [1.5, 2.0]}  # fmt: skip
+
+
+def test_truncated_last_line_is_dropped_and_its_task_rerun(tmp_path):
+    results = tmp_path / "results.jsonl"
+    run_sweep(make_tasks(3), sweep_toy.run_one, results, workers=1, progress=False)
+    text = results.read_text()
+    cut = len(text) - len(text.splitlines()[-1]) // 2 - 1  # half of the last line survives
+    results.write_text(text[:cut])
+    survivors = [json.loads(line)["key"] for line in text[:cut].splitlines()[:-1]]
+
+    rerun = CountingRunOne()
+    rows = run_sweep(make_tasks(3), rerun, results, workers=1, progress=False)
+    assert len(rerun.calls) == 3 - len(survivors) == 1
+    assert rows == [expected_row(task) for task in make_tasks(3)]
+    assert sorted(json.loads(line)["key"] for line in file_lines(results)) == ["t00", "t01", "t02"]
+
+
+def test_complete_last_line_without_newline_is_kept(tmp_path):
+    results = tmp_path / "results.jsonl"
+    run_sweep(make_tasks(2), sweep_toy.run_one, results, workers=1, progress=False)
+    results.write_text(results.read_text().rstrip("\n"))
+
+    rerun = CountingRunOne()
+    run_sweep(make_tasks(3), rerun, results, workers=1, progress=False)
+    assert rerun.calls == [2]
+    assert [json.loads(line)["key"] for line in file_lines(results)] == ["t00", "t01", "t02"]
+
+
+def test_a_corrupt_line_before_the_last_is_an_input_error(tmp_path):
+    results = tmp_path / "results.jsonl"
+    results.write_text('{"key": "t00"}\nnot json\n{"key": "t01"}\n')
+    with pytest.raises(InputError, match=r"results\.jsonl:2"):
+        run_sweep(make_tasks(2), sweep_toy.run_one, results, workers=1, progress=False)
+
+
+def test_invalid_arguments_raise_value_error(tmp_path):
+    results = tmp_path / "r.jsonl"
+    duplicated = [SweepTask("a", {"x": 1, "seed": 1}), SweepTask("a", {"x": 2, "seed": 2})]
+    with pytest.raises(ValueError, match="duplicate task keys: a"):
+        run_sweep(duplicated, sweep_toy.run_one, results, progress=False)
+    with pytest.raises(ValueError, match="scheduler"):
+        run_sweep(make_tasks(1), sweep_toy.run_one, results, executor="dask", progress=False)
+    with pytest.raises(ValueError, match="task bad: params are not JSON"):
+        run_sweep([SweepTask("bad", {"x": object()})], sweep_toy.run_one, results, progress=False)
+    assert not results.exists() or results.read_text() == ""
+
+
+def test_process_pool_gives_the_same_rows_as_in_process(tmp_path):
+    tasks = make_tasks(6, x4={"fail": True})
+    in_process = run_sweep(tasks, sweep_toy.run_one, tmp_path / "a.jsonl", workers=1,
+                           progress=False)  # fmt: skip
+    pooled = run_sweep(tasks, sweep_toy.run_one, tmp_path / "b.jsonl", workers=2, progress=False)
+    assert pooled == in_process
+    assert sorted(file_lines(tmp_path / "b.jsonl")) == sorted(file_lines(tmp_path / "a.jsonl"))
+
+
+def test_a_dying_worker_keeps_finished_rows_and_a_rerun_completes(tmp_path):
+    results = tmp_path / "results.jsonl"
+    crashing = make_tasks(6, x5={"die_after_s": 2.0})
+    with pytest.raises(BrokenProcessPool):
+        run_sweep(crashing, sweep_toy.run_one, results, workers=2, progress=False)
+    assert {row["key"] for row in read_rows(results)} == {f"t{x:02d}" for x in range(5)}
+
+    rows = run_sweep(make_tasks(6), sweep_toy.run_one, results, workers=2, progress=False)
+    assert rows == [expected_row(task) for task in make_tasks(6)]
+    assert len(file_lines(results)) == 6
+
+
+def test_ctrl_c_during_a_pool_run_keeps_finished_rows_and_reraises(tmp_path):
+    results = tmp_path / "results.jsonl"
+    slow = [SweepTask(t.key, {**t.params, "sleep_s": 0.15}) for t in make_tasks(12)]
+    timer = threading.Timer(1.0, os.kill, args=(os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_sweep(slow, sweep_toy.run_one, results, workers=2, progress=False)
+    finally:
+        timer.cancel()
+    kept = read_rows(results)
+    assert len(kept) < len(slow)
+    assert all(row == expected_row(slow[int(row["key"][1:])]) for row in kept)
+
+    rows = run_sweep(slow, sweep_toy.run_one, results, workers=2, progress=False)
+    assert rows == [expected_row(task) for task in slow]
+
+
+def test_write_csv_flattens_nested_dicts_with_dotted_columns(tmp_path):
+    rows = [
+        {"key": "a", "params": {"x": 1, "grid": {"r_m": 0.01}}, "value": 2.5, "draws": [1, 2]},
+        {"key": "b", "params": {"x": 2, "grid": {"r_m": 0.02}}, "error": "ValueError: no"},
+    ]
+    path = write_csv(rows, tmp_path / "sub" / "table.csv")
+    with path.open(newline="") as handle:
+        reader = csv.DictReader(handle)
+        table = list(reader)
+    assert reader.fieldnames == ["key", "params.x", "params.grid.r_m", "value", "draws", "error"]
+    assert table[0] == {"key": "a", "params.x": "1", "params.grid.r_m": "0.01", "value": "2.5",
+                        "draws": "[1, 2]", "error": ""}  # fmt: skip
+    assert table[1]["value"] == "" and table[1]["error"] == "ValueError: no"
