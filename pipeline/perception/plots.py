@@ -1,0 +1,94 @@
+"""Figures of the perception stage: the cloud from above with a plane, and VC scores.
+
+matplotlib with the non-interactive Agg backend; every function writes one PNG and
+returns its path.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.types import SymmetryHypothesis, SymmetryPlane
+
+
+def _figure():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_cloud_with_plane(
+    points_robot: np.ndarray,
+    plane: SymmetryPlane,
+    path: Path,
+    *,
+    title: str = "",
+) -> Path:
+    """Top-down view (robot x, y in mm) of the cloud coloured by height, its mirror image in
+    grey and the plane's trace on the table as a line."""
+    plt = _figure()
+    mm = 1000.0
+    mirrored = plane.mirror(points_robot)
+    figure, axes = plt.subplots(figsize=(6, 6))
+    axes.scatter(mirrored[:, 0] * mm, mirrored[:, 1] * mm, s=1, c="0.75", label="mirrored")
+    scatter = axes.scatter(
+        points_robot[:, 0] * mm, points_robot[:, 1] * mm, s=1, c=points_robot[:, 2] * mm
+    )
+    figure.colorbar(scatter, ax=axes, label="height z (mm)")
+    both = np.concatenate([points_robot, mirrored])[:, :2]
+    span = float(np.ptp(both, axis=0).max()) * 0.75 + 0.02
+    normal = plane.normal[:2]
+    foot = both.mean(axis=0) - (both.mean(axis=0) @ normal - plane.offset_m) * normal
+    along = np.array([-normal[1], normal[0]])
+    ends = foot + np.outer([-span, span], along)
+    axes.plot(ends[:, 0] * mm, ends[:, 1] * mm, "r-", label="symmetry plane")
+    axes.set_aspect("equal")
+    axes.set_xlabel("x (mm)")
+    axes.set_ylabel("y (mm)")
+    axes.set_title(
+        title
+        or f"plane: theta {np.rad2deg(plane.theta_rad):.1f} deg, "
+        f"offset {plane.offset_m * mm:.1f} mm"
+    )
+    axes.legend(loc="upper right", markerscale=8)
+    path = Path(path)
+    figure.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(figure)
+    return path
+
+
+def plot_vc_scores(
+    hypotheses: Sequence[SymmetryHypothesis],
+    centroid_m: np.ndarray,
+    path: Path,
+) -> Path:
+    """The VC hypothesis grid: normal angle (deg) against offset from the centroid along the
+    normal (mm), coloured by the fraction of mirrored points in free space; the winner
+    (``hypotheses[0]``) is circled."""
+    plt = _figure()
+    theta = np.array([h.plane.theta_rad for h in hypotheses])
+    relative = np.array(
+        [h.plane.offset_m - h.plane.normal[:2] @ np.asarray(centroid_m)[:2] for h in hypotheses]
+    )
+    score = np.array([h.score for h in hypotheses])
+    figure, axes = plt.subplots(figsize=(7, 5))
+    scatter = axes.scatter(
+        np.rad2deg(theta), relative * 1000.0, c=score, marker="s", s=60, cmap="viridis_r"
+    )
+    figure.colorbar(scatter, ax=axes, label="fraction of mirrored points in free space")
+    axes.scatter(
+        np.rad2deg(theta[0]), relative[0] * 1000.0, s=200, facecolors="none", edgecolors="r"
+    )
+    axes.set_xlabel("plane normal angle theta (deg)")
+    axes.set_ylabel("offset from centroid r (mm)")
+    axes.set_title(f"VC: {len(hypotheses)} hypotheses, best violates {score[0]:.1%}")
+    path = Path(path)
+    figure.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(figure)
+    return path

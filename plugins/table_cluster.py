@@ -1,0 +1,89 @@
+"""Segmenter ``table-cluster``: table plane, height filter, largest cluster."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from pipeline import hookimpl
+from pipeline.errors import StageFailure
+from pipeline.params import param
+from pipeline.perception.depth import backproject_depth
+from pipeline.perception.segmentation import segment_points
+from pipeline.perception.table import resolve_table
+from pipeline.stages import Segmenter
+from pipeline.types import DepthObservation, PointCloud
+
+
+class TableCluster(Segmenter):
+    """Table plane (RANSAC or known height), drop points near it, keep the largest cluster.
+
+    The paper's segmentation (section 6.2.1): every point less than ``min_height_m`` above
+    the table is removed, the rest is clustered (DBSCAN, or Euclidean clustering) and the
+    largest cluster is the object. Output points are in the robot frame with their pixels.
+    """
+
+    name = "table-cluster"
+
+    @dataclass(frozen=True)
+    class Params:
+        table: Literal["auto", "known", "ransac"] = param(
+            "auto",
+            "table plane: 'known' = observation.table_height_m, 'ransac' = fit it, "
+            "'auto' = known when the observation has it, else RANSAC",
+        )
+        min_height_m: float = param(0.02, "drop points closer than this to the table (m)")
+        max_height_m: float = param(1.0, "drop points higher than this above the table (m)")
+        method: Literal["dbscan", "euclidean"] = param(
+            "dbscan", "clustering: DBSCAN, or Euclidean (single linkage, min_points ignored)"
+        )
+        eps_m: float = param(0.01, "neighbourhood radius of the clustering (m)")
+        min_points: int = param(10, "DBSCAN: neighbours (self included) of a core point")
+        voxel_m: float = param(0.0, "voxel side for subsampling before clustering (m; 0 = off)")
+        min_object_points: int = param(50, "fail when the largest cluster is smaller than this")
+        ransac_inlier_m: float = param(0.005, "RANSAC: distance from the plane of an inlier (m)")
+        ransac_iterations: int = param(200, "RANSAC: random point triples tried")
+        ransac_seed: int = param(0, "RANSAC: seed of its random generator")
+
+    def segment(self, observation: DepthObservation) -> PointCloud:
+        p = self.params
+        points, pixels = backproject_depth(
+            observation.depth_m, observation.intrinsics, observation.T_robot_camera
+        )
+        if len(points) == 0:
+            raise StageFailure("segmenter 'table-cluster': the depth image has no valid pixel")
+        try:
+            table = resolve_table(
+                points,
+                observation.table_height_m,
+                p.table,
+                np.random.default_rng(p.ransac_seed),
+                inlier_distance_m=p.ransac_inlier_m,
+                iterations=p.ransac_iterations,
+            )
+        except ValueError as error:
+            raise StageFailure(f"segmenter 'table-cluster': no table plane: {error}") from error
+        result = segment_points(
+            points,
+            table,
+            min_height_m=p.min_height_m,
+            max_height_m=p.max_height_m,
+            eps_m=p.eps_m,
+            min_points=1 if p.method == "euclidean" else p.min_points,
+            voxel_m=p.voxel_m,
+        )
+        if len(result.indices) < p.min_object_points:
+            raise StageFailure(
+                f"segmenter 'table-cluster': largest cluster has {len(result.indices)} points "
+                f"(< min_object_points = {p.min_object_points}); {result.above_table} points "
+                f"were {p.min_height_m * 1000:.0f}-{p.max_height_m * 1000:.0f} mm above the "
+                f"table, in {result.clusters} clusters"
+            )
+        return PointCloud(points[result.indices], "robot", pixels[result.indices])
+
+
+@hookimpl
+def symfuse_register_stages(registry):
+    registry.add(TableCluster)

@@ -1,0 +1,125 @@
+"""Planner ``top-parallel``: a PG-70 top grasp closing along the symmetry plane's normal."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline import hookimpl
+from pipeline.errors import ConfigError
+from pipeline.params import param
+from pipeline.perception.grasp_geometry import (
+    front_to_back,
+    hand_pose,
+    pad_band,
+    parallel_top_grasp,
+    rotate_z,
+)
+from pipeline.stages import GraspPlanner
+from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
+
+
+class TopParallel(GraspPlanner):
+    """Parallel-jaw top grasp at the widest opening, front jaw 10 mm before the visible side.
+
+    The closing direction is the proposed plane's normal rotated about z by
+    ``tactile_angle_deg``; the hand's x axis points from the front jaw (the PG-70's
+    ``"left"`` pad, camera side) to the back jaw. The closing line passes through the
+    cloud's centroid projected onto the proposed plane; the front pad's surface stands
+    ``jaw_clearance_m`` in front of the first visible point on that line (within the pad's
+    width and height range). Pads cover the object's upper part (top edge ``top_margin_m``
+    below the cloud's top) but the fingertips stay ``table_clearance_m`` above the table,
+    which is taken to lie ``cloud_base_above_table_m`` below the cloud's lowest point (the
+    segmentation's height cut). Palm-to-pad-centre and pad-centre-to-fingertip distances
+    default to ``robots/pg70.urdf`` (125 mm and 29 mm). ``predicted_contacts`` are the
+    visible points the front pad meets first. The plan is refused when the object's width
+    along the closing direction (visible cloud and its mirror image, between the pads'
+    paths) plus the jaw clearance exceeds the gripper's aperture.
+    """
+
+    name = "top-parallel"
+
+    @dataclass(frozen=True)
+    class Params:
+        tactile_angle_deg: float = param(
+            0.0, "rotation of the closing direction from the plane normal about z (deg)"
+        )
+        jaw_clearance_m: float = param(0.01, "front pad distance before the visible surface (m)")
+        top_margin_m: float = param(0.005, "pad top edge below the object's top (m)")
+        table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
+        cloud_base_above_table_m: float = param(
+            0.02, "the table lies this far below the cloud's lowest point (m)"
+        )
+        palm_to_pad_centre_m: float = param(0.125, "palm origin to pad centre along z (m)")
+        pad_centre_to_fingertip_m: float = param(0.029, "pad centre to fingertip along z (m)")
+        contact_band_m: float = param(
+            0.008, "depth of the first-touched surface layer, about 4 sigma of depth noise (m)"
+        )
+        pregrasp_height_m: float = param(0.1, "start of the descent above the grasp pose (m)")
+
+    def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
+        p = self.params
+        if gripper.fingers != 2:
+            raise ConfigError(
+                f"planner 'top-parallel' needs a two-finger gripper, got '{gripper.name}' with "
+                f"{gripper.fingers} fingers (use planner 'top-three-finger')"
+            )
+        points = cloud.points
+        plane = proposal.plane
+        normal = plane.normal
+        centroid = points.mean(axis=0)
+        centre = centroid - (centroid @ normal - plane.offset_m) * normal
+        direction = front_to_back(points, rotate_z(normal, np.deg2rad(p.tactile_angle_deg)))
+        band = pad_band(
+            points,
+            gripper.pads[0],
+            table_height_m=float(points[:, 2].min()) - p.cloud_base_above_table_m,
+            top_margin_m=p.top_margin_m,
+            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            table_clearance_m=p.table_clearance_m,
+        )
+        opening = gripper.max_aperture_m
+        grasp = parallel_top_grasp(
+            points,
+            plane.mirror(points),
+            centre,
+            direction,
+            band,
+            opening_m=opening,
+            jaw_clearance_m=p.jaw_clearance_m,
+            palm_above_pad_centre_m=p.palm_to_pad_centre_m,
+            contact_band_m=p.contact_band_m,
+        )
+        if grasp is None:
+            return GraspPlan(
+                gripper=gripper.name,
+                status="refused",
+                T_robot_hand=hand_pose(centre, direction),
+                pregrasp_height_m=p.pregrasp_height_m,
+                opening_m=opening,
+                closing_direction=direction,
+                reason="no visible point lies between the pads' paths at the grasp height",
+            )
+        refused = grasp.width_m + p.jaw_clearance_m > opening
+        return GraspPlan(
+            gripper=gripper.name,
+            status="refused" if refused else "ok",
+            T_robot_hand=grasp.T_robot_hand,
+            pregrasp_height_m=p.pregrasp_height_m,
+            opening_m=opening,
+            closing_direction=grasp.closing_direction,
+            predicted_contacts=grasp.predicted_contacts,
+            reason=(
+                f"object is {grasp.width_m * 1000:.1f} mm wide along the closing direction; "
+                f"with the {p.jaw_clearance_m * 1000:.0f} mm jaw clearance it exceeds the "
+                f"{gripper.name} aperture of {opening * 1000:.1f} mm"
+                if refused
+                else ""
+            ),
+        )
+
+
+@hookimpl
+def symfuse_register_stages(registry):
+    registry.add(TopParallel)

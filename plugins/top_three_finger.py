@@ -1,0 +1,112 @@
+"""Planner ``top-three-finger``: an SDH cylindrical top grasp on the completed cloud."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline import hookimpl
+from pipeline.errors import ConfigError
+from pipeline.params import param
+from pipeline.perception.grasp_geometry import (
+    cylindrical_top_grasp,
+    front_to_back,
+    pad_band,
+    rotate_z,
+)
+from pipeline.stages import GraspPlanner
+from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
+
+
+class TopThreeFinger(GraspPlanner):
+    """Three-finger cylindrical top grasp toward the completed cloud's centroid.
+
+    The cloud is completed by mirroring it through the proposed plane; the palm descends
+    on the vertical line through the completed cloud's centroid with the fingers 120 deg
+    apart (SDH base rotation ``spread_deg`` = 60) and closes radially. The palm's x axis is
+    the plane normal rotated about z by ``tactile_angle_deg``, oriented from the visible
+    (camera) side to the back, so at tactile angle 0 the thumb touches the visible front
+    and the two fingers the mirrored back. The distal pads cover the object's upper part
+    (their top edge ``top_margin_m`` below the top), the fingertips stay
+    ``table_clearance_m`` above the table (taken ``cloud_base_above_table_m`` below the
+    cloud's lowest point). ``palm_to_pad_centre_m`` defaults to the SDH-2 URDF's distal pad
+    centre depth with the distal link vertical and the pads touching a 60-150 mm wide
+    object (74.5 + 16.5 + 86.5 cos(alpha) + 42 mm = 0.20-0.22 m). ``predicted_contacts``
+    are the completed-cloud points each finger meets first (thumb, f1, f2). Refused when
+    the completed cloud is wider along the closing direction than the hand's aperture.
+    """
+
+    name = "top-three-finger"
+
+    @dataclass(frozen=True)
+    class Params:
+        tactile_angle_deg: float = param(
+            0.0, "rotation of the palm x axis from the plane normal about z (deg)"
+        )
+        spread_deg: float = param(60.0, "SDH base rotation; 60 puts the fingers 120 deg apart")
+        top_margin_m: float = param(0.005, "pad top edge below the object's top (m)")
+        table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
+        cloud_base_above_table_m: float = param(
+            0.02, "the table lies this far below the cloud's lowest point (m)"
+        )
+        palm_to_pad_centre_m: float = param(0.21, "palm origin to distal pad centre along z (m)")
+        pad_centre_to_fingertip_m: float = param(
+            0.027, "distal pad centre to fingertip along z (m)"
+        )
+        contact_band_m: float = param(
+            0.008, "depth of the first-touched surface layer, about 4 sigma of depth noise (m)"
+        )
+        pregrasp_height_m: float = param(0.1, "start of the descent above the grasp pose (m)")
+
+    def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
+        p = self.params
+        if gripper.fingers != 3:
+            raise ConfigError(
+                f"planner 'top-three-finger' needs a three-finger hand, got '{gripper.name}' "
+                f"with {gripper.fingers} fingers (use planner 'top-parallel')"
+            )
+        points = cloud.points
+        completed = np.concatenate([points, proposal.plane.mirror(points)])
+        direction = front_to_back(
+            points, rotate_z(proposal.plane.normal, np.deg2rad(p.tactile_angle_deg))
+        )
+        distal = [pad for pad in gripper.pads if pad.name.endswith("distal")]
+        band = pad_band(
+            completed,
+            (distal or list(gripper.pads))[0],
+            table_height_m=float(points[:, 2].min()) - p.cloud_base_above_table_m,
+            top_margin_m=p.top_margin_m,
+            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            table_clearance_m=p.table_clearance_m,
+        )
+        grasp = cylindrical_top_grasp(
+            completed,
+            direction,
+            band,
+            palm_above_pad_centre_m=p.palm_to_pad_centre_m,
+            contact_band_m=p.contact_band_m,
+        )
+        refused = grasp.width_m > gripper.max_aperture_m
+        return GraspPlan(
+            gripper=gripper.name,
+            status="refused" if refused else "ok",
+            T_robot_hand=grasp.T_robot_hand,
+            pregrasp_height_m=p.pregrasp_height_m,
+            opening_m=gripper.max_aperture_m,
+            closing_direction=grasp.closing_direction,
+            predicted_contacts=grasp.predicted_contacts,
+            spread_rad=float(np.deg2rad(p.spread_deg)),
+            reason=(
+                f"object is {grasp.width_m * 1000:.1f} mm wide along the closing direction, "
+                f"wider than the {gripper.name} aperture of "
+                f"{gripper.max_aperture_m * 1000:.1f} mm"
+                if refused
+                else ""
+            ),
+        )
+
+
+@hookimpl
+def symfuse_register_stages(registry):
+    registry.add(TopThreeFinger)

@@ -1,0 +1,120 @@
+"""Initialiser ``vc``: the plane hypothesis that best respects the depth image's free space."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from pipeline import hookimpl
+from pipeline.errors import StageFailure
+from pipeline.params import param
+from pipeline.perception.principal_axes import table_axes
+from pipeline.perception.visibility import plane_grid, visibility_violations
+from pipeline.stages import SymmetryInitialiser
+from pipeline.types import (
+    Bias,
+    DepthObservation,
+    PointCloud,
+    SymmetryHypothesis,
+    SymmetryInit,
+    SymmetryPlane,
+)
+
+
+class VcInitialiser(SymmetryInitialiser):
+    """VC (visibility constraints): the plane hypothesis with fewest mirrored points in free space.
+
+    The O x D hypotheses are scored by the mirrored points they put in known free space.
+    Hypotheses rotate the plane by up to ``max_angle_deg`` about z relative to the seed axis
+    and shift it by up to ``max_offset_m`` from the cloud's centroid along the normal
+    (METHOD.md section 5). Each hypothesis mirrors the whole cloud, projects it into the
+    depth image with the believed camera pose and counts the points lying more than
+    ``tolerance_m`` in front of the measured depth at their pixel (table and background
+    pixels are free space too; NaN pixels and points outside the image are unknown). Ranking:
+    fewest violations, then smallest summed violation depth. ``SymmetryInit.hypotheses``
+    holds every hypothesis, best first, with ``score`` = fraction of violating points. When
+    even the best one exceeds ``max_violation_fraction`` the result is ``"rejected"``.
+    ``refine`` keeps the proposal (zero bias, pivot at the cloud's centroid).
+    """
+
+    name = "vc"
+    needs_observation = True
+
+    @dataclass(frozen=True)
+    class Params:
+        seed: Literal["major", "view"] = param(
+            "major",
+            "seed axis contained in the plane: 'major' = the PCA major axis (the paper), "
+            "'view' = the PCA axis most perpendicular to the camera's horizontal view",
+        )
+        max_angle_deg: float = param(45.0, "largest plane rotation from the seed (deg)")
+        orientations: int = param(19, "number of orientations O (evenly spaced, inclusive)")
+        max_offset_m: float = param(0.06, "largest plane shift from the centroid (m)")
+        offsets: int = param(25, "number of offsets D (evenly spaced, inclusive)")
+        tolerance_m: float = param(
+            0.01, "how far in front of the measured depth a mirrored point may lie (m)"
+        )
+        max_violation_fraction: float = param(
+            0.2, "reject when the best hypothesis has a larger fraction of violating points"
+        )
+
+    def propose(self, cloud: PointCloud, observation: DepthObservation | None) -> SymmetryInit:
+        p = self.params
+        if observation is None:
+            raise StageFailure("initialiser 'vc' needs the depth image (observation is None)")
+        axes = table_axes(cloud.points)
+        seed_normal = axes.minor
+        if p.seed == "view":
+            view = axes.centroid_m - np.asarray(observation.T_robot_camera)[:3, 3]
+            if abs(view[:2] @ axes.major[:2]) > abs(view[:2] @ axes.minor[:2]):
+                seed_normal = axes.major
+        grid = plane_grid(
+            float(np.arctan2(seed_normal[1], seed_normal[0])),
+            axes.centroid_m,
+            max_angle_rad=np.deg2rad(p.max_angle_deg),
+            orientations=p.orientations,
+            max_offset_m=p.max_offset_m,
+            offsets=p.offsets,
+        )
+        violations, depth_sum = visibility_violations(
+            cloud.points,
+            grid.theta_rad.ravel(),
+            grid.offset_m.ravel(),
+            observation.depth_m,
+            observation.intrinsics,
+            observation.T_robot_camera,
+            tolerance_m=p.tolerance_m,
+        )
+        order = np.lexsort((depth_sum, violations))
+        theta, offset = grid.theta_rad.ravel(), grid.offset_m.ravel()
+        hypotheses = tuple(
+            SymmetryHypothesis(
+                plane=SymmetryPlane(float(theta[i]), float(offset[i])),
+                score=float(violations[i]) / len(cloud),
+                violations=int(violations[i]),
+            )
+            for i in order
+        )
+        best = hypotheses[0]
+        bias = Bias(pivot_m=axes.centroid_m)
+        if best.score > p.max_violation_fraction:
+            return SymmetryInit(
+                plane=best.plane,
+                bias=bias,
+                hypotheses=hypotheses,
+                status="rejected",
+                reason=(
+                    f"the best of {len(hypotheses)} plane hypotheses puts {best.score:.0%} of "
+                    f"the mirrored points in free space (max_violation_fraction = "
+                    f"{p.max_violation_fraction:.0%}); the true plane may be nearly parallel "
+                    "to the viewing direction"
+                ),
+            )
+        return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+
+
+@hookimpl
+def symfuse_register_stages(registry):
+    registry.add(VcInitialiser)

@@ -1,0 +1,159 @@
+"""Depth back-projection, table RANSAC, clustering and the two segmenters."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.errors import StageFailure
+from pipeline.open3d_loader import open3d
+from pipeline.perception.clustering import (
+    dbscan_labels,
+    largest_cluster_indices,
+    voxel_subsample_indices,
+)
+from pipeline.perception.depth import backproject_depth, project_points
+from pipeline.perception.synthetic import (
+    KINECT,
+    box_object,
+    look_at,
+    render_depth,
+    synthetic_observation,
+)
+from pipeline.perception.table import fit_table_ransac
+from pipeline.types import CameraIntrinsics, DepthObservation
+from plugins.ground_truth_mask import GroundTruthMask
+from plugins.table_cluster import TableCluster
+
+SMALL = CameraIntrinsics(width=8, height=6, fx=10.0, fy=12.0, cx=3.5, cy=2.5)
+
+
+def test_backprojection_matches_pinhole_by_hand():
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    T[:3, 3] = [1.0, 2.0, 3.0]
+    depth = np.full((6, 8), np.nan, dtype=np.float32)
+    depth[4, 1] = 2.0
+    points, pixels = backproject_depth(depth, SMALL, T)
+    # Pixel (row 4, col 1): x_c = (1 - 3.5) * 2 / 10 = -0.5, y_c = (4 - 2.5) * 2 / 12 = 0.25.
+    expected = T[:3, :3] @ np.array([-0.5, 0.25, 2.0]) + T[:3, 3]
+    np.testing.assert_allclose(points, [expected])
+    np.testing.assert_array_equal(pixels, [[4, 1]])
+    rows, cols, z = project_points(points, SMALL, T)
+    assert (rows[0], cols[0]) == (4, 1)
+    assert z[0] == pytest.approx(2.0)
+
+
+def test_renderer_depth_of_a_box_top_seen_from_straight_above():
+    # Camera 1 m above the table looking straight down: the table is at depth 1 m, the top
+    # of a 0.1 m tall box at 0.9 m.
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = [0.0, 0.0, 1.0]
+    depth, mask = render_depth(box_object(0.1, 0.1, 0.1), (0.0, 0.0, 0.3), 0.0, KINECT, T)
+    assert depth[240, 315] == pytest.approx(0.9, abs=1e-6)
+    assert depth[10, 10] == pytest.approx(1.0, abs=1e-6)
+    assert mask[240, 315] and not mask[10, 10]
+
+
+def test_ransac_finds_a_known_tilted_table():
+    rng = np.random.default_rng(3)
+    normal = np.array([0.05, -0.03, 1.0])
+    normal /= np.linalg.norm(normal)
+    xy = rng.uniform(-0.5, 0.5, size=(20000, 2))
+    z = (0.73 - normal[0] * xy[:, 0] - normal[1] * xy[:, 1]) / normal[2]
+    table = np.column_stack([xy, z + rng.normal(0, 0.001, len(xy))])
+    clutter = rng.uniform([-0.5, -0.5, 0.75], [0.5, 0.5, 1.2], size=(8000, 3))
+    wall = np.column_stack(  # a vertical plane must not win: it is not near horizontal
+        [np.full(15000, 0.6), rng.uniform(-0.5, 0.5, 15000), rng.uniform(0.0, 1.5, 15000)]
+    )
+    plane, inliers = fit_table_ransac(np.concatenate([table, clutter, wall]), rng)
+    assert np.degrees(np.arccos(plane.normal @ normal)) < 0.5
+    assert plane.offset_m == pytest.approx(0.73, abs=0.002)
+    assert inliers[: len(table)].mean() > 0.99
+    assert inliers[len(table) :].mean() < 0.05
+
+
+def _blobs(rng):
+    centres = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.4, 0.1]])
+    sizes = [600, 300, 150]
+    blobs = [rng.normal(c, 0.01, size=(n, 3)) for c, n in zip(centres, sizes, strict=True)]
+    noise = rng.uniform(-1.0, 1.0, size=(30, 3)) + np.array([0.0, 0.0, 2.0])
+    return np.concatenate([*blobs, noise]), sizes
+
+
+def test_dbscan_matches_open3d_partition():
+    points, sizes = _blobs(np.random.default_rng(0))
+    ours = dbscan_labels(points, 0.01, 10)
+    cloud = open3d().geometry.PointCloud(open3d().utility.Vector3dVector(points))
+    theirs = np.asarray(cloud.cluster_dbscan(eps=0.01, min_points=10))
+    np.testing.assert_array_equal(ours < 0, theirs < 0)
+    clustered = ours >= 0
+    # Same partition: the label pairs form a bijection.
+    pairs = set(zip(ours[clustered], theirs[clustered], strict=True))
+    assert len(pairs) == len(set(ours[clustered])) == len(set(theirs[clustered]))
+    largest = largest_cluster_indices(ours)
+    assert set(largest) <= set(range(sizes[0])) and len(largest) > 0.9 * sizes[0]
+
+
+def test_euclidean_clustering_links_chains():
+    chain = np.column_stack([np.arange(10) * 0.009, np.zeros(10), np.zeros(10)])
+    far = chain + np.array([1.0, 0.0, 0.0])
+    labels = dbscan_labels(np.concatenate([chain, far]), 0.01, 1)
+    assert len(set(labels[:10])) == 1 and len(set(labels[10:])) == 1
+    assert labels[0] != labels[10]
+
+
+def test_voxel_subsampling_keeps_one_point_per_voxel():
+    rng = np.random.default_rng(1)
+    points = rng.uniform(0.0, 0.1, size=(5000, 3))
+    kept = voxel_subsample_indices(points, 0.02)
+    voxels = np.floor(points / 0.02).astype(int)
+    assert len(kept) == len(np.unique(voxels, axis=0))
+    assert len(np.unique(voxels[kept], axis=0)) == len(kept)
+
+
+@pytest.fixture(scope="module")
+def box_scene():
+    return synthetic_observation(
+        box_object(0.042, 0.15, 0.12),
+        (0.6, 0.1, 0.4),
+        table_height_m=0.7,
+        rng=np.random.default_rng(5),
+    )
+
+
+@pytest.mark.parametrize("table", ["known", "ransac"])
+def test_table_cluster_recovers_object_points(box_scene, table):
+    segmenter = TableCluster(TableCluster.Params(table=table))
+    cloud = segmenter.segment(box_scene)
+    on_object = box_scene.object_mask[cloud.pixels[:, 0], cloud.pixels[:, 1]]
+    precision = on_object.mean()
+    # Recall against the object pixels at least 2 cm above the table (exact geometry).
+    depth = np.where(box_scene.object_mask, box_scene.depth_m, np.nan)
+    points, _ = backproject_depth(depth, box_scene.intrinsics, box_scene.T_robot_camera)
+    reachable = int((points[:, 2] >= 0.7 + 0.025).sum())
+    assert precision > 0.99
+    assert on_object.sum() >= 0.97 * reachable
+    assert cloud.frame == "robot" and cloud.points[:, 2].min() >= 0.7 + 0.015
+
+
+def test_table_cluster_fails_clearly_on_an_empty_table():
+    T = look_at(np.array([0.6, 0.0, 0.7]), 1.0, np.deg2rad(45.0), np.pi)
+    depth, _ = render_depth(box_object(0.04, 0.04, 0.01), (0.6, 0.0, 0.0), 0.7, KINECT, T)
+    observation = DepthObservation(
+        depth, np.zeros((480, 640, 3), np.uint8), KINECT, T, table_height_m=0.7
+    )
+    with pytest.raises(StageFailure, match=r"table-cluster.*largest cluster has 0 points"):
+        TableCluster().segment(observation)
+
+
+def test_ground_truth_mask_drops_near_table_points_and_needs_a_mask(box_scene):
+    cloud = GroundTruthMask().segment(box_scene)
+    assert box_scene.object_mask[cloud.pixels[:, 0], cloud.pixels[:, 1]].all()
+    assert cloud.points[:, 2].min() >= 0.72
+    without = DepthObservation(
+        box_scene.depth_m, box_scene.rgb, box_scene.intrinsics, box_scene.T_robot_camera, 0.7
+    )
+    with pytest.raises(StageFailure, match="no object mask"):
+        GroundTruthMask().segment(without)
