@@ -1,0 +1,261 @@
+"""Pinhole camera rendering in PyBullet: pose from a viewpoint, OpenGL matrices from
+intrinsics, and metric depth, colour and segmentation from ``getCameraImage``.
+
+Frames: the robot frame ``R`` is PyBullet's world frame. Camera poses are returned in the
+OpenCV optical convention (x right, y down, z along the optical axis) as ``T_robot_camera``;
+the OpenGL eye frame PyBullet renders with (x right, y up, z backward) is used only inside
+this module.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+import pybullet
+
+from pipeline.errors import ConfigError, PluginError
+from pipeline.params import param
+from pipeline.sim.depth_noise import SimulatedDepth
+from pipeline.types import CameraIntrinsics, DepthObservation
+
+#: OpenCV optical frame -> OpenGL eye frame (flip y and z).
+T_CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+#: Where TinyRenderer samples pixel (column i, row j) relative to the pixel's centre, in
+#: pixels (column, row): at a corner, not the centre (measured on a tilted plane; see
+#: tests/test_camera_render.py). :func:`projection_matrix` moves the principal point by it,
+#: so each pixel shows the surface on its centre's ray.
+TINY_RENDERER_SAMPLE_OFFSET_PX = (-0.5, 0.5)
+
+
+@dataclass(frozen=True)
+class Rendering:
+    """One noise-free rendered image.
+
+    Attributes:
+        rgb: ``(H, W, 3) uint8`` colour image.
+        depth_m: ``(H, W) float32`` true depth along the optical axis (m), ``NaN`` where no
+            body was hit within the far plane.
+        segmentation: ``(H, W) int32`` PyBullet body id seen at each pixel, ``-1`` for none.
+        T_robot_camera: the true camera pose (OpenCV optical frame), ``(4, 4)``.
+    """
+
+    rgb: np.ndarray
+    depth_m: np.ndarray
+    segmentation: np.ndarray
+    T_robot_camera: np.ndarray
+
+
+def look_at(
+    target_robot: np.ndarray, distance_m: float, elevation_deg: float, azimuth_deg: float
+) -> np.ndarray:
+    """``T_robot_camera`` of a camera looking at ``target_robot`` from a viewpoint.
+
+    The camera sits at ``target + distance (cos el cos az, cos el sin az, sin el)``: azimuth
+    is measured about +z from the robot's +x axis, elevation up from the table plane. The
+    image x axis stays horizontal (no roll), so the table's vertical projects to the image's
+    up direction. Defined for every elevation, including straight down (90 deg).
+    """
+    elevation, azimuth = np.deg2rad(elevation_deg), np.deg2rad(azimuth_deg)
+    direction_to_camera = np.array(
+        [
+            np.cos(elevation) * np.cos(azimuth),
+            np.cos(elevation) * np.sin(azimuth),
+            np.sin(elevation),
+        ]
+    )
+    z_axis = -direction_to_camera
+    x_axis = np.array([-np.sin(azimuth), np.cos(azimuth), 0.0])
+    y_axis = np.cross(z_axis, x_axis)
+    transform = np.eye(4)
+    transform[:3, :3] = np.column_stack([x_axis, y_axis, z_axis])
+    transform[:3, 3] = np.asarray(target_robot, dtype=np.float64) + distance_m * direction_to_camera
+    return transform
+
+
+def view_matrix(T_robot_camera: np.ndarray) -> list[float]:
+    """PyBullet's view matrix (column-major, 16 floats) for an OpenCV camera pose."""
+    T_gl_robot = T_CV_TO_GL @ np.linalg.inv(T_robot_camera)
+    return T_gl_robot.flatten(order="F").tolist()
+
+
+def projection_matrix(intrinsics: CameraIntrinsics, near_m: float, far_m: float) -> list[float]:
+    """OpenGL projection (column-major, 16 floats) reproducing the pinhole ``intrinsics``.
+
+    Maps eye coordinates so that pixel centres land at ``u = fx X/Z + cx``,
+    ``v = fy Y/Z + cy`` (OpenCV convention: ``(0, 0)`` is the centre of the top-left pixel,
+    rows down), with the normalised-device range ``[-1, 1]`` spanning the image's outer edges,
+    corrected for TinyRenderer sampling pixels at a corner
+    (:data:`TINY_RENDERER_SAMPLE_OFFSET_PX`).
+    """
+    width, height = intrinsics.width, intrinsics.height
+    projection = np.zeros((4, 4))
+    projection[0, 0] = 2.0 * intrinsics.fx / width
+    column_shift, row_shift = TINY_RENDERER_SAMPLE_OFFSET_PX
+    projection[0, 2] = 1.0 - 2.0 * (intrinsics.cx + 0.5 + column_shift) / width
+    projection[1, 1] = 2.0 * intrinsics.fy / height
+    projection[1, 2] = 2.0 * (intrinsics.cy + 0.5 + row_shift) / height - 1.0
+    projection[2, 2] = -(far_m + near_m) / (far_m - near_m)
+    projection[2, 3] = -2.0 * far_m * near_m / (far_m - near_m)
+    projection[3, 2] = -1.0
+    return projection.flatten(order="F").tolist()
+
+
+def metric_depth(depth_buffer: np.ndarray, near_m: float, far_m: float) -> np.ndarray:
+    """Depth along the optical axis (m) from OpenGL depth-buffer values in ``[0, 1]``:
+    ``z = far near / (far - (far - near) d)``; ``NaN`` at the far plane (nothing hit)."""
+    buffer = np.asarray(depth_buffer, dtype=np.float64)
+    depth = far_m * near_m / (far_m - (far_m - near_m) * buffer)
+    return np.where(buffer < 1.0, depth, np.nan)
+
+
+def render(
+    client: int,
+    intrinsics: CameraIntrinsics,
+    T_robot_camera: np.ndarray,
+    near_m: float = 0.05,
+    far_m: float = 6.0,
+) -> Rendering:
+    """Render colour, metric depth and body segmentation with PyBullet's TinyRenderer.
+
+    Works in DIRECT mode (no GPU); shadows off, default light from above the camera.
+    """
+    _, _, rgba, depth_buffer, segmentation = pybullet.getCameraImage(
+        intrinsics.width,
+        intrinsics.height,
+        viewMatrix=view_matrix(T_robot_camera),
+        projectionMatrix=projection_matrix(intrinsics, near_m, far_m),
+        renderer=pybullet.ER_TINY_RENDERER,
+        shadow=0,
+        physicsClientId=client,
+    )
+    shape = (intrinsics.height, intrinsics.width)
+    rgb = np.asarray(rgba, dtype=np.uint8).reshape(*shape, 4)[..., :3].copy()
+    depth_m = metric_depth(np.asarray(depth_buffer).reshape(shape), near_m, far_m)
+    segmentation = np.asarray(segmentation, dtype=np.int32).reshape(shape)
+    depth_m[segmentation < 0] = np.nan
+    return Rendering(rgb, depth_m.astype(np.float32), segmentation, np.array(T_robot_camera))
+
+
+def calibration_error(
+    T_robot_camera: np.ndarray, yaw_rad: float, translation_m: np.ndarray, pivot_robot: np.ndarray
+) -> np.ndarray:
+    """The camera pose a miscalibrated system believes in.
+
+    The error is a rotation by ``yaw_rad`` about the vertical axis through ``pivot_robot``
+    followed by a translation ``translation_m`` (frame ``R``): a cloud reconstructed with
+    the believed pose is the true cloud moved by exactly that planar motion (the form of the
+    estimator's bias), and a yaw error alone does not shift points at the pivot.
+    """
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    pivot = np.asarray(pivot_robot, dtype=np.float64)
+    T_believed_true = np.eye(4)
+    T_believed_true[:3, :3] = rotation
+    T_believed_true[:3, 3] = pivot - rotation @ pivot + np.asarray(translation_m, dtype=np.float64)
+    return T_believed_true @ T_robot_camera
+
+
+@dataclass(frozen=True)
+class CameraParams:
+    """Viewpoint, image and calibration-error parameters shared by the simulated sensors."""
+
+    distance_m: float = param(1.0, "distance from the camera to the look-at target (m)")
+    elevation_deg: float = param(45.0, "camera elevation above the table plane (deg)")
+    azimuth_deg: float = param(180.0, "camera azimuth about +z from the robot's +x axis (deg)")
+    target_m: tuple[float, ...] = param(
+        (0.0, 0.0, 0.05), "look-at point (x, y, z) in frame R (m); see target_relative_to"
+    )
+    target_relative_to: Literal["object", "robot"] = param(
+        "object",
+        "'object': target_m is an offset from the object's base position; 'robot': absolute",
+    )
+    width: int = param(640, "image width (px)")
+    height: int = param(480, "image height (px)")
+    fx: float = param(575.8, "focal length along x (px)")
+    fy: float = param(575.8, "focal length along y (px)")
+    cx: float = param(314.5, "principal point column, from the top-left pixel centre (px)")
+    cy: float = param(235.5, "principal point row, from the top-left pixel centre (px)")
+    near_m: float = param(0.05, "renderer near clipping plane (m)")
+    far_m: float = param(6.0, "renderer far clipping plane (m); nothing is seen beyond it")
+    noise: bool = param(True, "apply the sensor's noise and missing-data model")
+    calibration_yaw_deg: float = param(
+        0.0, "calibration error: yaw of the believed camera pose about the target's vertical (deg)"
+    )
+    calibration_translation_m: tuple[float, ...] = param(
+        (0.0, 0.0, 0.0), "calibration error: translation (x, y, z) of the believed pose in R (m)"
+    )
+
+    def __post_init__(self) -> None:
+        for key in ("target_m", "calibration_translation_m"):
+            if len(getattr(self, key)) != 3:
+                raise ConfigError(f"sensor parameter '{key}' must have 3 values (x, y, z)")
+        if self.distance_m <= 0 or self.near_m <= 0 or self.far_m <= self.near_m:
+            raise ConfigError("sensor parameters need distance_m > 0 and 0 < near_m < far_m")
+        if self.width <= 0 or self.height <= 0 or self.fx <= 0 or self.fy <= 0:
+            raise ConfigError("sensor parameters need positive width, height, fx and fy")
+
+    @property
+    def intrinsics(self) -> CameraIntrinsics:
+        """The camera's pinhole intrinsics."""
+        return CameraIntrinsics(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
+
+
+def _require_pybullet_world(world: Any, sensor: str) -> None:
+    missing = [
+        name
+        for name in ("client", "object_id", "table_height_m", "rng")
+        if not hasattr(world, name)
+    ]
+    if missing:
+        raise PluginError(
+            f"sensor '{sensor}' needs a PybulletWorld (missing: {', '.join(missing)}), "
+            f"got {type(world).__name__}"
+        )
+
+
+def observe(
+    world: Any,
+    params: CameraParams,
+    sensor: str,
+    corrupt: Callable[[np.ndarray, CameraIntrinsics, np.random.Generator], SimulatedDepth],
+) -> DepthObservation:
+    """Render ``world`` from the viewpoint in ``params`` and pass the true depth through the
+    sensor model ``corrupt`` (skipped when ``params.noise`` is False).
+
+    ``world`` must have ``client``, ``object_id``, ``table_height_m`` and ``rng`` (a
+    :class:`~pipeline.sim.world.PybulletWorld`). The observation carries the *believed*
+    camera pose (with the calibration error), the table height and the ground-truth object
+    mask registered to the returned depth image.
+    """
+    _require_pybullet_world(world, sensor)
+    target_robot = np.array(params.target_m, dtype=np.float64)
+    if params.target_relative_to == "object":
+        target_robot = target_robot + world.object_pose().position_m
+    T_robot_camera = look_at(
+        target_robot, params.distance_m, params.elevation_deg, params.azimuth_deg
+    )
+    intrinsics = params.intrinsics
+    rendering = render(world.client, intrinsics, T_robot_camera, params.near_m, params.far_m)
+    segmentation = rendering.segmentation
+    depth_m = rendering.depth_m
+    if params.noise:
+        simulated = corrupt(depth_m, intrinsics, world.rng)
+        depth_m = simulated.depth_m
+        segmentation = segmentation[simulated.source_rows, simulated.source_cols]
+    T_believed = calibration_error(
+        T_robot_camera,
+        np.deg2rad(params.calibration_yaw_deg),
+        np.array(params.calibration_translation_m),
+        target_robot,
+    )
+    return DepthObservation(
+        depth_m=depth_m,
+        rgb=rendering.rgb,
+        intrinsics=intrinsics,
+        T_robot_camera=T_believed,
+        table_height_m=float(world.table_height_m),
+        object_mask=segmentation == world.object_id,
+    )

@@ -1,0 +1,134 @@
+"""The PyBullet world: one object on the table and one hand (the :class:`pipeline.stages.World`
+protocol for simulation trials).
+
+The robot frame ``R`` is PyBullet's world frame. Sensor sources read ``client``,
+``object_id``, ``table_height_m`` and ``rng``; tactile models read ``client``, ``hand`` and
+``object_id``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+import trimesh
+
+from pipeline.errors import ConfigError
+from pipeline.sim.scene import Scene
+from pipeline.types import GraspOutcome, GraspPlan, GripperSpec, ObjectPose
+
+if TYPE_CHECKING:
+    from pipeline.sim.hands import Hand
+
+#: Physics steps (1/240 s each) the object is left to settle after being placed (s * 240).
+SETTLE_STEPS = 24
+
+
+class SceneObject(Protocol):
+    """What the world needs of an object (a catalogue entry satisfies it)."""
+
+    name: str
+    mesh: trimesh.Trimesh
+    mass_kg: float
+    friction: float
+
+
+class PybulletWorld:
+    """A PyBullet scene with one object on the table and (optionally) one hand.
+
+    Attributes:
+        client: PyBullet client id.
+        scene: the :class:`~pipeline.sim.scene.Scene` owning the client.
+        hand: the loaded hand, or None for a sensing-only world.
+        object_id: PyBullet body id of the object.
+        object_mesh: the object's mesh in its own frame (m); ``object_pose().transform``
+            maps it into frame ``R``.
+        object_name: the object's name.
+        gripper: the hand's :class:`GripperSpec` (None without a hand).
+        table_height_m: z of the table top in frame ``R``.
+        rng: the trial's random generator (sensor and tactile noise draw from it).
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        hand: Hand | None,
+        object_id: int,
+        object_mesh: trimesh.Trimesh,
+        object_name: str,
+        seed: int,
+    ) -> None:
+        self.scene = scene
+        self.client = scene.client
+        self.hand = hand
+        self.object_id = object_id
+        self.object_mesh = object_mesh
+        self.object_name = object_name
+        self.gripper: GripperSpec | None = hand.spec if hand is not None else None
+        self.table_height_m = scene.table_height_m
+        self.rng = np.random.default_rng(seed)
+
+    @classmethod
+    def create(
+        cls,
+        obj: SceneObject,
+        gripper: str | None,
+        x: float = 0.0,
+        y: float = 0.0,
+        yaw: float = 0.0,
+        seed: int = 0,
+        table_height_m: float = 0.0,
+        urdf_path: str | Path | None = None,
+    ) -> PybulletWorld:
+        """Build a world: table, ``obj`` standing at ``(x, y)`` m with ``yaw`` rad, and the
+        hand named ``gripper`` (``"pg70"``, ``"sdh"``; None for no hand).
+
+        With ``urdf_path`` the object's body comes from that URDF (its base frame must be
+        the frame ``obj.mesh`` is expressed in); otherwise it is built from ``obj.mesh``,
+        ``obj.mass_kg`` and ``obj.friction``. The object is left to settle for 0.1 s.
+        """
+        scene = Scene(table_height_m=table_height_m)
+        try:
+            if urdf_path is None:
+                object_id = scene.add_object(obj.mesh, obj.mass_kg, obj.friction, x, y, yaw)
+            else:
+                object_id = scene.add_urdf(urdf_path, x, y, yaw)
+            scene.step(SETTLE_STEPS)
+            hand = None
+            if gripper is not None:
+                from pipeline.sim.hands import Hand
+
+                hand = Hand.load(scene.client, gripper)
+        except BaseException:
+            scene.close()
+            raise
+        return cls(scene, hand, object_id, obj.mesh, obj.name, seed)
+
+    def __enter__(self) -> PybulletWorld:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Disconnect the PyBullet client."""
+        self.scene.close()
+
+    def object_pose(self) -> ObjectPose:
+        """The object's true pose now (its mesh frame in frame ``R``)."""
+        return self.scene.object_pose(self.object_id)
+
+    def execute_grasp(self, plan: GraspPlan) -> GraspOutcome:
+        """Run ``plan`` with the hand (see :func:`pipeline.sim.grasping.execute_grasp`)."""
+        if self.hand is None:
+            raise ConfigError("this PybulletWorld was created without a gripper; cannot grasp")
+        from pipeline.sim.grasping import execute_grasp
+
+        return execute_grasp(self.client, self.hand, plan, self.object_id)

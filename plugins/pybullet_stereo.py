@@ -1,0 +1,68 @@
+"""Built-in sensor source ``pybullet-stereo``: a simulated narrow-angle stereo pair."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline import hookimpl
+from pipeline.params import param
+from pipeline.sim.camera import CameraParams, observe
+from pipeline.sim.depth_noise import SimulatedDepth, StereoNoise, simulate_stereo
+from pipeline.stages import SensorSource, World
+from pipeline.types import CameraIntrinsics, DepthObservation
+
+
+class PybulletStereo(SensorSource):
+    """Stereo depth + colour from PyBullet (z^2 sigma_d / (f B) noise, occlusions, edges).
+
+    Models the narrow-angle camera pair of an Armar III-like head: 640x480 images, a 90 mm
+    baseline and a 12 mm lens on 7.4 um pixels (f about 1600 px, 22 deg horizontal field
+    of view) -- the lens and pixel figures are unconfirmed estimates; all are parameters.
+    Depth is registered to the left camera. Matching failures on untextured surfaces are
+    not modelled. Needs a :class:`pipeline.sim.world.PybulletWorld`.
+    """
+
+    name = "pybullet-stereo"
+
+    @dataclass(frozen=True)
+    class Params(CameraParams):
+        fx: float = param(1600.0, "focal length along x (px)")
+        fy: float = param(1600.0, "focal length along y (px)")
+        cx: float = param(319.5, "principal point column, from the top-left pixel centre (px)")
+        cy: float = param(239.5, "principal point row, from the top-left pixel centre (px)")
+        baseline_m: float = param(0.09, "distance to the right camera along image x (m)")
+        disparity_sigma_px: float = param(0.2, "disparity noise of the matcher (px)")
+        disparity_step_px: float = param(0.0625, "sub-pixel disparity step (px; 1/16)")
+        min_range_m: float = param(0.3, "nearest depth the disparity search covers (m)")
+        max_range_m: float = param(3.0, "farthest depth the disparity search covers (m)")
+        axial_noise: bool = param(True, "add disparity noise; off leaves quantisation")
+        occlusions: bool = param(True, "drop pixels the right camera cannot see")
+        edge_jump_px: float = param(1.0, "disparity jump that counts as a depth edge (px)")
+        edge_margin_px: int = param(2, "pixels dropped on each side of a depth edge (px)")
+
+    def _corrupt(
+        self, depth_m: np.ndarray, intrinsics: CameraIntrinsics, rng: np.random.Generator
+    ) -> SimulatedDepth:
+        p = self.params
+        noise = StereoNoise(
+            baseline_m=p.baseline_m,
+            disparity_sigma_px=p.disparity_sigma_px,
+            disparity_step_px=p.disparity_step_px,
+            min_range_m=p.min_range_m,
+            max_range_m=p.max_range_m,
+            axial_noise=p.axial_noise,
+            occlusions=p.occlusions,
+            edge_jump_px=p.edge_jump_px,
+            edge_margin_px=p.edge_margin_px,
+        )
+        return simulate_stereo(depth_m, intrinsics, rng, noise)
+
+    def observe(self, world: World) -> DepthObservation:
+        return observe(world, self.params, self.name, self._corrupt)
+
+
+@hookimpl
+def symfuse_register_stages(registry):
+    registry.add(PybulletStereo)

@@ -1,0 +1,173 @@
+"""The PyBullet scene: table, object placement, mass properties, convex decomposition."""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from pipeline.errors import InputError
+from pipeline.sim import scene as scene_module
+from pipeline.sim.scene import Scene
+
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path_factory, monkeypatch):
+    """Keep convex decompositions out of the user's cache directory."""
+    monkeypatch.setenv("SYMFUSE_CACHE", str(tmp_path_factory.getbasetemp() / "symfuse-cache"))
+
+
+def standing(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    mesh = mesh.copy()
+    mesh.apply_translation(-mesh.bounds[0] * [0, 0, 1])
+    return mesh
+
+
+def box_mesh(size_m=(0.06, 0.1, 0.16)) -> trimesh.Trimesh:
+    return standing(trimesh.creation.box(size_m))
+
+
+def ring_mesh() -> trimesh.Trimesh:
+    """A thick ring: non-convex, with a 60 mm hole through the middle."""
+    return standing(trimesh.creation.annulus(r_min=0.03, r_max=0.05, height=0.08))
+
+
+def yaw_of(quaternion_xyzw) -> float:
+    return float(Rotation.from_quat(quaternion_xyzw).as_euler("xyz")[2])
+
+
+@pytest.mark.parametrize("table_height_m", [0.0, 0.25])
+def test_box_stands_still_at_its_planar_pose(table_height_m):
+    with Scene(table_height_m=table_height_m) as scene:
+        body = scene.add_object(box_mesh(), 0.4, 0.6, x_m=0.45, y_m=-0.12, yaw_rad=0.7)
+        scene.step(240)
+        pose = scene.object_pose(body)
+    np.testing.assert_allclose(pose.position_m, [0.45, -0.12, table_height_m], atol=5e-4)
+    assert yaw_of(pose.quaternion_xyzw) == pytest.approx(0.7, abs=1e-3)
+
+
+def test_pose_is_the_mesh_frame_even_with_an_offset_centre_of_mass():
+    # A box whose mesh origin is 40 mm off its centre (and centre of mass).
+    offset_box = box_mesh((0.12, 0.05, 0.1))
+    offset_box.apply_translation((0.04, 0.0, 0.0))
+    with Scene() as scene:
+        body = scene.add_object(offset_box, 0.3, 0.8, x_m=0.3, y_m=0.2, yaw_rad=-0.4)
+        pose = scene.object_pose(body)
+        com_world = pybullet.getBasePositionAndOrientation(body, physicsClientId=scene.client)[0]
+    # Objects rest on the 0.1 mm collision margin, hence the z tolerance.
+    np.testing.assert_allclose(pose.position_m, [0.3, 0.2, 0.0], atol=2e-4)
+    assert yaw_of(pose.quaternion_xyzw) == pytest.approx(-0.4, abs=1e-6)
+    expected_com = [0.3 + 0.04 * np.cos(-0.4), 0.2 + 0.04 * np.sin(-0.4), 0.05]
+    np.testing.assert_allclose(com_world, expected_com, atol=2e-4)
+
+
+def test_mass_and_inertia_of_a_uniform_box():
+    a, b, c = 0.06, 0.1, 0.16
+    mass = 0.5
+    with Scene() as scene:
+        body = scene.add_object(box_mesh((a, b, c)), mass, 0.7)
+        info = pybullet.getDynamicsInfo(body, -1, physicsClientId=scene.client)
+    assert info[0] == pytest.approx(mass)
+    assert info[1] == pytest.approx(0.7)
+    expected = sorted(
+        [mass * (b**2 + c**2) / 12, mass * (a**2 + c**2) / 12, mass * (a**2 + b**2) / 12]
+    )
+    np.testing.assert_allclose(sorted(info[2]), expected, rtol=1e-6)
+    np.testing.assert_allclose(info[3], [0.0, 0.0, c / 2], atol=1e-9)  # centre of mass
+
+
+def test_non_convex_mesh_keeps_its_hole_and_is_cached(tmp_path, monkeypatch):
+    monkeypatch.setenv("SYMFUSE_CACHE", str(tmp_path))  # empty: V-HACD must run here
+    ring = ring_mesh()
+    assert not ring.is_convex
+    with Scene(vhacd_resolution=20_000) as scene:
+        body = scene.add_object(ring, 0.2, 0.5, x_m=0.2)
+        scene.step(120)
+        # A ray straight down the hole reaches the table; one through the wall hits the ring.
+        hole, wall = pybullet.rayTestBatch(
+            [(0.2, 0.0, 0.3), (0.24, 0.0, 0.3)],
+            [(0.2, 0.0, -0.01), (0.24, 0.0, -0.01)],
+            physicsClientId=scene.client,
+        )
+        assert hole[0] == scene.table_id
+        assert wall[0] == body
+        assert wall[3][2] == pytest.approx(0.08, abs=3e-3)
+        assert scene.object_pose(body).position_m[2] == pytest.approx(0.0, abs=3e-3)
+    cached = list((tmp_path / "vhacd").glob("*.obj"))
+    assert len(cached) == 1
+    # Shrink-wrapped: no hull vertex lies outside the true surface (trimesh: outside < 0).
+    hull_vertices = trimesh.load(cached[0], force="mesh").vertices
+    assert trimesh.proximity.signed_distance(ring, hull_vertices).min() > -1e-6
+
+    def no_vhacd(*args, **kwargs):
+        raise AssertionError("V-HACD ran again despite a cached decomposition")
+
+    monkeypatch.setattr(scene_module.pybullet, "vhacd", no_vhacd)
+    with Scene(vhacd_resolution=20_000) as scene:
+        scene.add_object(ring_mesh(), 0.2, 0.5)
+
+
+def test_convex_mesh_is_not_decomposed(tmp_path, monkeypatch):
+    monkeypatch.setenv("SYMFUSE_CACHE", str(tmp_path))
+    cylinder = standing(trimesh.creation.cylinder(radius=0.04, height=0.12))
+    with Scene() as scene:
+        body = scene.add_object(cylinder, 0.2, 0.5)
+        hit = pybullet.rayTest((0.0, 0.0, 0.3), (0.0, 0.0, -0.01), physicsClientId=scene.client)
+    assert hit[0][0] == body
+    assert not (tmp_path / "vhacd").exists()
+
+
+URDF = """<?xml version="1.0"?>
+<robot name="block">
+  <link name="base">
+    <inertial><mass value="0.2"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0"
+      iyz="0"/></inertial>
+    <visual><geometry><box size="0.05 0.05 0.1"/></geometry></visual>
+    <collision><geometry><box size="0.05 0.05 0.1"/></geometry></collision>
+  </link>
+</robot>
+"""
+
+
+def test_user_urdf_rests_on_the_table(tmp_path):
+    path = tmp_path / "block.urdf"
+    path.write_text(URDF)
+    with Scene(table_height_m=0.1) as scene:
+        body = scene.add_urdf(path, x_m=-0.2, y_m=0.3, yaw_rad=1.0)
+        placed = scene.object_pose(body)
+        scene.step(120)
+        settled = scene.object_pose(body)
+    # The block's base frame is its centre: 50 mm above the table top when resting.
+    np.testing.assert_allclose(placed.position_m, [-0.2, 0.3, 0.15], atol=5e-4)
+    np.testing.assert_allclose(settled.position_m, placed.position_m, atol=5e-4)
+    assert yaw_of(settled.quaternion_xyzw) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_missing_urdf_and_bad_mass_are_input_errors(tmp_path):
+    with Scene() as scene:
+        with pytest.raises(InputError, match="not found"):
+            scene.add_urdf(tmp_path / "nothing.urdf")
+        with pytest.raises(InputError, match="mass"):
+            scene.add_object(box_mesh(), 0.0, 0.5)
+
+
+def test_simulation_is_deterministic_and_context_closes_client():
+    def tumble():
+        with Scene() as scene:
+            tilted = box_mesh((0.05, 0.05, 0.2))
+            body = scene.add_object(tilted, 0.3, 0.4, x_m=0.1)
+            pybullet.resetBaseVelocity(
+                body, [0.3, 0.1, 0.0], [0.0, 4.0, 1.0], physicsClientId=scene.client
+            )
+            scene.step(200)
+            pose = scene.object_pose(body)
+            client = scene.client
+        return pose, client
+
+    first, client = tumble()
+    second, _ = tumble()
+    np.testing.assert_array_equal(first.position_m, second.position_m)
+    np.testing.assert_array_equal(first.quaternion_xyzw, second.quaternion_xyzw)
+    assert not pybullet.isConnected(client)
