@@ -1,0 +1,315 @@
+"""Taxel-to-point correspondence weights (paper eqs. 9, 11 and 13; METHOD.md section 2).
+
+For each taxel ``i`` and each side (front ``f_b``, back ``f_mb``) the weights are Gaussian
+densities ``w = N(f(p_n); centre_i, C_i)`` gated at the chi-square(3) 95 % quantile
+``D2 < 7.815``. The centre is the taxel itself (eq. 9, "standard") or the vector median of
+the five object points Mahalanobis-closest to it (eq. 13, "alternative").
+
+Search strategy: both sides' maps are isometries, so a taxel's gate is searched around its
+*pre-image* (``f^-1`` of the centre) among the unmoved points, in one
+:class:`scipy.spatial.cKDTree` built once over the points' reference positions. Points that
+the filter has moved since (Stage 2) are covered by widening the search radius by the
+largest displacement so far, and every candidate is then tested exactly at its current
+position. The cost of a search therefore grows with N only through the tree queries and the
+number of points that really fall inside the gates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .covariances import correspondence_covariances
+from .geometry import apply_side, invert_side, side_jacobian, side_linear_part
+
+#: chi-square quantile, 3 degrees of freedom, 95 % (paper eq. 9).
+GATE_CHI2_3DOF_95 = 7.815
+#: Object points whose vector median replaces the taxel in the alternative weights (eq. 13).
+ALTERNATIVE_NEIGHBOURS = 5
+
+
+class PointIndex:
+    """A KD-tree over the points' reference positions that tolerates later moves.
+
+    Args:
+        reference_points: ``(N, 3)`` positions the tree is built on (kept by reference;
+            the caller must not modify the array).
+    """
+
+    def __init__(self, reference_points: np.ndarray) -> None:
+        self.reference = reference_points
+        self.tree = cKDTree(reference_points)
+        self._moved = np.empty(0, dtype=np.int64)
+
+    def note_moved(self, indices: np.ndarray) -> None:
+        """Record that the points ``indices`` may now differ from their reference position."""
+        self._moved = np.union1d(self._moved, indices)
+
+    def displacement_bound(self, points: np.ndarray, indices: np.ndarray | None = None) -> float:
+        """Largest distance (m) between a point's current and reference position, over
+        every point noted as moved plus ``indices``."""
+        moved = self._moved if indices is None else np.union1d(self._moved, indices)
+        if moved.size == 0:
+            return 0.0
+        return float(np.max(np.linalg.norm(points[moved] - self.reference[moved], axis=1)))
+
+
+@dataclass(frozen=True)
+class SideCorrespondences:
+    """Gated weights of one side for all taxels, as a list of (taxel, point) pairs.
+
+    Attributes:
+        back: True for the mirrored side ``f_mb``, False for the front ``f_b``.
+        taxel, point: ``(K,)`` indices of each pair with a non-zero weight.
+        weight: ``(K,)`` Gaussian density ``N(f(p); centre, C)`` (1/m^3).
+        mass: ``(M,)`` per-taxel sum of weights, ``a_i`` of eq. 11.
+    """
+
+    back: bool
+    taxel: np.ndarray
+    point: np.ndarray
+    weight: np.ndarray
+    mass: np.ndarray
+
+
+@dataclass(frozen=True)
+class Correspondences:
+    """Front and back correspondences of one iteration.
+
+    Attributes:
+        front, back: the two sides.
+        alternative: True when the eq. 13 (vector-median) centres were used.
+    """
+
+    front: SideCorrespondences
+    back: SideCorrespondences
+    alternative: bool
+
+    def sides(self) -> tuple[SideCorrespondences, SideCorrespondences]:
+        return (self.front, self.back)
+
+    def supported_taxels(self) -> np.ndarray:
+        """``(M,)`` bool: taxels with a non-zero weight on either side."""
+        return (self.front.mass > 0) | (self.back.mass > 0)
+
+    def active_points(self) -> np.ndarray:
+        """Sorted indices of the points inside some taxel's gate (the active set A)."""
+        return np.union1d(self.front.point, self.back.point)
+
+
+def exclusive_sides(correspondences: Correspondences) -> Correspondences:
+    """Keep, for every taxel, only the side with the larger weight mass.
+
+    A taxel touches one surface, front or back. With a broad prior on ``m_r`` the back's
+    gate reaches through the object, so under eq. 11 a front taxel also gets a residual
+    against the far side and the two pull the state in opposite directions; explaining each
+    taxel by its better-supported side removes that conflict (ties go to the front).
+    """
+    keep_front = correspondences.front.mass >= correspondences.back.mass
+    sides = []
+    for side, keep in zip(correspondences.sides(), (keep_front, ~keep_front), strict=True):
+        pairs = keep[side.taxel]
+        sides.append(
+            SideCorrespondences(
+                back=side.back,
+                taxel=side.taxel[pairs],
+                point=side.point[pairs],
+                weight=side.weight[pairs],
+                mass=np.where(keep, side.mass, 0.0),
+            )
+        )
+    return Correspondences(front=sides[0], back=sides[1], alternative=correspondences.alternative)
+
+
+def every_pad_supported(correspondences: Correspondences, pads: np.ndarray) -> bool:
+    """Hybrid-schedule switch: every pad in contact has more than one supported taxel."""
+    supported = correspondences.supported_taxels()
+    return all(np.count_nonzero(supported[pads == pad]) > 1 for pad in np.unique(pads))
+
+
+def side_covariances(
+    taxels_m: np.ndarray,
+    window: np.ndarray,
+    g: np.ndarray,
+    pivot_m: np.ndarray,
+    state_covariance: np.ndarray,
+    back: bool,
+) -> np.ndarray:
+    """World-frame ``C_i = C_t + J P J^T`` of one side, (M, 3, 3).
+
+    The Jacobian of the side's map is evaluated at the taxel's pre-image, the point that
+    would sit exactly at the taxel: ``C_i`` is a property of the taxel's window, shared by
+    all its candidates.
+    """
+    preimages = invert_side(taxels_m, g, pivot_m, back)
+    jacobians = side_jacobian(preimages, g, pivot_m, back)
+    return correspondence_covariances(window, jacobians, state_covariance)
+
+
+def _quadratic_forms(inverse: np.ndarray, rows: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """``d^T A_rows d`` for each offset, gathering only the six distinct entries of A."""
+    a = inverse.reshape(-1, 9)
+    dx, dy, dz = offsets.T
+    return (
+        a[rows, 0] * dx * dx
+        + a[rows, 4] * dy * dy
+        + a[rows, 8] * dz * dz
+        + 2.0 * (a[rows, 1] * dx * dy + a[rows, 2] * dx * dz + a[rows, 5] * dy * dz)
+    )
+
+
+def _gated_weights(
+    index: PointIndex,
+    points: np.ndarray,
+    centres_pre: np.ndarray,
+    covariance_pre: np.ndarray,
+    displacement_m: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs (taxel, point, density) inside each centre's gate, in the pre-image frame."""
+    eigenvalues = np.linalg.eigvalsh(covariance_pre)
+    radii = np.sqrt(GATE_CHI2_3DOF_95 * eigenvalues[:, -1]) + displacement_m
+    centre_tree = cKDTree(centres_pre)
+    pairs = centre_tree.sparse_distance_matrix(
+        index.tree, float(radii.max()), output_type="ndarray"
+    )
+    taxel = pairs["i"].astype(np.int64)
+    point = pairs["j"].astype(np.int64)
+    inside = pairs["v"] <= radii[taxel]
+    taxel, point = taxel[inside], point[inside]
+    inverse = np.linalg.inv(covariance_pre)
+    d2 = _quadratic_forms(inverse, taxel, points[point] - centres_pre[taxel])
+    gated = d2 < GATE_CHI2_3DOF_95
+    taxel, point, d2 = taxel[gated], point[gated], d2[gated]
+    normaliser = 1.0 / np.sqrt((2.0 * np.pi) ** 3 * np.prod(eigenvalues, axis=1))
+    return taxel, point, normaliser[taxel] * np.exp(-0.5 * d2)
+
+
+def _mahalanobis_nearest(
+    index: PointIndex,
+    points: np.ndarray,
+    centres_pre: np.ndarray,
+    covariance_pre: np.ndarray,
+    count: int,
+    displacement_m: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``count`` points with the smallest Mahalanobis distance to each centre, exactly.
+
+    Euclidean k-nearest queries with growing k: once the k-th Euclidean distance ``d_k``
+    (less the displacement bound) satisfies ``d_k^2 / lambda_max >= D2`` of the current
+    ``count``-th best, no point outside the queried set can be Mahalanobis-closer.
+
+    Returns:
+        ``(M, count)`` point indices and their squared Mahalanobis distances, best first.
+    """
+    n_points, n_centres = len(points), len(centres_pre)
+    count = min(count, n_points)
+    inverse = np.linalg.inv(covariance_pre)
+    lambda_max = np.linalg.eigvalsh(covariance_pre)[:, -1]
+    best_index = np.empty((n_centres, count), dtype=np.int64)
+    best_d2 = np.empty((n_centres, count))
+    todo = np.arange(n_centres)
+    k = min(n_points, 4 * count)
+    while todo.size:
+        distances, neighbours = index.tree.query(centres_pre[todo], k=k)
+        distances = distances.reshape(len(todo), k)
+        neighbours = neighbours.reshape(len(todo), k)
+        offsets = points[neighbours] - centres_pre[todo][:, None, :]
+        d2 = np.einsum("tki,tij,tkj->tk", offsets, inverse[todo], offsets)
+        order = np.argsort(d2, axis=1)[:, :count]
+        chosen_d2 = np.take_along_axis(d2, order, axis=1)
+        outside = np.maximum(distances[:, -1] - displacement_m, 0.0) ** 2 / lambda_max[todo]
+        done = (chosen_d2[:, -1] <= outside) | (k >= n_points)
+        best_index[todo[done]] = np.take_along_axis(neighbours, order, axis=1)[done]
+        best_d2[todo[done]] = chosen_d2[done]
+        todo = todo[~done]
+        k = min(n_points, 4 * k)
+    return best_index, best_d2
+
+
+def vector_median(candidates: np.ndarray) -> np.ndarray:
+    """Vector median of each set in ``(M, K, 3)``: the member with the least summed
+    Euclidean distance to the others (Astola et al. 1990), shape (M, 3)."""
+    distances = np.linalg.norm(candidates[:, :, None, :] - candidates[:, None, :, :], axis=-1)
+    best = np.argmin(distances.sum(axis=2), axis=1)
+    return candidates[np.arange(len(candidates)), best]
+
+
+def alternative_centres(
+    index: PointIndex,
+    points: np.ndarray,
+    g: np.ndarray,
+    pivot_m: np.ndarray,
+    taxels_m: np.ndarray,
+    covariances: tuple[np.ndarray, np.ndarray],
+    displacement_m: float,
+) -> np.ndarray:
+    """``T^_i`` of eq. 13 in frame R, (M, 3).
+
+    The five closest points are taken from the whole completed model (front and back
+    images together, each side measured with its own ``C_i``), so ``T^_i`` lies on the side
+    that best explains the contact; this is why eq. 13 fails when front and back overlap
+    (paper Fig. 4).
+    """
+    images, distances = [], []
+    for back, covariance in zip((False, True), covariances, strict=True):
+        linear = side_linear_part(g, back)
+        covariance_pre = np.einsum("ji,mjk,kl->mil", linear, covariance, linear)
+        centres_pre = invert_side(taxels_m, g, pivot_m, back)
+        nearest, d2 = _mahalanobis_nearest(
+            index, points, centres_pre, covariance_pre, ALTERNATIVE_NEIGHBOURS, displacement_m
+        )
+        images.append(apply_side(points[nearest.ravel()], g, pivot_m, back).reshape(*d2.shape, 3))
+        distances.append(d2)
+    all_images = np.concatenate(images, axis=1)
+    all_d2 = np.concatenate(distances, axis=1)
+    count = min(ALTERNATIVE_NEIGHBOURS, all_d2.shape[1])
+    closest = np.argsort(all_d2, axis=1)[:, :count]
+    chosen = np.take_along_axis(all_images, closest[:, :, None], axis=1)
+    return vector_median(chosen)
+
+
+def find_correspondences(
+    index: PointIndex,
+    points: np.ndarray,
+    g: np.ndarray,
+    pivot_m: np.ndarray,
+    taxels_m: np.ndarray,
+    window: np.ndarray,
+    state_covariance: np.ndarray,
+    alternative: bool,
+) -> Correspondences:
+    """Weights of every taxel against the front and back images of the current points.
+
+    Args:
+        index: KD-tree over the points' reference positions.
+        points: ``(N, 3)`` current object points (unbiased, frame R).
+        g: current ``(b_theta, b_x, b_y, b_z, m_r, m_theta)``.
+        pivot_m: the bias pivot ``c``.
+        taxels_m: ``(M, 3)`` taxel positions in contact, frame R.
+        window: ``(M, 3, 3)`` taxel windows ``C_t``.
+        state_covariance: ``(6, 6)`` covariance of ``g`` propagated into ``C_i``.
+        alternative: use the eq. 13 centres instead of the taxels (eq. 9).
+    """
+    displacement_m = index.displacement_bound(points)
+    covariances = tuple(
+        side_covariances(taxels_m, window, g, pivot_m, state_covariance, back)
+        for back in (False, True)
+    )
+    centres = (
+        alternative_centres(index, points, g, pivot_m, taxels_m, covariances, displacement_m)
+        if alternative
+        else taxels_m
+    )
+    sides = []
+    for back, covariance in zip((False, True), covariances, strict=True):
+        linear = side_linear_part(g, back)
+        covariance_pre = np.einsum("ji,mjk,kl->mil", linear, covariance, linear)
+        centres_pre = invert_side(centres, g, pivot_m, back)
+        taxel, point, weight = _gated_weights(
+            index, points, centres_pre, covariance_pre, displacement_m
+        )
+        mass = np.bincount(taxel, weights=weight, minlength=len(taxels_m))
+        sides.append(SideCorrespondences(back, taxel, point, weight, mass))
+    return Correspondences(front=sides[0], back=sides[1], alternative=alternative)

@@ -1,0 +1,36 @@
+"""Measurement and correspondence covariances (METHOD.md section 4, paper sec. 5.2).
+
+Every covariance here is a robot-frame (3, 3) matrix in square metres.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def normal_ellipsoids(
+    normals: np.ndarray, sigma_along_m: float, sigma_across_m: float
+) -> np.ndarray:
+    """``s_n^2 nu nu^T + s_t^2 (I - nu nu^T)`` for each unit normal ``nu``, shape (M, 3, 3).
+
+    With ``sigma_along_m < sigma_across_m`` this is the flattened measurement noise ``R``;
+    with ``sigma_along_m > sigma_across_m`` the elongated correspondence window ``C_t``.
+    """
+    unit = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    outer = unit[:, :, None] * unit[:, None, :]
+    return sigma_along_m**2 * outer + sigma_across_m**2 * (np.eye(3)[None] - outer)
+
+
+def correspondence_covariances(
+    window: np.ndarray, jacobians: np.ndarray, state_covariance: np.ndarray
+) -> np.ndarray:
+    """``C_i = C_t,i + J_i P J_i^T`` (paper eq. 14), shape (M, 3, 3).
+
+    Args:
+        window: ``C_t`` per taxel, (M, 3, 3).
+        jacobians: ``d f / d g`` of the side's map at the taxel, (M, 3, 6).
+        state_covariance: the (6, 6) covariance of ``g``; for the front ``f_b`` has zero
+            plane columns, so only the bias block contributes, as the paper prescribes.
+    """
+    propagated = np.einsum("mij,jk,mlk->mil", jacobians, state_covariance, jacobians)
+    return window + propagated

@@ -1,0 +1,142 @@
+"""Bias, mirroring and their analytic Jacobians (METHOD.md section 1).
+
+All functions are pure and work on robot-frame arrays in metres and radians.
+
+The six bias-and-plane parameters are packed in one vector ``g`` in the order of
+:data:`pipeline.types.BIAS_PLANE_PARAMETERS`: ``(b_theta, b_x, b_y, b_z, m_r, m_theta)``.
+
+* Bias: ``f_b(p) = R_z(b_theta) (p - c) + c + (b_x, b_y, b_z)`` with a fixed pivot ``c``.
+* Mirror: ``f_m(p) = p - 2 (n.p - m_r) n`` with the horizontal unit normal
+  ``n = (cos m_theta, sin m_theta, 0)`` (``m_theta`` is the *normal's* angle, as in
+  :class:`pipeline.types.SymmetryPlane`).
+* Mirror then bias: ``f_mb(p) = f_b(f_m(p))``.
+
+Both maps are isometries, so distances between a point and a taxel are the same before and
+after inverting them; the correspondence search relies on that.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Length of the bias-and-plane block of the state.
+BIAS_PLANE_DIM = 6
+#: Slices into ``g``.
+BIAS = slice(0, 4)
+PLANE = slice(4, 6)
+
+
+def rotation_z(theta_rad: float) -> np.ndarray:
+    """``R_z(theta)``, (3, 3)."""
+    c, s = np.cos(theta_rad), np.sin(theta_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rotation_z_derivative(theta_rad: float) -> np.ndarray:
+    """``d R_z / d theta``, (3, 3)."""
+    c, s = np.cos(theta_rad), np.sin(theta_rad)
+    return np.array([[-s, -c, 0.0], [c, -s, 0.0], [0.0, 0.0, 0.0]])
+
+
+def plane_normal(m_theta_rad: float) -> np.ndarray:
+    """Unit normal ``(cos m_theta, sin m_theta, 0)`` of the symmetry plane."""
+    return np.array([np.cos(m_theta_rad), np.sin(m_theta_rad), 0.0])
+
+
+def reflection_matrix(m_theta_rad: float) -> np.ndarray:
+    """Linear part ``I - 2 n n^T`` of the mirroring, (3, 3)."""
+    n = plane_normal(m_theta_rad)
+    return np.eye(3) - 2.0 * np.outer(n, n)
+
+
+def apply_bias(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
+    """``f_b`` applied to ``(N, 3)`` points."""
+    rotation = rotation_z(g[0])
+    return (points - pivot_m) @ rotation.T + pivot_m + g[1:4]
+
+
+def mirror(points: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """``f_m`` applied to ``(N, 3)`` points (uses ``g[4:6] = (m_r, m_theta)``)."""
+    n = plane_normal(g[5])
+    return points - 2.0 * (points @ n - g[4])[:, None] * n[None, :]
+
+
+def apply_mirror_bias(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
+    """``f_mb = f_b o f_m`` applied to ``(N, 3)`` points."""
+    return apply_bias(mirror(points, g), g, pivot_m)
+
+
+def apply_side(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray, back: bool) -> np.ndarray:
+    """``f_mb`` when ``back`` else ``f_b``."""
+    return apply_mirror_bias(points, g, pivot_m) if back else apply_bias(points, g, pivot_m)
+
+
+def invert_bias(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
+    """``f_b^-1``: the unbiased points that ``f_b`` maps onto ``points``."""
+    rotation = rotation_z(g[0])
+    return (points - pivot_m - g[1:4]) @ rotation + pivot_m
+
+
+def invert_side(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray, back: bool) -> np.ndarray:
+    """Pre-image under ``f_mb`` (the mirroring is its own inverse) or ``f_b``."""
+    unbiased = invert_bias(points, g, pivot_m)
+    return mirror(unbiased, g) if back else unbiased
+
+
+def side_linear_part(g: np.ndarray, back: bool) -> np.ndarray:
+    """``d f / d p`` (constant in ``p``): ``R_z`` for the front, ``R_z (I - 2 n n^T)`` back."""
+    rotation = rotation_z(g[0])
+    return rotation @ reflection_matrix(g[5]) if back else rotation
+
+
+def bias_jacobian(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
+    """``d f_b(q) / d b`` at the points ``q``, shape (N, 3, 4), columns ``(b_theta, b_xyz)``."""
+    jacobian = np.zeros((len(points), 3, 4))
+    jacobian[:, :, 0] = (points - pivot_m) @ rotation_z_derivative(g[0]).T
+    jacobian[:, :, 1:4] = np.eye(3)
+    return jacobian
+
+
+def mirror_plane_jacobian(points: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """``d f_m(p) / d (m_r, m_theta)``, shape (N, 3, 2).
+
+    With ``n' = dn/dm_theta = (-sin, cos, 0)``:
+    ``df_m/dm_r = 2 n`` and ``df_m/dm_theta = -2 ((n'.p) n + (n.p - m_r) n')``.
+    """
+    n = plane_normal(g[5])
+    n_prime = np.array([-np.sin(g[5]), np.cos(g[5]), 0.0])
+    jacobian = np.empty((len(points), 3, 2))
+    jacobian[:, :, 0] = 2.0 * n
+    jacobian[:, :, 1] = -2.0 * (
+        (points @ n_prime)[:, None] * n[None, :] + (points @ n - g[4])[:, None] * n_prime[None, :]
+    )
+    return jacobian
+
+
+def side_jacobian(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray, back: bool) -> np.ndarray:
+    """``d f / d g`` of ``f_b`` (front) or ``f_mb`` (back) at the points, shape (N, 3, 6).
+
+    The front does not depend on the plane, so its last two columns are zero.
+    """
+    jacobian = np.zeros((len(points), 3, BIAS_PLANE_DIM))
+    if back:
+        mirrored = mirror(points, g)
+        jacobian[:, :, BIAS] = bias_jacobian(mirrored, g, pivot_m)
+        jacobian[:, :, PLANE] = np.einsum(
+            "ij,njk->nik", rotation_z(g[0]), mirror_plane_jacobian(points, g)
+        )
+    else:
+        jacobian[:, :, BIAS] = bias_jacobian(points, g, pivot_m)
+    return jacobian
+
+
+def rebase_bias_translation(
+    yaw_rad: float, translation_m: np.ndarray, old_pivot_m: np.ndarray, new_pivot_m: np.ndarray
+) -> np.ndarray:
+    """Translation that gives the same rigid motion when rotating about ``new_pivot_m``.
+
+    ``R (p - c0) + c0 + t0 = R (p - c) + c + t`` for all ``p`` when
+    ``t = t0 + (R - I)(c - c0)``.
+    """
+    offset = np.asarray(new_pivot_m, float) - np.asarray(old_pivot_m, float)
+    return np.asarray(translation_m, float) + (rotation_z(yaw_rad) - np.eye(3)) @ offset

@@ -1,0 +1,375 @@
+"""The visuo-tactile iterated EKF (METHOD.md section 3, paper eqs. 5-7).
+
+For grasp ``k`` with prior ``x-, P-`` every iteration relinearises around ``x_i``::
+
+    H_i     = dh/dx (x_i)                  (weights recomputed at x_i, then frozen)
+    K_i     = P- H_i^T (H_i P- H_i^T + R)^-1
+    x_{i+1} = x- + K_i (y - h(x_i) - H_i (x- - x_i))
+
+until the step is below the tolerance or the iteration cap is hit; then
+``P+ = (I - K H) P-`` with the last gain (the covariance model decides the algebraic form:
+symmetric downdate in :mod:`.structured`, textbook in :mod:`.dense`).
+
+Choices this module makes where the paper is silent:
+
+* **Correspondence covariance.** ``C_i = C_t + J P J^T`` uses the covariance of the current
+  iterate: ``P-`` at the first iteration, then ``(I - K_{i-1} H_{i-1}) P-``. The paper
+  indexes the covariance by iteration (``P+_{k,i+1}``, eq. 7) and evaluates eq. 14 "at the
+  current state"; this also shrinks the gates as the state firms up.
+* **Stages.** Stage 1 holds the points fixed (6 states). Stage 2 estimates points too; like
+  the paper it *starts from the Stage-1 result*: each grasp's iterations begin at Stage 1's
+  ``(b, m)`` for that grasp and its gates use Stage 1's covariance, but the prior
+  ``x-, P-`` is the unfused one (the Stage-0 state, then Stage 2's own posterior), so the
+  tactile data is used once per stage and never twice.
+* **Several grasps.** ``P-_k = P+_{k-1} + Q`` for ``k >= 2``, ``Q`` on the bias only; the
+  first grasp's own motion is already in the initial bias covariance.
+* **One side per taxel** (``exclusive_sides``, default on): each taxel keeps only the side
+  (front or back) with the larger weight mass, see
+  :func:`~.correspondences.exclusive_sides`; off gives the paper's two residuals per taxel.
+* **Schedules.** ``standard`` (eq. 9), ``alternative`` (eq. 13) or ``hybrid``: eq. 13 until
+  every pad in contact has eq.-9 correspondences on more than one taxel, then eq. 9 for the
+  rest of that grasp's iterations.
+* **Status** of a grasp: ``converged``; ``max_iterations``; ``no_correspondence`` (at some
+  iteration no taxel has any weight) and ``diverged`` (a non-finite state, or some component
+  of ``(b, m)`` further than ``divergence_sigmas`` prior standard deviations from the
+  Stage-0 value) both leave that grasp's prior state and covariance unchanged. A stage's
+  status is the worst of its grasps' in the order diverged > no_correspondence >
+  max_iterations > converged.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Literal, Protocol
+
+import numpy as np
+
+from .correspondences import (
+    Correspondences,
+    PointIndex,
+    every_pad_supported,
+    exclusive_sides,
+    find_correspondences,
+)
+from .measurement import Linearisation, freeze, linearise
+from .structured import StructuredCovariance
+
+Schedule = Literal["standard", "alternative", "hybrid"]
+GraspStatus = Literal["converged", "max_iterations", "no_correspondence", "diverged"]
+#: Components of g measured in metres and in radians.
+_LINEAR = np.array([1, 2, 3, 4])
+_ANGULAR = np.array([0, 5])
+_SEVERITY = ("converged", "max_iterations", "no_correspondence", "diverged")
+
+
+class Gain(Protocol):
+    def step(self, innovation: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def bias_plane_posterior(self) -> np.ndarray: ...
+
+
+class CovarianceModel(Protocol):
+    """What the iteration loop needs from a covariance representation."""
+
+    def bias_plane(self) -> np.ndarray: ...
+
+    def add_bias_plane_noise(self, noise: np.ndarray) -> None: ...
+
+    def gain(self, linearisation: Linearisation, noise: np.ndarray) -> Gain: ...
+
+    def commit(self, gain: Gain, with_points: bool) -> None: ...
+
+
+@dataclass(frozen=True)
+class IekfSettings:
+    """Iteration control.
+
+    Attributes:
+        schedule: correspondence weights, see the module docstring.
+        max_iterations: iteration cap per grasp and stage.
+        tolerance_m: convergence when no linear component (bias translation, ``m_r``,
+            points) changes by more than this between iterations (m) ...
+        tolerance_rad: ... and no angle (``b_theta``, ``m_theta``) by more than this (rad).
+        divergence_sigmas: sane region half-width, in prior standard deviations of g.
+        exclusive_sides: explain each taxel by its better-supported side only.
+    """
+
+    schedule: Schedule = "hybrid"
+    max_iterations: int = 30
+    tolerance_m: float = 1e-6
+    tolerance_rad: float = 1e-5
+    divergence_sigmas: float = 10.0
+    exclusive_sides: bool = True
+
+
+@dataclass(frozen=True)
+class GraspContacts:
+    """The taxels of one grasp with their covariances.
+
+    Attributes:
+        positions_m: ``(M, 3)`` taxel positions, frame R.
+        pads: ``(M,)`` pad id of each taxel.
+        window: ``(M, 3, 3)`` correspondence window ``C_t`` (m^2).
+        noise: ``(M, 3, 3)`` measurement noise ``R`` (m^2).
+    """
+
+    positions_m: np.ndarray
+    pads: np.ndarray
+    window: np.ndarray
+    noise: np.ndarray
+
+
+@dataclass(frozen=True)
+class FusionProblem:
+    """Everything the filter needs, as arrays.
+
+    Attributes:
+        points_m: ``(N, 3)`` segmented object points, frame R (Stage 0 ``p_n``).
+        pivot_m: ``(3,)`` fixed pivot ``c`` of the bias rotation.
+        g_init: ``(6,)`` Stage 0 ``(b_theta, b_x, b_y, b_z, m_r, m_theta)``.
+        covariance_init: ``(6, 6)`` prior covariance of ``g``.
+        point_variance_m2: ``(N,)`` isotropic prior variance of each point.
+        grasps: the grasps in the order they happened.
+        regrasp_noise: ``(6, 6)`` ``Q`` added before every grasp after the first.
+    """
+
+    points_m: np.ndarray
+    pivot_m: np.ndarray
+    g_init: np.ndarray
+    covariance_init: np.ndarray
+    point_variance_m2: np.ndarray
+    grasps: tuple[GraspContacts, ...]
+    regrasp_noise: np.ndarray
+
+
+@dataclass(frozen=True)
+class StageOutcome:
+    """Result of one stage.
+
+    Attributes:
+        g: final ``(6,)`` bias and plane.
+        covariance: final ``(6, 6)`` covariance of ``g``.
+        points: ``(N, 3)`` final points (the Stage-0 array itself in Stage 1).
+        status: worst grasp status.
+        iterations: iterations summed over grasps.
+        active_points: points inside some gate at the last iteration of the last grasp.
+        seconds: wall time of the stage.
+        grasp_g, grasp_covariance: ``g`` and its covariance after each grasp.
+    """
+
+    g: np.ndarray
+    covariance: np.ndarray
+    points: np.ndarray
+    status: GraspStatus
+    iterations: int
+    active_points: int
+    seconds: float
+    grasp_g: tuple[np.ndarray, ...]
+    grasp_covariance: tuple[np.ndarray, ...]
+
+
+@dataclass(frozen=True)
+class _GraspResult:
+    g: np.ndarray
+    points: np.ndarray
+    status: GraspStatus
+    iterations: int
+    active_points: int
+
+
+def _correspondences(
+    index: PointIndex,
+    points: np.ndarray,
+    g: np.ndarray,
+    pivot_m: np.ndarray,
+    contacts: GraspContacts,
+    gate_covariance: np.ndarray,
+    use_alternative: bool,
+    exclusive: bool,
+) -> Correspondences:
+    found = find_correspondences(
+        index,
+        points,
+        g,
+        pivot_m,
+        contacts.positions_m,
+        contacts.window,
+        gate_covariance,
+        alternative=use_alternative,
+    )
+    return exclusive_sides(found) if exclusive else found
+
+
+def update_grasp(
+    covariance: CovarianceModel,
+    index: PointIndex,
+    g_prior: np.ndarray,
+    points_prior: np.ndarray,
+    pivot_m: np.ndarray,
+    contacts: GraspContacts,
+    settings: IekfSettings,
+    move_points: bool,
+    g_start: np.ndarray,
+    gate_covariance: np.ndarray,
+    sane_centre: np.ndarray,
+    sane_halfwidth: np.ndarray,
+    keep_point_covariance: bool,
+) -> _GraspResult:
+    """Iterate one grasp's update and commit its covariance (see the module docstring).
+
+    ``points_prior`` is never modified; with ``move_points`` the result holds a new array.
+    """
+    if len(contacts.positions_m) == 0:
+        return _GraspResult(g_prior, points_prior, "no_correspondence", 0, 0)
+    g_i = np.array(g_start, dtype=float)
+    points_i = points_prior.copy() if move_points else points_prior
+    moved = np.empty(0, dtype=np.int64)
+    use_alternative = settings.schedule != "standard"
+    exclusive = settings.exclusive_sides
+    gain, status, active = None, "max_iterations", 0
+    iterations = 0
+    for iterations in range(1, settings.max_iterations + 1):
+        corr = None
+        if settings.schedule == "hybrid" and use_alternative:
+            standard = _correspondences(
+                index, points_i, g_i, pivot_m, contacts, gate_covariance, False, exclusive
+            )
+            if every_pad_supported(standard, contacts.pads):
+                use_alternative, corr = False, standard
+        if corr is None:
+            corr = _correspondences(
+                index, points_i, g_i, pivot_m, contacts, gate_covariance, use_alternative, exclusive
+            )
+        if not corr.supported_taxels().any():
+            return _GraspResult(g_prior, points_prior, "no_correspondence", iterations, 0)
+        measurement = freeze(corr, contacts.positions_m, contacts.noise)
+        lin = linearise(measurement, g_i, points_i, pivot_m, with_points=move_points)
+        innovation = (
+            measurement.observation() - lin.prediction + lin.bias_plane_jacobian @ (g_i - g_prior)
+        )
+        if move_points:
+            innovation += lin.point_jacobian.times_displacement(points_i, points_prior)
+        gain = covariance.gain(lin, measurement.noise)
+        delta_g, step_points, delta_p = gain.step(innovation)
+        g_next = g_prior + delta_g
+        point_step = 0.0
+        if move_points:
+            touched = np.union1d(moved, step_points)
+            before = points_i[touched].copy()
+            points_i[moved] = points_prior[moved]
+            points_i[step_points] = points_prior[step_points] + delta_p
+            point_step = float(np.max(np.abs(points_i[touched] - before), initial=0.0))
+            moved = step_points
+            index.note_moved(moved)
+        sane = np.all(np.abs(g_next - sane_centre) <= sane_halfwidth)
+        if not (np.all(np.isfinite(g_next)) and np.isfinite(point_step) and sane):
+            return _GraspResult(g_prior, points_prior, "diverged", iterations, 0)
+        step = np.abs(g_next - g_i)
+        g_i = g_next
+        gate_covariance = gain.bias_plane_posterior()
+        active = int(corr.active_points().size)
+        linear_step = max(float(step[_LINEAR].max()), point_step)
+        if linear_step < settings.tolerance_m and step[_ANGULAR].max() < settings.tolerance_rad:
+            status = "converged"
+            break
+    covariance.commit(gain, with_points=keep_point_covariance)
+    return _GraspResult(g_i, points_i, status, iterations, active)
+
+
+def worst_status(statuses: list[GraspStatus]) -> GraspStatus:
+    """The most severe status; ``no_correspondence`` when there was no grasp at all."""
+    return max(statuses, key=_SEVERITY.index) if statuses else "no_correspondence"
+
+
+def run_stage(
+    problem: FusionProblem,
+    settings: IekfSettings,
+    stage: Literal[1, 2],
+    index: PointIndex,
+    covariance_model: Callable[[np.ndarray, np.ndarray], CovarianceModel],
+    stage_one: StageOutcome | None = None,
+) -> StageOutcome:
+    """Run Stage 1 (``stage_one`` None) or Stage 2 (started from ``stage_one``) over all
+    grasps in order."""
+    started = time.perf_counter()
+    covariance = covariance_model(problem.covariance_init, problem.point_variance_m2)
+    halfwidth = settings.divergence_sigmas * np.sqrt(
+        np.diag(problem.covariance_init + max(len(problem.grasps) - 1, 0) * problem.regrasp_noise)
+    )
+    g, points = np.array(problem.g_init, dtype=float), problem.points_m
+    statuses, iterations, active = [], 0, 0
+    grasp_g, grasp_covariance = [], []
+    for k, contacts in enumerate(problem.grasps):
+        if k > 0:
+            covariance.add_bias_plane_noise(problem.regrasp_noise)
+        if stage == 1:
+            g_start, gate = g, covariance.bias_plane()
+        else:
+            g_start, gate = stage_one.grasp_g[k], stage_one.grasp_covariance[k]
+        result = update_grasp(
+            covariance,
+            index,
+            g,
+            points,
+            problem.pivot_m,
+            contacts,
+            settings,
+            move_points=stage == 2,
+            g_start=g_start,
+            gate_covariance=gate,
+            sane_centre=problem.g_init,
+            sane_halfwidth=halfwidth,
+            keep_point_covariance=stage == 2 and k < len(problem.grasps) - 1,
+        )
+        g, points = result.g, result.points
+        statuses.append(result.status)
+        iterations += result.iterations
+        active = result.active_points
+        grasp_g.append(g.copy())
+        grasp_covariance.append(covariance.bias_plane())
+    return StageOutcome(
+        g=g,
+        covariance=covariance.bias_plane(),
+        points=points,
+        status=worst_status(statuses),
+        iterations=iterations,
+        active_points=active,
+        seconds=time.perf_counter() - started,
+        grasp_g=tuple(grasp_g),
+        grasp_covariance=tuple(grasp_covariance),
+    )
+
+
+def fuse(
+    problem: FusionProblem,
+    settings: IekfSettings,
+    last_stage: Literal[1, 2] = 2,
+    covariance_model: Callable[[np.ndarray, np.ndarray], CovarianceModel] = StructuredCovariance,
+) -> tuple[StageOutcome, ...]:
+    """Stages 1 (and 2) of the visuo-tactile IEKF.
+
+    Args:
+        problem: the arrays to fuse.
+        settings: iteration control.
+        last_stage: 1 to stop after bias + plane, 2 to also estimate the points.
+        covariance_model: :class:`~.structured.StructuredCovariance` (default) or
+            :class:`~.dense.DenseCovariance` (the reference).
+
+    Returns:
+        The Stage 1 outcome, then the Stage 2 outcome when ``last_stage == 2``. The KD-tree
+        over the points is built once and its time is counted in Stage 1.
+    """
+    started = time.perf_counter()
+    index = PointIndex(problem.points_m)
+    build_seconds = time.perf_counter() - started
+    stage_one = run_stage(problem, settings, 1, index, covariance_model)
+    stage_one = _with_seconds(stage_one, stage_one.seconds + build_seconds)
+    if last_stage == 1:
+        return (stage_one,)
+    return stage_one, run_stage(problem, settings, 2, index, covariance_model, stage_one)
+
+
+def _with_seconds(outcome: StageOutcome, seconds: float) -> StageOutcome:
+    return replace(outcome, seconds=seconds)

@@ -1,0 +1,78 @@
+"""Conversions between the stage contract's types and the estimation kernels' arrays."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import StageFailure
+from ..types import (
+    Bias,
+    Contacts,
+    EstimateStatus,
+    EstimationProblem,
+    StageEstimate,
+    SymmetryPlane,
+)
+from .covariances import normal_ellipsoids
+from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
+from .iekf import GraspContacts
+
+
+def checked_points(problem: EstimationProblem, estimator: str) -> np.ndarray:
+    """The cloud's points; raises :class:`StageFailure` when there are none."""
+    points = problem.cloud.points
+    if len(points) == 0:
+        raise StageFailure(f"estimator '{estimator}': the object cloud is empty")
+    return points
+
+
+def initial_state(problem: EstimationProblem, pivot_m: np.ndarray) -> np.ndarray:
+    """Stage-0 ``g = (b_theta, b_x, b_y, b_z, m_r, m_theta)`` with the bias re-expressed
+    about ``pivot_m`` (the same rigid motion as the initialiser's bias about its own pivot)."""
+    bias, plane = problem.init.bias, problem.init.plane
+    translation = rebase_bias_translation(bias.yaw_rad, bias.translation_m, bias.pivot_m, pivot_m)
+    return np.array([bias.yaw_rad, *translation, plane.offset_m, plane.theta_rad])
+
+
+def grasp_contacts(
+    contacts: Contacts, window_std_m: tuple[float, float], noise_std_m: tuple[float, float]
+) -> GraspContacts:
+    """Taxels of one grasp with ``C_t`` and ``R`` built from (along, across) normal stds."""
+    return GraspContacts(
+        positions_m=contacts.positions,
+        pads=contacts.pads,
+        window=normal_ellipsoids(contacts.normals, *window_std_m),
+        noise=normal_ellipsoids(contacts.normals, *noise_std_m),
+    )
+
+
+def stage_estimate(
+    stage: int,
+    g: np.ndarray,
+    covariance: np.ndarray,
+    points: np.ndarray,
+    pivot_m: np.ndarray,
+    iterations: int,
+    status: EstimateStatus,
+    seconds: float,
+    active_points: int,
+) -> StageEstimate:
+    """A :class:`StageEstimate` with the completed model ``{f_b(p)} u {f_mb(p)}``."""
+    completed = np.vstack([apply_bias(points, g, pivot_m), apply_mirror_bias(points, g, pivot_m)])
+    return StageEstimate(
+        stage=stage,
+        plane=SymmetryPlane(theta_rad=float(g[5]), offset_m=float(g[4])),
+        bias=Bias(yaw_rad=float(g[0]), translation_m=g[1:4].copy(), pivot_m=pivot_m.copy()),
+        covariance=np.array(covariance, dtype=float),
+        points=points,
+        completed=completed,
+        iterations=iterations,
+        status=status,
+        seconds=seconds,
+        active_points=active_points,
+    )
+
+
+def diagonal_covariance(stds: tuple[float, ...]) -> np.ndarray:
+    """``diag(stds^2)``."""
+    return np.diag(np.square(np.asarray(stds, dtype=float)))

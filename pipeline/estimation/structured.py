@@ -1,0 +1,212 @@
+"""The IEKF covariance kept in structured form (METHOD.md section 3, "structure").
+
+``P`` of the full state ``(g, p_1 .. p_N)`` is never formed. It is held as
+
+    P = B - sum_k V_k^T V_k
+
+* ``B``: block diagonal, a dense (6, 6) block for ``g = (b, m)`` (the prior plus every
+  re-grasp noise ``Q``) and ``sigma_n^2 I_3`` for each point (the sensor noise);
+* one downdate ``V_k = L_k^-1 H_k P_k^-`` per committed grasp (``S_k = L_k L_k^T`` the
+  innovation covariance, Cholesky), whose columns cover only ``g`` and the points that grasp
+  coupled (its active set and those of earlier grasps).
+
+This is the covariance "dense over (b, m) and the active points, 3x3 blocks for every other
+point" in factored form: the dense block over (b, m) u A equals ``B - sum V^T V`` restricted
+to those columns (:meth:`StructuredCovariance.dense` materialises it for tests), but its
+cost is ``O(rows x |A|)`` in memory and ``O(rows^2 x |A| + rows^3)`` in time instead of
+``O(|A|^2)`` and ``O(rows x |A|^2)``. Nothing here touches a point outside (b, m) u A, so
+time and memory do not grow with N.
+
+The update is the symmetric form ``P+ = P- - (L^-1 H P-)^T (L^-1 H P-)``, which equals
+``(I - K H) P-`` for the Kalman gain ``K = P- H^T S^-1`` and stays symmetric by
+construction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse
+
+from .geometry import BIAS_PLANE_DIM
+from .measurement import Linearisation
+
+
+def block_diagonal(blocks: np.ndarray) -> np.ndarray:
+    """Dense block-diagonal matrix from ``(B, 3, 3)`` blocks, (3B, 3B)."""
+    count = len(blocks)
+    matrix = np.zeros((count, 3, count, 3))
+    matrix[np.arange(count), :, np.arange(count), :] = blocks
+    return matrix.reshape(3 * count, 3 * count)
+
+
+def columns3(positions: np.ndarray) -> np.ndarray:
+    """State columns ``3 u + (0, 1, 2)`` of local point positions ``u``, flattened."""
+    return (3 * positions[:, None] + np.arange(3)[None, :]).ravel()
+
+
+@dataclass(frozen=True)
+class _Downdate:
+    """``V`` (rows x (6 + 3 |points|)) and the sorted point indices of its point columns;
+    ``points is None`` when only the (b, m) columns were kept."""
+
+    factor: np.ndarray
+    points: np.ndarray | None
+
+
+class StructuredGain:
+    """Everything one IEKF iteration needs from ``P-`` and ``H_i``.
+
+    Built by :meth:`StructuredCovariance.gain`; ``step`` gives ``P- H^T S^-1 v``.
+    """
+
+    def __init__(
+        self, covariance: StructuredCovariance, linearisation: Linearisation, noise: np.ndarray
+    ) -> None:
+        self._covariance = covariance
+        self._h_g = linearisation.bias_plane_jacobian
+        point_jacobian = linearisation.point_jacobian
+        if point_jacobian is None:
+            self._local = np.empty(0, dtype=np.int64)
+            self._h_p = scipy.sparse.csr_matrix((len(self._h_g), 0))
+        else:
+            self._local = point_jacobian.points()
+            self._h_p = point_jacobian.sparse(self._local)
+        local_variance = np.repeat(covariance.point_variance[self._local], 3)
+        #: ``H_p D`` with ``D`` the local points' prior variances: the point part of H B.
+        self._h_p_base = self._h_p.multiply(local_variance[None, :]).tocsr()
+
+        innovation = self._h_g @ covariance.base_bias_plane @ self._h_g.T + block_diagonal(noise)
+        innovation += (self._h_p_base @ self._h_p.T).toarray()
+        self._cross = []  # W_k = H V_k^T, (rows, rows_k)
+        coupled = [self._local]
+        for downdate in covariance.downdates:
+            cross = self._h_g @ downdate.factor[:, :BIAS_PLANE_DIM].T
+            if downdate.points is None:
+                if self._local.size:
+                    raise RuntimeError("a grasp's point covariance was not kept but is needed")
+            else:
+                coupled.append(downdate.points)
+                common, in_local, in_downdate = np.intersect1d(
+                    self._local, downdate.points, assume_unique=True, return_indices=True
+                )
+                if common.size:
+                    block = downdate.factor[:, BIAS_PLANE_DIM + columns3(in_downdate)]
+                    cross = cross + self._h_p[:, columns3(in_local)] @ block.T
+            innovation -= cross @ cross.T
+            self._cross.append(cross)
+        self._cholesky = scipy.linalg.cho_factor(innovation, lower=True)
+        #: Sorted indices of every point the gain can move: this A and earlier grasps' A.
+        self.points = np.unique(np.concatenate(coupled))
+
+    def _scatter(self, target: np.ndarray, points: np.ndarray, values: np.ndarray) -> None:
+        """Add values laid out over ``points`` into ``target`` laid out over ``self.points``."""
+        target[..., columns3(np.searchsorted(self.points, points))] += values
+
+    def _pairs(self):
+        return zip(self._covariance.downdates, self._cross, strict=True)
+
+    def step(self, innovation: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``P- H^T S^-1 v`` split into its (b, m) part and its point part.
+
+        Returns:
+            ``(6,)`` increment of ``g``, the sorted indices of the points it moves and their
+            ``(U, 3)`` increments (metres).
+        """
+        alpha = scipy.linalg.cho_solve(self._cholesky, innovation)
+        delta_g = self._covariance.base_bias_plane @ (self._h_g.T @ alpha)
+        delta_p = np.zeros(3 * len(self.points))
+        self._scatter(delta_p, self._local, self._h_p_base.T @ alpha)
+        for downdate, cross in self._pairs():
+            coefficients = cross.T @ alpha
+            delta_g -= downdate.factor[:, :BIAS_PLANE_DIM].T @ coefficients
+            if downdate.points is not None:
+                values = downdate.factor[:, BIAS_PLANE_DIM:].T @ coefficients
+                self._scatter(delta_p, downdate.points, -values)
+        return delta_g, self.points, delta_p.reshape(-1, 3)
+
+    def _whitened_bias_plane(self) -> np.ndarray:
+        """``L^-1 (H P-)[:, g]``, (rows, 6)."""
+        product = self._h_g @ self._covariance.base_bias_plane
+        for downdate, cross in self._pairs():
+            product -= cross @ downdate.factor[:, :BIAS_PLANE_DIM]
+        return scipy.linalg.solve_triangular(self._cholesky[0], product, lower=True)
+
+    def bias_plane_posterior(self) -> np.ndarray:
+        """The (6, 6) block of ``(I - K H) P-``."""
+        whitened = self._whitened_bias_plane()
+        return self._covariance.bias_plane() - whitened.T @ whitened
+
+    def downdate(self, with_points: bool) -> _Downdate:
+        """``V = L^-1 H P-`` over (b, m) and, if asked (or free), over ``self.points``."""
+        if self.points.size == 0:
+            return _Downdate(self._whitened_bias_plane(), self.points)
+        if not with_points:
+            return _Downdate(self._whitened_bias_plane(), None)
+        if any(d.points is None for d in self._covariance.downdates):
+            raise RuntimeError("a grasp's point covariance was not kept but is needed")
+        product = np.zeros((len(self._h_g), BIAS_PLANE_DIM + 3 * len(self.points)))
+        product[:, :BIAS_PLANE_DIM] = self._h_g @ self._covariance.base_bias_plane
+        point_part = product[:, BIAS_PLANE_DIM:]
+        self._scatter(point_part, self._local, self._h_p_base.toarray())
+        for downdate, cross in self._pairs():
+            product[:, :BIAS_PLANE_DIM] -= cross @ downdate.factor[:, :BIAS_PLANE_DIM]
+            self._scatter(point_part, downdate.points, -cross @ downdate.factor[:, BIAS_PLANE_DIM:])
+        factor = scipy.linalg.solve_triangular(self._cholesky[0], product, lower=True)
+        return _Downdate(factor, self.points)
+
+
+class StructuredCovariance:
+    """Covariance of ``(g, p_1 .. p_N)`` as block-diagonal prior minus low-rank downdates.
+
+    Args:
+        bias_plane: ``(6, 6)`` prior covariance of ``g``.
+        point_variance: ``(N,)`` isotropic prior variance of each point (m^2).
+    """
+
+    def __init__(self, bias_plane: np.ndarray, point_variance: np.ndarray) -> None:
+        self.base_bias_plane = np.array(bias_plane, dtype=float)
+        self.point_variance = np.asarray(point_variance, dtype=float)
+        self.downdates: list[_Downdate] = []
+
+    def bias_plane(self) -> np.ndarray:
+        """The current (6, 6) covariance of ``g``."""
+        result = self.base_bias_plane.copy()
+        for downdate in self.downdates:
+            block = downdate.factor[:, :BIAS_PLANE_DIM]
+            result -= block.T @ block
+        return result
+
+    def add_bias_plane_noise(self, noise: np.ndarray) -> None:
+        """``P <- P + Q`` with ``Q`` acting on ``g`` only."""
+        self.base_bias_plane = self.base_bias_plane + noise
+
+    def gain(self, linearisation: Linearisation, noise: np.ndarray) -> StructuredGain:
+        """Prepare ``S = H P H^T + R`` (Cholesky) for one iteration."""
+        return StructuredGain(self, linearisation, noise)
+
+    def commit(self, gain: StructuredGain, with_points: bool) -> None:
+        """``P <- (I - K H) P`` with the gain of the last iteration.
+
+        ``with_points=False`` keeps only the (b, m) columns of the downdate, which is all a
+        caller needs after the last grasp of Stage 2; a later gain over points then raises.
+        """
+        self.downdates.append(gain.downdate(with_points))
+
+    def dense(self) -> np.ndarray:
+        """The full ``(6 + 3N)^2`` matrix (small problems and tests only)."""
+        size = BIAS_PLANE_DIM + 3 * len(self.point_variance)
+        result = np.zeros((size, size))
+        result[:BIAS_PLANE_DIM, :BIAS_PLANE_DIM] = self.base_bias_plane
+        diagonal = np.arange(BIAS_PLANE_DIM, size)
+        result[diagonal, diagonal] = np.repeat(self.point_variance, 3)
+        for downdate in self.downdates:
+            if downdate.points is None:
+                raise RuntimeError("a grasp's point covariance was not kept")
+            columns = np.concatenate(
+                [np.arange(BIAS_PLANE_DIM), BIAS_PLANE_DIM + columns3(downdate.points)]
+            )
+            result[np.ix_(columns, columns)] -= downdate.factor.T @ downdate.factor
+        return result

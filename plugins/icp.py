@@ -1,0 +1,82 @@
+"""The ``icp`` estimator: one-point-per-taxel maximum-likelihood baseline."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+from pipeline import hookimpl
+from pipeline.errors import ConfigError
+from pipeline.estimation.icp import IcpSettings, icp_fuse
+from pipeline.estimation.problem import stage_estimate
+from pipeline.params import param
+from pipeline.types import EstimateResult, EstimationProblem
+
+from .iekf import IekfEstimator
+
+
+class IcpEstimator(IekfEstimator):
+    """ICP baseline: each taxel matched to its nearest front/back point (paper sec. 5.1).
+
+    Solves the same bias + plane (Stage 1) and point (Stage 2) MAP problem as ``iekf`` with
+    :mod:`pipeline.estimation.icp`, sharing ``iekf``'s noise, prior and re-grasp parameters;
+    the correspondence window, schedule and side options do not apply. ``active_points``
+    counts the matched taxels.
+    """
+
+    name = "icp"
+
+    @dataclass(frozen=True)
+    class Params(IekfEstimator.Params):
+        max_match_distance_m: float = param(
+            0.02, "a taxel farther than this from every point has no match (m)"
+        )
+        last_stage: Literal[1, 2] = param(2, "1: bias + plane only; 2: also the points")
+
+    def __init__(self, params: Params | None = None) -> None:
+        super().__init__(params)
+        if not self.params.max_match_distance_m > 0:
+            raise ConfigError("config key 'estimator.max_match_distance_m': must be > 0")
+
+    def estimate(self, problem: EstimationProblem) -> EstimateResult:
+        started = time.perf_counter()
+        fusion = self.fusion_problem(problem)
+        p = self.params
+        settings = IcpSettings(
+            max_iterations=p.max_iterations,
+            max_match_distance_m=p.max_match_distance_m,
+            divergence_sigmas=p.divergence_sigmas,
+        )
+        initial = stage_estimate(
+            0,
+            fusion.g_init,
+            fusion.covariance_init,
+            fusion.points_m,
+            fusion.pivot_m,
+            0,
+            "initial",
+            time.perf_counter() - started,
+            0,
+        )
+        outcomes = icp_fuse(fusion, settings, last_stage=p.last_stage)
+        stages = [initial] + [
+            stage_estimate(
+                stage,
+                o.g,
+                o.covariance,
+                o.points,
+                fusion.pivot_m,
+                o.iterations,
+                o.status,
+                o.seconds,
+                o.active_points,
+            )
+            for stage, o in enumerate(outcomes, start=1)
+        ]
+        return EstimateResult(stages=tuple(stages))
+
+
+@hookimpl
+def symfuse_register_stages(registry):
+    registry.add(IcpEstimator)

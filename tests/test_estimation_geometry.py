@@ -1,0 +1,126 @@
+"""Geometry, covariance and correspondence kernels against independent oracles."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+from pipeline.estimation.correspondences import (
+    GATE_CHI2_3DOF_95,
+    PointIndex,
+    _mahalanobis_nearest,
+    find_correspondences,
+    side_covariances,
+    vector_median,
+)
+from pipeline.estimation.covariances import normal_ellipsoids
+from pipeline.estimation.geometry import (
+    apply_side,
+    invert_side,
+    rebase_bias_translation,
+    side_jacobian,
+    side_linear_part,
+)
+from pipeline.types import Bias, SymmetryPlane
+
+RNG = np.random.default_rng(7)
+G = np.array([0.3, 0.01, -0.02, 0.005, 0.013, 0.7])
+PIVOT = np.array([0.1, -0.05, 0.2])
+
+
+@pytest.mark.parametrize("back", [False, True])
+def test_side_jacobian_matches_central_differences(back):
+    points = RNG.normal(0.0, 0.1, (5, 3))
+    analytic = side_jacobian(points, G, PIVOT, back)
+    step = 1e-6
+    for k in range(6):
+        dg = np.zeros(6)
+        dg[k] = step
+        numeric = (
+            apply_side(points, G + dg, PIVOT, back) - apply_side(points, G - dg, PIVOT, back)
+        ) / (2 * step)
+        np.testing.assert_allclose(analytic[:, :, k], numeric, atol=1e-8)
+
+
+@pytest.mark.parametrize("back", [False, True])
+def test_point_jacobian_matches_central_differences(back):
+    point = RNG.normal(0.0, 0.1, (1, 3))
+    numeric = np.empty((3, 3))
+    for k in range(3):
+        dp = np.zeros((1, 3))
+        dp[0, k] = 1e-6
+        numeric[:, k] = (
+            apply_side(point + dp, G, PIVOT, back) - apply_side(point - dp, G, PIVOT, back)
+        )[0] / 2e-6
+    np.testing.assert_allclose(side_linear_part(G, back), numeric, atol=1e-8)
+
+
+@pytest.mark.parametrize("back", [False, True])
+def test_inverse_and_contract_types_agree(back):
+    points = RNG.normal(0.0, 0.1, (10, 3))
+    np.testing.assert_allclose(
+        invert_side(apply_side(points, G, PIVOT, back), G, PIVOT, back), points
+    )
+    bias = Bias(yaw_rad=G[0], translation_m=G[1:4], pivot_m=PIVOT)
+    plane = SymmetryPlane(theta_rad=G[5], offset_m=G[4])
+    expected = bias.apply(plane.mirror(points)) if back else bias.apply(points)
+    np.testing.assert_allclose(apply_side(points, G, PIVOT, back), expected, atol=1e-15)
+
+
+def test_rebased_bias_is_the_same_rigid_motion():
+    points = RNG.normal(0.0, 0.1, (10, 3))
+    old = Bias(yaw_rad=0.4, translation_m=[0.01, 0.02, 0.03], pivot_m=[0.0, 0.0, 0.0])
+    translation = rebase_bias_translation(0.4, old.translation_m, old.pivot_m, PIVOT)
+    new = Bias(yaw_rad=0.4, translation_m=translation, pivot_m=PIVOT)
+    np.testing.assert_allclose(new.apply(points), old.apply(points), atol=1e-15)
+
+
+def test_normal_ellipsoid_eigenstructure():
+    normal = np.array([[0.0, 0.6, 0.8]])
+    ellipsoid = normal_ellipsoids(normal, 0.001, 0.003)[0]
+    np.testing.assert_allclose(ellipsoid @ normal[0], 1e-6 * normal[0], atol=1e-15)
+    tangent = np.array([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(ellipsoid @ tangent, 9e-6 * tangent, atol=1e-15)
+
+
+def test_vector_median_picks_the_central_member():
+    cluster = np.array([[[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0], [2.5, 0, 0], [40.0, 0, 0]]])
+    np.testing.assert_allclose(vector_median(cluster), [[2.0, 0, 0]])
+
+
+def test_mahalanobis_nearest_matches_brute_force():
+    points = RNG.normal(0.0, 0.05, (3000, 3))
+    centres = RNG.normal(0.0, 0.05, (20, 3))
+    normals = RNG.normal(size=(20, 3))
+    covariances = normal_ellipsoids(normals, 0.02, 0.002)
+    index = PointIndex(points)
+    chosen, d2 = _mahalanobis_nearest(index, points, centres, covariances, 5, 0.0)
+    inverse = np.linalg.inv(covariances)
+    offsets = points[None, :, :] - centres[:, None, :]
+    all_d2 = np.einsum("tni,tij,tnj->tn", offsets, inverse, offsets)
+    np.testing.assert_array_equal(chosen, np.argsort(all_d2, axis=1)[:, :5])
+    np.testing.assert_allclose(d2, np.sort(all_d2, axis=1)[:, :5])
+
+
+def test_standard_weights_match_dense_gaussian_densities():
+    points = RNG.uniform(-0.03, 0.03, (2000, 3))
+    taxels = RNG.uniform(-0.02, 0.02, (6, 3))
+    window = normal_ellipsoids(RNG.normal(size=(6, 3)), 0.004, 0.0015)
+    state_covariance = np.diag([0.01, 0.002, 0.002, 0.002, 0.003, 0.02]) ** 2
+    index = PointIndex(points)
+    found = find_correspondences(
+        index, points, G, PIVOT, taxels, window, state_covariance, alternative=False
+    )
+    for side in found.sides():
+        covariance = side_covariances(taxels, window, G, PIVOT, state_covariance, side.back)
+        images = apply_side(points, G, PIVOT, side.back)
+        for i in range(len(taxels)):
+            offsets = images - taxels[i]
+            d2 = np.einsum("ni,ij,nj->n", offsets, np.linalg.inv(covariance[i]), offsets)
+            expected = multivariate_normal(taxels[i], covariance[i]).pdf(images)
+            expected[d2 >= GATE_CHI2_3DOF_95] = 0.0
+            got = np.zeros(len(points))
+            got[side.point[side.taxel == i]] = side.weight[side.taxel == i]
+            np.testing.assert_allclose(got, expected, rtol=1e-9)
+            assert side.mass[i] == pytest.approx(expected.sum(), rel=1e-9)

@@ -1,0 +1,84 @@
+"""The three estimator plugins through the stage contract."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from estimation_scenes import cylinder_scene
+
+from pipeline.errors import ConfigError, StageFailure
+from pipeline.types import (
+    Bias,
+    Contacts,
+    EstimationProblem,
+    PointCloud,
+    SymmetryInit,
+    SymmetryPlane,
+)
+from plugins.icp import IcpEstimator
+from plugins.iekf import IekfEstimator
+from plugins.mirror_only import MirrorOnlyEstimator
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return cylinder_scene(300, seed=11)
+
+
+def _problem(scene, points=None):
+    contacts = Contacts(
+        positions=scene.taxels_m,
+        normals=scene.normals,
+        pads=scene.pads,
+        taxel_indices=np.arange(len(scene.taxels_m)),
+    )
+    # Initial bias about the robot origin: the plugin must re-express it about its pivot.
+    init = SymmetryInit(
+        plane=SymmetryPlane(theta_rad=0.08, offset_m=0.008),
+        bias=Bias(yaw_rad=0.0, translation_m=np.zeros(3), pivot_m=np.zeros(3)),
+    )
+    cloud = PointCloud(scene.points_m if points is None else points)
+    return EstimationProblem(cloud=cloud, init=init, grasps=(contacts,))
+
+
+def _error(scene, stage):
+    return scene.surface_distance(stage.completed).mean()
+
+
+@pytest.mark.parametrize("estimator", [IekfEstimator(), IcpEstimator()])
+def test_fusing_estimators_improve_on_the_initial_model(scene, estimator):
+    result = estimator.estimate(_problem(scene))
+    assert [s.stage for s in result.stages] == [0, 1, 2]
+    assert result.stage(0).status == "initial"
+    np.testing.assert_allclose(result.stage(0).bias.pivot_m, scene.points_m.mean(axis=0))
+    for stage in result.stages:
+        assert stage.completed.shape == (2 * len(scene.points_m), 3)
+        assert stage.covariance.shape == (6, 6)
+    assert result.final.status in ("converged", "max_iterations")
+    assert result.final.iterations > 0
+    assert _error(scene, result.final) < 0.5 * _error(scene, result.stage(0))
+
+
+def test_iekf_can_stop_after_stage_one(scene):
+    params = IekfEstimator.Params(last_stage=1)
+    result = IekfEstimator(params).estimate(_problem(scene))
+    assert [s.stage for s in result.stages] == [0, 1]
+    np.testing.assert_array_equal(result.final.points, scene.points_m)
+
+
+def test_mirror_only_repeats_the_initial_completion(scene):
+    result = MirrorOnlyEstimator().estimate(_problem(scene))
+    expected = np.vstack([scene.points_m, SymmetryPlane(0.08, 0.008).mirror(scene.points_m)])
+    for stage in result.stages:
+        np.testing.assert_allclose(stage.completed, expected, atol=1e-15)
+        assert stage.iterations == 0
+    assert [s.status for s in result.stages] == ["initial", "converged", "converged"]
+
+
+def test_bad_parameters_and_inputs_are_reported(scene):
+    with pytest.raises(ConfigError, match="point_std_m"):
+        IekfEstimator(IekfEstimator.Params(point_std_m=0.0))
+    with pytest.raises(ConfigError, match="max_iterations"):
+        IekfEstimator(IekfEstimator.Params(max_iterations=0))
+    with pytest.raises(StageFailure, match="empty"):
+        IekfEstimator().estimate(_problem(scene, points=np.zeros((0, 3))))
