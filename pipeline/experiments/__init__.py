@@ -26,6 +26,11 @@ EXPERIMENTS: dict[str, str] = {
     "fig8": "pipeline.experiments.fig8",
     "fig9": "pipeline.experiments.fig9",
     "fig10": "pipeline.experiments.fig10",
+    "table1": "pipeline.experiments.table1",
+    "table2": "pipeline.experiments.table2",
+    "table3": "pipeline.experiments.table3",
+    "spray": "pipeline.experiments.spray",
+    "kth": "pipeline.experiments.kth",
 }
 
 

@@ -1,0 +1,372 @@
+"""Shared machinery of the synthetic cylinder studies (paper Figs. 8, 9, 10; METHOD.md §7).
+
+One trial: generate a noisy single-view cloud of a 40 mm radius cylinder and the contacts of
+one top grasp (:func:`pipeline.synthetic.make_case`), run the estimator, and score every stage
+by the error of the cylinder diameter fitted to its completed cloud (Taubin circle fit).
+
+Task parameters are JSON with explicit units in their names, degrees and millimetres (this is
+the file boundary; everything is converted to SI before it reaches the generator):
+
+    gripper            "parallel" | "three_finger"
+    tactile_angle_deg  grasp angle relative to the view
+    theta_deg, r_mm    initial symmetry-plane error
+    bias_mm            horizontal bias magnitude
+    bias_direction_deg its direction about +z
+    seed               the trial's random seed (cloud noise)
+    estimator          estimator name; estimator_params: its parameter overrides
+
+Result rows add ``stage{k}_diameter_error_mm`` (None when the completed cloud admits no circle
+fit), ``stage{k}_status``, ``stage{k}_iterations``, ``stage{k}_seconds`` for k = 0, 1, 2 (as far
+as the estimator returns stages), and the cloud and contact sizes.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import zlib
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..metrics import diameter_error
+from ..plots import GridPanel, error_grid_figure
+from ..stages import Estimator
+from ..sweep import write_csv
+from ..synthetic import make_case
+from . import ExperimentOptions, SweepTask
+
+#: A trial succeeds when the final diameter error is below this (the paper's 4 mm).
+SUCCESS_MM = 4.0
+#: Full grids of the initial plane error (paper Fig. 8/9 axes: theta 0..90 deg).
+THETA_DEG_FULL = tuple(float(v) for v in np.arange(0.0, 90.01, 11.25))
+R_MM_FULL = tuple(float(v) for v in np.arange(-50.0, 50.01, 10.0))
+#: The region where the paper claims success at the best tactile angle.
+CLAIM_THETA_MAX_DEG = 45.0
+CLAIM_R_MAX_MM = 30.0
+
+
+def task_seed(base_seed: int, key: str) -> int:
+    """A trial's seed, stable across runs and machines: CRC32 of the key mixed with the base."""
+    sequence = np.random.SeedSequence([int(base_seed), zlib.crc32(key.encode("utf-8"))])
+    return int(sequence.generate_state(1)[0])
+
+
+@functools.cache
+def _registry():
+    from ..registry import load_registry
+
+    return load_registry()
+
+
+def make_estimator(name: str, params: Mapping[str, Any]) -> Estimator:
+    """The estimator ``name`` from the plugin registry, with validated parameter overrides."""
+    return _registry().create("estimator", name, dict(params))
+
+
+def trial_params(
+    options: ExperimentOptions,
+    key: str,
+    *,
+    gripper: str,
+    tactile_angle_deg: float,
+    theta_deg: float,
+    r_mm: float,
+    bias_mm: float = 0.0,
+    bias_direction_deg: float = 0.0,
+    default_estimator_params: Mapping[str, Any] | None = None,
+) -> SweepTask:
+    """A :class:`SweepTask` for one trial; user overrides win over the experiment's defaults."""
+    estimator_params = dict(default_estimator_params or {}) if options.estimator == "iekf" else {}
+    estimator_params.update(options.estimator_params)
+    return SweepTask(
+        key=key,
+        params={
+            "gripper": gripper,
+            "tactile_angle_deg": float(tactile_angle_deg),
+            "theta_deg": float(theta_deg),
+            "r_mm": float(r_mm),
+            "bias_mm": float(bias_mm),
+            "bias_direction_deg": float(bias_direction_deg),
+            "seed": task_seed(options.seed, key),
+            "estimator": options.estimator,
+            "estimator_params": estimator_params,
+        },
+    )
+
+
+def grid_tasks(
+    options: ExperimentOptions,
+    *,
+    gripper: str,
+    tactile_angles_deg: Sequence[float],
+    thetas_deg: Sequence[float],
+    rs_mm: Sequence[float],
+    default_estimator_params: Mapping[str, Any] | None = None,
+) -> list[SweepTask]:
+    """Every (tactile angle, theta, r) combination, ``options.repeats`` times (default 1)."""
+    repeats = options.repeats or 1
+    tasks = []
+    for phi in tactile_angles_deg:
+        for theta in thetas_deg:
+            for r in rs_mm:
+                for repeat in range(repeats):
+                    key = f"{gripper}/phi{phi:+g}/theta{theta:g}/r{r:+g}"
+                    if repeats > 1:
+                        key += f"/rep{repeat}"
+                    tasks.append(
+                        trial_params(
+                            options,
+                            key,
+                            gripper=gripper,
+                            tactile_angle_deg=phi,
+                            theta_deg=theta,
+                            r_mm=r,
+                            default_estimator_params=default_estimator_params,
+                        )
+                    )
+    return tasks
+
+
+def _diameter_error_mm(points: np.ndarray, true_diameter_m: float) -> float | None:
+    if not np.all(np.isfinite(points)):
+        return None
+    try:
+        return 1e3 * diameter_error(points, true_diameter_m)
+    except ValueError:
+        return None
+
+
+def run_trial(params: Mapping[str, Any]) -> dict[str, Any]:
+    """Run one synthetic trial from its JSON parameters; return the result fields."""
+    rng = np.random.default_rng(int(params["seed"]))
+    case = make_case(
+        rng,
+        gripper=params["gripper"],
+        tactile_angle_rad=math.radians(params["tactile_angle_deg"]),
+        theta_error_rad=math.radians(params["theta_deg"]),
+        r_error_m=1e-3 * params["r_mm"],
+        bias_magnitude_m=1e-3 * params["bias_mm"],
+        bias_direction_rad=math.radians(params["bias_direction_deg"]),
+    )
+    estimator = make_estimator(params["estimator"], params["estimator_params"])
+    result = estimator.estimate(case.problem)
+    row: dict[str, Any] = {"points": len(case.cloud), "contacts": len(case.contacts)}
+    for stage in result.stages:
+        prefix = f"stage{stage.stage}"
+        row[f"{prefix}_diameter_error_mm"] = _diameter_error_mm(
+            stage.completed, case.cylinder.diameter_m
+        )
+        row[f"{prefix}_status"] = stage.status
+        row[f"{prefix}_iterations"] = int(stage.iterations)
+        row[f"{prefix}_seconds"] = float(stage.seconds)
+    return row
+
+
+# ------------------------------------------------------------------------- reporting
+
+
+def ok_rows(rows: Iterable[Mapping[str, Any]]) -> tuple[list[Mapping[str, Any]], list[str]]:
+    """Rows that ran, and one ``key: error`` line per row that raised."""
+    good, failed = [], []
+    for row in rows:
+        if "error" in row:
+            failed.append(f"{row.get('key', '?')}: {row['error']}")
+        else:
+            good.append(row)
+    return good, failed
+
+
+def final_error(row: Mapping[str, Any]) -> float:
+    """The last stage's diameter error (mm); NaN when undefined (counted as a failure)."""
+    for stage in (2, 1, 0):
+        name = f"stage{stage}_diameter_error_mm"
+        if name in row:
+            value = row[name]
+            return math.nan if value is None else float(value)
+    return math.nan
+
+
+def stage_error(row: Mapping[str, Any], stage: int) -> float:
+    value = row.get(f"stage{stage}_diameter_error_mm")
+    return math.nan if value is None else float(value)
+
+
+def error_grid(
+    rows: Sequence[Mapping[str, Any]],
+    thetas: Sequence[float],
+    rs: Sequence[float],
+    stage: int | None = None,
+) -> np.ndarray:
+    """``(len(thetas), len(rs))`` mean diameter error (mm) per grid cell, of ``stage`` or of
+    the last stage when None (NaN when missing, or when any run of the cell has no defined
+    error)."""
+    index_theta = {t: i for i, t in enumerate(thetas)}
+    index_r = {r: j for j, r in enumerate(rs)}
+    sums = np.zeros((len(thetas), len(rs)))
+    counts = np.zeros((len(thetas), len(rs)))
+    for row in rows:
+        i, j = index_theta[row["params"]["theta_deg"]], index_r[row["params"]["r_mm"]]
+        sums[i, j] += final_error(row) if stage is None else stage_error(row, stage)
+        counts[i, j] += 1
+    with np.errstate(invalid="ignore"):
+        return sums / counts
+
+
+def success_summary(
+    grid_mm: np.ndarray, thetas: Sequence[float], rs: Sequence[float]
+) -> dict[str, Any]:
+    """How much of a theta x r error grid is below :data:`SUCCESS_MM`.
+
+    Returns the number of cells and successes in the paper's claim region (theta <= 45 deg,
+    |r| <= 30 mm) and over the whole grid, the largest theta up to which every cell with
+    |r| <= 30 mm succeeds, and the largest R such that every cell with theta <= 45 deg and
+    |r| <= R succeeds (None when even the smallest fails).
+    """
+    thetas_a, rs_a = np.asarray(thetas), np.asarray(rs)
+    good = np.nan_to_num(grid_mm, nan=np.inf) < SUCCESS_MM
+    in_claim = (thetas_a[:, None] <= CLAIM_THETA_MAX_DEG) & (
+        np.abs(rs_a)[None, :] <= CLAIM_R_MAX_MM
+    )
+    theta_reach = None
+    for i, theta in enumerate(thetas_a):
+        if not np.all(good[i, np.abs(rs_a) <= CLAIM_R_MAX_MM]):
+            break
+        theta_reach = float(theta)
+    r_reach = None
+    for radius in np.unique(np.abs(rs_a)):
+        cells = (thetas_a[:, None] <= CLAIM_THETA_MAX_DEG) & (np.abs(rs_a)[None, :] <= radius)
+        if not np.all(good[cells]):
+            break
+        r_reach = float(radius)
+    return {
+        "claim_cells": int(in_claim.sum()),
+        "claim_successes": int((good & in_claim).sum()),
+        "grid_cells": int(good.size),
+        "grid_successes": int(good.sum()),
+        "theta_reach_deg": theta_reach,
+        "r_reach_mm": r_reach,
+    }
+
+
+def fmt(value: float | None, digits: int = 1) -> str:
+    """A number for a Markdown table; '-' for None/NaN, 'inf' for infinity."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    if math.isinf(value):
+        return "inf"
+    return f"{value:.{digits}f}"
+
+
+def failures_section(failed: Sequence[str]) -> list[str]:
+    """Markdown lines listing runs that raised (empty when none did)."""
+    if not failed:
+        return []
+    lines = ["", f"## Runs that raised ({len(failed)})", ""]
+    lines += [f"- `{line}`" for line in failed[:20]]
+    if len(failed) > 20:
+        lines.append(f"- ... and {len(failed) - 20} more (see results.csv)")
+    return lines
+
+
+def _status_counts(rows: Sequence[Mapping[str, Any]]) -> str:
+    counts: dict[str, int] = {}
+    for row in rows:
+        status = str(row.get("stage2_status", row.get("stage1_status", "-")))
+        counts[status] = counts.get(status, 0) + 1
+    return ", ".join(f"{name} {count}" for name, count in sorted(counts.items()))
+
+
+def report_grid(
+    rows: Sequence[Mapping[str, Any]],
+    out_dir: Path,
+    *,
+    name: str,
+    title: str,
+    claims: Sequence[str],
+) -> list[Path]:
+    """CSV, error-map PNG (one panel per tactile angle) and ``report.md`` of a theta x r study.
+
+    The Markdown puts the paper's claims beside, per tactile angle, the successes (final
+    diameter error < 4 mm) inside the claim region and over the grid, the median errors of
+    each stage in the claim region, the reach of the success region, and the claim-region
+    cells that fail.
+    """
+    out_dir = Path(out_dir)
+    csv_path = write_csv(rows, out_dir / "results.csv")
+    good, failed = ok_rows(rows)
+    phis = sorted({row["params"]["tactile_angle_deg"] for row in good}, key=lambda p: (abs(p), p))
+    thetas = sorted({row["params"]["theta_deg"] for row in good})
+    rs = sorted({row["params"]["r_mm"] for row in good})
+    panels, lines = [], []
+    lines += [f"# {title}", "", "Paper (METHOD.md §7):", ""]
+    lines += [f"- {claim}" for claim in claims]
+    lines += [
+        "",
+        f"Ours: success = final (Stage 2) diameter error < {SUCCESS_MM:g} mm. Claim region: "
+        f"theta <= {CLAIM_THETA_MAX_DEG:g} deg and |r| <= {CLAIM_R_MAX_MM:g} mm. Grid: theta "
+        f"{', '.join(f'{t:g}' for t in thetas)} deg; r {', '.join(f'{r:g}' for r in rs)} mm.",
+        "",
+        "| tactile angle | runs | claim region < 4 mm | median err. in claim region "
+        "S0 / S1 / S2 (mm) | whole grid < 4 mm | theta reach (|r|<=30) | r reach (theta<=45) "
+        "| final status |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    failing_lines = []
+    for phi in phis:
+        subset = [row for row in good if row["params"]["tactile_angle_deg"] == phi]
+        final = error_grid(subset, thetas, rs)
+        panels.append(
+            GridPanel(f"tactile angle {phi:+g} deg", np.array(rs), np.array(thetas), final)
+        )
+        summary = success_summary(final, thetas, rs)
+        in_claim = [
+            row
+            for row in subset
+            if row["params"]["theta_deg"] <= CLAIM_THETA_MAX_DEG
+            and abs(row["params"]["r_mm"]) <= CLAIM_R_MAX_MM
+        ]
+        medians = [
+            fmt(float(np.nanmedian([stage_error(row, k) for row in in_claim])))
+            if in_claim and any(not math.isnan(stage_error(row, k)) for row in in_claim)
+            else "-"
+            for k in (0, 1, 2)
+        ]
+        lines.append(
+            f"| {phi:+g} | {len(subset)} | {summary['claim_successes']}/{summary['claim_cells']} "
+            f"| {' / '.join(medians)} | {summary['grid_successes']}/{summary['grid_cells']} "
+            f"| {fmt(summary['theta_reach_deg'], 2)} | {fmt(summary['r_reach_mm'], 0)} "
+            f"| {_status_counts(subset)} |"
+        )
+        bad = [
+            (theta, r, final[i, j])
+            for i, theta in enumerate(thetas)
+            for j, r in enumerate(rs)
+            if theta <= CLAIM_THETA_MAX_DEG
+            and abs(r) <= CLAIM_R_MAX_MM
+            and not final[i, j] < SUCCESS_MM
+        ]
+        if bad:
+            cells = ", ".join(f"({t:g}°, {r:+g} mm): {fmt(e)}" for t, r, e in bad[:24])
+            more = f" ... {len(bad) - 24} more" if len(bad) > 24 else ""
+            failing_lines.append(f"- tactile angle {phi:+g}: {cells}{more}")
+    if failing_lines:
+        lines += ["", "Claim-region cells that fail (theta, r): final error in mm:", ""]
+        lines += failing_lines
+    figure = error_grid_figure(
+        panels,
+        out_dir / f"{name}.png",
+        xlabel="r (mm)",
+        ylabel="theta (deg)",
+        colour_label=f"final diameter error (mm); outlined: < {SUCCESS_MM:g} mm",
+        vmax=20.0,
+        threshold=SUCCESS_MM,
+        title=title,
+    )
+    lines += ["", f"![{name}]({figure.name})"]
+    lines += failures_section(failed)
+    report_path = out_dir / "report.md"
+    report_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return [csv_path, figure, report_path]

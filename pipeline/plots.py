@@ -1,0 +1,275 @@
+"""Figures: deviation heatmaps and histograms of completed clouds, and the synthetic studies'
+error maps and box plots.
+
+Uses matplotlib's object API with the Agg canvas (no pyplot, no global backend switch), so
+it works headless and in worker processes. Inputs are in SI units (metres, radians); the
+figures print millimetres and degrees.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import PolyCollection
+from matplotlib.figure import Figure
+
+#: Colour scale of deviation pictures: 0 mm blue to 30 mm red (METHOD.md section 6).
+DEVIATION_CMAP = "jet"
+DEVIATION_MAX_M = 0.030
+
+
+@dataclass(frozen=True)
+class DeviationPanel:
+    """One completed cloud with each point's deviation from the true surface.
+
+    Attributes:
+        label: panel title (e.g. ``"Stage 0"``).
+        points: ``(N, 3)`` completed cloud, frame ``R``, metres.
+        distances_m: ``(N,)`` point-to-mesh distances, metres.
+    """
+
+    label: str
+    points: np.ndarray
+    distances_m: np.ndarray
+
+
+def _save(figure: Figure, out_path: Path) -> Path:
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    FigureCanvasAgg(figure)
+    figure.savefig(out_path, dpi=120)
+    return out_path
+
+
+def view_projection(azimuth_rad: float, elevation_rad: float) -> np.ndarray:
+    """``(3, 3)`` rows: screen right, screen up, toward the viewer, for an orthographic view
+    from direction (azimuth about +z, elevation above the table). Elevation 90 deg is the
+    top-down view with +x to the right and +y up."""
+    toward = np.array(
+        [
+            np.cos(elevation_rad) * np.cos(azimuth_rad),
+            np.cos(elevation_rad) * np.sin(azimuth_rad),
+            np.sin(elevation_rad),
+        ]
+    )
+    if np.isclose(abs(toward[2]), 1.0):
+        right = np.array([1.0, 0.0, 0.0]) if toward[2] > 0 else np.array([-1.0, 0.0, 0.0])
+    else:
+        right = np.cross([0.0, 0.0, 1.0], toward)
+        right /= np.linalg.norm(right)
+    up = np.cross(toward, right)
+    return np.vstack([right, up, toward])
+
+
+def deviation_heatmap(
+    panels: Sequence[DeviationPanel],
+    out_path: Path,
+    *,
+    mesh: tuple[np.ndarray, np.ndarray] | None = None,
+    azimuth_rad: float = np.radians(-60.0),
+    elevation_rad: float = np.radians(90.0),
+    max_deviation_m: float = DEVIATION_MAX_M,
+    title: str = "",
+) -> Path:
+    """Completed clouds side by side, coloured by deviation (0 blue to ``max`` red).
+
+    Each panel is an orthographic view (default top-down; e.g. elevation 35 deg for a
+    3/4 view). The ground-truth mesh, when given as ``(vertices, faces)``, is drawn as its
+    grey silhouette behind the points; nearer points are drawn over farther ones.
+
+    Returns:
+        The path written.
+    """
+    projection = view_projection(azimuth_rad, elevation_rad)
+    figure = Figure(figsize=(4.2 * len(panels) + 1.0, 4.4), layout="constrained")
+    axes = figure.subplots(1, len(panels), squeeze=False)[0]
+    scatter = None
+    for ax, panel in zip(axes, panels, strict=True):
+        if mesh is not None:
+            vertices, faces = mesh
+            screen = (np.asarray(vertices) @ projection.T)[:, :2] * 1e3
+            ax.add_collection(
+                PolyCollection(
+                    screen[np.asarray(faces)], facecolors="0.85", edgecolors="none", zorder=0
+                )
+            )
+        screen_points = np.asarray(panel.points) @ projection.T
+        order = np.argsort(screen_points[:, 2])
+        scatter = ax.scatter(
+            screen_points[order, 0] * 1e3,
+            screen_points[order, 1] * 1e3,
+            c=np.asarray(panel.distances_m)[order] * 1e3,
+            cmap=DEVIATION_CMAP,
+            vmin=0.0,
+            vmax=max_deviation_m * 1e3,
+            s=2,
+            linewidths=0,
+            zorder=1,
+        )
+        median_mm = float(np.median(panel.distances_m)) * 1e3
+        ax.set_title(f"{panel.label}\nmedian {median_mm:.1f} mm")
+        ax.set_aspect("equal")
+        ax.autoscale_view()
+        ax.set_xlabel("mm")
+    if scatter is not None:
+        figure.colorbar(scatter, ax=list(axes), label="deviation (mm)", shrink=0.85)
+    if title:
+        figure.suptitle(title)
+    return _save(figure, out_path)
+
+
+def deviation_histogram(
+    panels: Sequence[DeviationPanel],
+    out_path: Path,
+    *,
+    max_deviation_m: float = DEVIATION_MAX_M,
+    bins: int = 30,
+    title: str = "",
+) -> Path:
+    """Overlaid histograms of the deviations of several completed clouds (mm); deviations
+    beyond ``max_deviation_m`` are counted in the last bin."""
+    figure = Figure(figsize=(6.0, 4.0), layout="constrained")
+    ax = figure.subplots()
+    edges = np.linspace(0.0, max_deviation_m * 1e3, bins + 1)
+    for panel in panels:
+        values = np.clip(np.asarray(panel.distances_m) * 1e3, 0.0, edges[-1])
+        ax.hist(values, bins=edges, histtype="step", linewidth=1.5, label=panel.label)
+    ax.set_xlabel("deviation (mm)")
+    ax.set_ylabel("points")
+    ax.legend()
+    if title:
+        ax.set_title(title)
+    return _save(figure, out_path)
+
+
+@dataclass(frozen=True)
+class GridPanel:
+    """An error map over a 2-D grid: ``values[i, j]`` at ``(x_values[j], y_values[i])``."""
+
+    title: str
+    x_values: np.ndarray
+    y_values: np.ndarray
+    values: np.ndarray
+
+
+def _edges(centres: np.ndarray) -> np.ndarray:
+    centres = np.asarray(centres, dtype=np.float64)
+    if len(centres) == 1:
+        return np.array([centres[0] - 0.5, centres[0] + 0.5])
+    middle = 0.5 * (centres[1:] + centres[:-1])
+    return np.concatenate([[2 * centres[0] - middle[0]], middle, [2 * centres[-1] - middle[-1]]])
+
+
+def error_grid_figure(
+    panels: Sequence[GridPanel],
+    out_path: Path,
+    *,
+    xlabel: str,
+    ylabel: str,
+    colour_label: str,
+    vmax: float,
+    threshold: float | None = None,
+    title: str = "",
+) -> Path:
+    """One colour map per panel (the paper's Fig. 8/9 layout), each cell labelled with its
+    value; NaN cells (failed runs) are grey. ``threshold`` outlines the cells below it."""
+    columns = min(len(panels), 3)
+    rows = int(np.ceil(len(panels) / columns))
+    figure = Figure(figsize=(4.3 * columns + 1.0, 3.8 * rows), layout="constrained")
+    axes = figure.subplots(rows, columns, squeeze=False).reshape(-1)
+    mesh = None
+    for ax, panel in zip(axes, panels, strict=False):
+        values = np.ma.masked_invalid(np.asarray(panel.values, dtype=np.float64))
+        ax.set_facecolor("0.6")
+        mesh = ax.pcolormesh(
+            _edges(panel.x_values),
+            _edges(panel.y_values),
+            values,
+            cmap="viridis",
+            vmin=0.0,
+            vmax=vmax,
+        )
+        x_edges, y_edges = _edges(panel.x_values), _edges(panel.y_values)
+        for i, j in np.ndindex(values.shape):
+            if not np.ma.is_masked(values[i, j]):
+                ax.text(
+                    0.5 * (x_edges[j] + x_edges[j + 1]),
+                    0.5 * (y_edges[i] + y_edges[i + 1]),
+                    f"{values[i, j]:.0f}",
+                    ha="center",
+                    va="center",
+                    fontsize=6,
+                    color="white" if values[i, j] < 0.6 * vmax else "black",
+                )
+        if threshold is not None:
+            good = np.asarray(panel.values) < threshold
+            for i, j in zip(*np.nonzero(good), strict=True):
+                x = _edges(panel.x_values)[j : j + 2]
+                y = _edges(panel.y_values)[i : i + 2]
+                ax.plot(
+                    [x[0], x[1], x[1], x[0], x[0]],
+                    [y[0], y[0], y[1], y[1], y[0]],
+                    color="white",
+                    linewidth=0.6,
+                )
+        ax.set_title(panel.title)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
+    if mesh is not None:
+        figure.colorbar(mesh, ax=list(axes[: len(panels)]), label=colour_label, shrink=0.9)
+    if title:
+        figure.suptitle(title)
+    return _save(figure, out_path)
+
+
+@dataclass(frozen=True)
+class BoxPanel:
+    """Box plots of samples per category: ``samples[k]`` at ``positions[k]``."""
+
+    title: str
+    positions: np.ndarray
+    samples: Sequence[np.ndarray]
+
+
+def box_plot_figure(
+    panels: Sequence[BoxPanel],
+    out_path: Path,
+    *,
+    xlabel: str,
+    ylabel: str,
+    threshold: float | None = None,
+    ylim: tuple[float, float] | None = None,
+    title: str = "",
+) -> Path:
+    """Box-and-whisker plots (quartiles, whiskers at min and max) per panel (the paper's
+    Fig. 10 layout); ``threshold`` draws a dashed horizontal reference line."""
+    figure = Figure(figsize=(5.5 * len(panels), 4.2), layout="constrained")
+    axes = figure.subplots(1, len(panels), squeeze=False)[0]
+    for ax, panel in zip(axes, panels, strict=True):
+        positions = np.asarray(panel.positions, dtype=np.float64)
+        width = 0.6 * (np.min(np.diff(positions)) if len(positions) > 1 else 1.0)
+        ax.boxplot(
+            [np.asarray(s, dtype=np.float64) for s in panel.samples],
+            positions=positions,
+            widths=width,
+            whis=(0, 100),
+            manage_ticks=False,
+        )
+        ax.set_xticks(positions)
+        ax.set_xticklabels([f"{p:g}" for p in positions])
+        if threshold is not None:
+            ax.axhline(threshold, color="tab:red", linestyle="--", linewidth=1)
+        if ylim is not None:
+            ax.set_ylim(*ylim)
+        ax.set_title(panel.title)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+    if title:
+        figure.suptitle(title)
+    return _save(figure, out_path)
