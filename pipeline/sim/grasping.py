@@ -1,0 +1,257 @@
+"""Executing a planned top grasp with a simulated hand in PyBullet.
+
+Sequence (:func:`execute_grasp`):
+
+1. refuse a refused plan or an opening the hand cannot make (``executed=False``); a plan
+   made for another hand is a configuration error;
+2. release the object if the hand still holds it from an earlier grasp (open, back off);
+3. teleport the open hand to the pre-grasp pose, ``plan.pregrasp_height_m`` above
+   ``plan.T_robot_hand`` along +z of frame R; refuse if the hand overlaps the object there;
+4. descend to ``plan.T_robot_hand`` at ``descent_speed_m_s`` (the base constraint's target is
+   moved every step); stop with ``executed=False`` if the hand is blocked on the way;
+5. close every finger at its own speed (position control with a force cap) until its pads
+   report sufficient contact - at least ``min_contact_taxels`` taxels within
+   ``contact_gap_m`` of the object (ray probes) and at least ``min_contact_force_N`` summed
+   normal force between its pads and the object - or it reaches its joint limit; a finger
+   in contact stops, and its joint targets move ``FingerDrive.squeeze`` further in so that
+   it presses with its force caps;
+6. let everything settle for ``settle_s`` and report.
+
+The hand closes along the x axis of ``plan.T_robot_hand`` (``plan.closing_direction`` is
+not used here). The object is free: it slides or turns when one finger reaches it before
+the others, which is the motion the estimator's bias has to absorb. The true object poses
+before and after are read from the simulator. Timestep ``timestep_s`` (default 1/240 s); a
+PG-70 grasp takes a few hundred steps.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as pb
+
+from ..errors import ConfigError
+from ..types import GraspOutcome, GraspPlan, ObjectPose
+from .hands import Hand
+
+
+@dataclass(frozen=True)
+class GraspSettings:
+    """Tunables of :func:`execute_grasp`.
+
+    Attributes:
+        timestep_s: physics timestep used during the grasp (restored afterwards).
+        descent_speed_m_s: palm speed from the pre-grasp to the grasp pose.
+        blocked_tolerance_m: palm position error after the descent that counts as blocked.
+        force_fraction: fraction of each joint's URDF effort limit used as its force/torque
+            cap while closing (PG-70: 0.2 x 200 N = 40 N per jaw).
+        contact_gap_m: a taxel counts as touching within this distance of the object.
+        probe_behind_m: contact probe rays start this far behind the pad surface.
+        min_contact_taxels: touching taxels a finger needs (over its pads) to stop closing.
+        min_contact_force_N: summed pad-object normal force a finger needs to stop closing.
+        check_every_steps: contact is checked every this many physics steps.
+        max_close_s: closing gives up after this much simulated time.
+        settle_s: simulated time the grasp is held before the final poses are read.
+        release_s: time taken to open and back off when the hand still holds the object.
+        release_lift_m: how far the palm backs off along its -z when releasing.
+    """
+
+    timestep_s: float = 1.0 / 240.0
+    descent_speed_m_s: float = 0.3
+    blocked_tolerance_m: float = 0.005
+    force_fraction: float = 0.2
+    contact_gap_m: float = 0.001
+    probe_behind_m: float = 0.0015
+    min_contact_taxels: int = 2
+    min_contact_force_N: float = 1.0
+    check_every_steps: int = 2
+    max_close_s: float = 2.0
+    settle_s: float = 0.15
+    release_s: float = 0.2
+    release_lift_m: float = 0.05
+
+
+def object_pose(client: int, object_id: int) -> ObjectPose:
+    """The object's true pose: its base link frame (the mesh origin, not the centre of
+    mass PyBullet reports) in frame R, quaternion (x, y, z, w)."""
+    com_position, com_orientation = pb.getBasePositionAndOrientation(
+        object_id, physicsClientId=client
+    )
+    inertial = pb.getDynamicsInfo(object_id, -1, physicsClientId=client)
+    com_in_link = pb.invertTransform(inertial[3], inertial[4])
+    position, orientation = pb.multiplyTransforms(com_position, com_orientation, *com_in_link)
+    return ObjectPose(np.array(position), np.array(orientation))
+
+
+def _step(client: int, steps: int) -> None:
+    for _ in range(steps):
+        pb.stepSimulation(physicsClientId=client)
+
+
+def _outcome(
+    client: int,
+    hand: Hand,
+    object_id: int,
+    before: ObjectPose,
+    executed: bool,
+    reason: str = "",
+) -> GraspOutcome:
+    return GraspOutcome(
+        executed=executed,
+        aperture_m=hand.aperture() if executed else math.nan,
+        joint_positions=hand.joint_positions(),
+        T_robot_hand=hand.pose(),
+        object_before=before,
+        object_after=object_pose(client, object_id),
+        reason=reason,
+    )
+
+
+def _release(client: int, hand: Hand, opening_m: float, settings: GraspSettings) -> None:
+    """Open the fingers and back the palm off along -z of the hand."""
+    hand.command(hand.open_configuration(opening_m))
+    T_robot_hand = hand.pose()
+    steps = max(1, round(settings.release_s / settings.timestep_s))
+    for step in range(1, steps + 1):
+        target = T_robot_hand.copy()
+        target[:3, 3] -= T_robot_hand[:3, 2] * settings.release_lift_m * step / steps
+        hand.move_to(target)
+        pb.stepSimulation(physicsClientId=client)
+
+
+def _finger_targets(
+    hand: Hand, open_targets: dict[str, float], closure: np.ndarray, touching: np.ndarray
+) -> dict[str, float]:
+    targets = dict(open_targets)
+    for i, finger in enumerate(hand.model.fingers):
+        for joint, ratio, squeeze in zip(finger.joints, finger.ratios, finger.squeeze, strict=True):
+            targets[joint] = open_targets[joint] + ratio * closure[i] + squeeze * touching[i]
+    return targets
+
+
+def _close(
+    client: int, hand: Hand, object_id: int, open_targets: dict[str, float], s: GraspSettings
+) -> None:
+    """Close every finger until it touches (or reaches its limit); see the module doc."""
+    fingers = hand.model.fingers
+    closure = np.zeros(len(fingers))
+    limit = np.array([hand.closure_limit(f, open_targets) for f in fingers])
+    stopped = limit <= 0.0
+    touching = np.zeros(len(fingers))
+    pad_row = {pad: i for i, pad in enumerate(hand.pad_ids)}
+    for step in range(round(s.max_close_s / s.timestep_s)):
+        closure = np.where(
+            stopped,
+            closure,
+            np.minimum(closure + s.timestep_s * np.array([f.speed for f in fingers]), limit),
+        )
+        hand.command(_finger_targets(hand, open_targets, closure, touching), s.force_fraction)
+        pb.stepSimulation(physicsClientId=client)
+        if step % s.check_every_steps:
+            continue
+        frames, gaps = hand.taxel_gaps(object_id, s.probe_behind_m, s.contact_gap_m)
+        touched_pads = frames.pads[gaps <= s.contact_gap_m]
+        forces = hand.pad_contact_forces(object_id)
+        for i, finger in enumerate(fingers):
+            if stopped[i]:
+                continue
+            taxels = int(np.isin(touched_pads, finger.pads).sum())
+            force = forces[[pad_row[p] for p in finger.pads]].sum()
+            if taxels >= s.min_contact_taxels and force >= s.min_contact_force_N:
+                stopped[i] = True
+                touching[i] = 1.0
+            elif closure[i] >= limit[i]:
+                stopped[i] = True
+        if stopped.all():
+            break
+    hand.command(_finger_targets(hand, open_targets, closure, touching), s.force_fraction)
+
+
+def execute_grasp(
+    client: int,
+    hand: Hand,
+    plan: GraspPlan,
+    object_id: int,
+    settings: GraspSettings | None = None,
+) -> GraspOutcome:
+    """Run a planned grasp on ``object_id`` and report what happened (module docstring).
+
+    Args:
+        client: PyBullet client id (its world frame is frame R).
+        hand: the hand, loaded into ``client``.
+        plan: the grasp; ``T_robot_hand`` is the palm pose at the grasp.
+        object_id: the PyBullet body to grasp.
+        settings: tunables; defaults to :class:`GraspSettings`.
+
+    Raises:
+        ConfigError: the plan was made for a different hand.
+    """
+    s = settings or GraspSettings()
+    before = object_pose(client, object_id)
+    if plan.gripper != hand.spec.name:
+        raise ConfigError(
+            f"grasp plan is for gripper '{plan.gripper}' but the world's hand is '{hand.spec.name}'"
+        )
+    if plan.status != "ok":
+        return _outcome(client, hand, object_id, before, False, plan.reason or "plan refused")
+    try:
+        open_targets = hand.open_configuration(plan.opening_m, plan.spread_rad)
+    except ValueError as error:
+        return _outcome(client, hand, object_id, before, False, f"cannot open: {error}")
+
+    previous_timestep_s = pb.getPhysicsEngineParameters(physicsClientId=client)["fixedTimeStep"]
+    pb.setTimeStep(s.timestep_s, physicsClientId=client)
+    try:
+        return _execute(client, hand, plan, object_id, open_targets, before, s)
+    finally:
+        pb.setTimeStep(previous_timestep_s, physicsClientId=client)
+
+
+def _execute(
+    client: int,
+    hand: Hand,
+    plan: GraspPlan,
+    object_id: int,
+    open_targets: dict[str, float],
+    before: ObjectPose,
+    s: GraspSettings,
+) -> GraspOutcome:
+    """Steps 2-6 of the module docstring, at the settings' timestep."""
+    if hand.touches(object_id):
+        _release(client, hand, plan.opening_m, s)
+        before = object_pose(client, object_id)
+
+    T_grasp = np.asarray(plan.T_robot_hand, dtype=np.float64)
+    T_pregrasp = T_grasp.copy()
+    T_pregrasp[2, 3] += plan.pregrasp_height_m
+    hand.set_opening(plan.opening_m, plan.spread_rad)
+    hand.reset_pose(T_pregrasp)
+    pb.performCollisionDetection(physicsClientId=client)
+    if hand.touches(object_id):
+        return _outcome(
+            client, hand, object_id, before, False, "hand overlaps the object at the pre-grasp pose"
+        )
+
+    steps = max(1, math.ceil(plan.pregrasp_height_m / (s.descent_speed_m_s * s.timestep_s)))
+    for step in range(1, steps + 1):
+        target = T_grasp.copy()
+        target[2, 3] += plan.pregrasp_height_m * (1.0 - step / steps)
+        hand.move_to(target)
+        pb.stepSimulation(physicsClientId=client)
+    _step(client, 2)
+    miss_m = float(np.linalg.norm(hand.pose()[:3, 3] - T_grasp[:3, 3]))
+    if miss_m > s.blocked_tolerance_m:
+        return _outcome(
+            client,
+            hand,
+            object_id,
+            before,
+            False,
+            f"hand blocked {miss_m * 1e3:.1f} mm short of the grasp pose during the descent",
+        )
+
+    _close(client, hand, object_id, open_targets, s)
+    _step(client, max(1, round(s.settle_s / s.timestep_s)))
+    return _outcome(client, hand, object_id, before, True)
