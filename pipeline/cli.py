@@ -319,8 +319,12 @@ def _add_sweep_parser(verbs) -> None:
         "Then write the CSV, figures and report.md. Experiments: "
         + "; ".join(f"{name}: {text}" for name, text in experiment_descriptions().items()),
     )
-    sweep.add_argument("experiment", choices=sorted(EXPERIMENTS), metavar="EXPERIMENT",
-                       help=", ".join(sorted(EXPERIMENTS)))
+    sweep.add_argument(
+        "experiment",
+        choices=sorted(EXPERIMENTS),
+        metavar="EXPERIMENT",
+        help=", ".join(sorted(EXPERIMENTS)),
+    )
     sweep.add_argument("--estimator", metavar="NAME", help="estimator to run (default: config)")
     sweep.add_argument("--quick", action="store_true", help="a reduced grid (smoke test)")
     sweep.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
@@ -329,8 +333,12 @@ def _add_sweep_parser(verbs) -> None:
     sweep.add_argument("--executor", choices=["local", "dask"], default="local")
     sweep.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (tcp://...)")
     _add_config_options(sweep)
-    sweep.add_argument("--out", type=Path, metavar="DIR",
-                       help="output folder (default runs/sweep-EXPERIMENT-ESTIMATOR)")
+    sweep.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help="output folder (default runs/sweep-EXPERIMENT-ESTIMATOR)",
+    )
     sweep.set_defaults(run=_cmd_sweep)
 
 
@@ -375,7 +383,9 @@ def build_parser() -> argparse.ArgumentParser:
     fuse.add_argument("--contacts", type=Path, required=True, help="contacts JSON (README)")
     start = fuse.add_mutually_exclusive_group()
     start.add_argument(
-        "--plane", metavar="NX,NY,D", help="initial symmetry plane {p : NX x + NY y = D}"
+        "--plane",
+        metavar="NX,NY,D",
+        help="initial symmetry plane {p : NX x + NY y = D}; write --plane=-1,0,0.2 when NX < 0",
     )
     start.add_argument("--init", metavar="NAME", help="initialiser to guess the plane with")
     _add_config_options(fuse)

@@ -1,0 +1,89 @@
+"""Scoring an estimate against the ground truth of a simulated trial (METHOD.md section 6).
+
+The completed model of a stage lives in the frame where the hand touched the object, so it
+is compared with the object's true pose *after* the grasp, and its symmetry plane is the
+estimated plane moved by the estimated bias (:func:`pipeline.metrics.plane_after_bias`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .metrics import box_thickness, fit_circle_taubin, mesh_deviation, plane_after_bias
+from .types import StageEstimate, SymmetryPlane
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """What a simulated trial knows about the object after the grasp, frame R.
+
+    Attributes:
+        vertices, faces: the object's mesh in its true pose after the grasp (m).
+        symmetry: ``"planar"``, ``"rotational"`` or ``"none"``.
+        plane: the true mirror plane after the grasp (planar objects), else None.
+        axis_xy_m: a point on the true symmetry axis/plane (the object origin), frame R.
+        thickness_m: true thickness for box-like objects, else None.
+        diameter_m: true diameter for cylinders, else None.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    symmetry: str
+    plane: SymmetryPlane | None
+    axis_xy_m: np.ndarray
+    thickness_m: float | None = None
+    diameter_m: float | None = None
+
+
+def plane_errors(estimated: SymmetryPlane, truth: GroundTruth) -> dict[str, float]:
+    """Orientation error (deg, modulo 180) and offset error (mm) of a symmetry plane.
+
+    The offset error is the distance of the true plane's anchor (the object origin) to the
+    estimated plane; for rotational objects only that is defined.
+    """
+    errors = {
+        "plane_offset_error_mm": float(
+            abs(estimated.normal[:2] @ truth.axis_xy_m - estimated.offset_m) * 1e3
+        )
+    }
+    if truth.plane is not None:
+        difference = (estimated.theta_rad - truth.plane.theta_rad) % np.pi
+        errors["plane_angle_error_deg"] = float(np.degrees(min(difference, np.pi - difference)))
+    return errors
+
+
+def evaluate_stage(
+    stage: StageEstimate, truth: GroundTruth, grasp_centre_xy_m: np.ndarray
+) -> tuple[dict[str, Any], np.ndarray]:
+    """Metrics of one stage and each completed point's distance to the true surface (m).
+
+    The metrics are the deviation summary (m), the plane errors, and the object's measure
+    (thickness or diameter, with the error in mm and percent) where defined.
+    """
+    plane = plane_after_bias(stage.plane, stage.bias)
+    distances, deviation = mesh_deviation(stage.completed, truth.vertices, truth.faces)
+    metrics: dict[str, Any] = {"deviation_m": deviation.as_dict(), **plane_errors(plane, truth)}
+    if truth.thickness_m is not None:
+        try:
+            fit = box_thickness(stage.completed, plane, grasp_centre_xy_m)
+        except ValueError as exc:
+            metrics["thickness_error"] = str(exc)
+        else:
+            metrics.update(_measure("thickness", fit.thickness_m, truth.thickness_m))
+            metrics["side_angle_deg"] = float(np.degrees(fit.angle_rad))
+    if truth.diameter_m is not None:
+        circle = fit_circle_taubin(stage.completed)
+        metrics.update(_measure("diameter", circle.diameter_m, truth.diameter_m))
+    return metrics, distances
+
+
+def _measure(name: str, measured_m: float, true_m: float) -> dict[str, float]:
+    error_m = measured_m - true_m
+    return {
+        f"{name}_mm": measured_m * 1e3,
+        f"{name}_error_mm": error_m * 1e3,
+        f"{name}_error_pct": abs(error_m) / true_m * 100.0,
+    }

@@ -1,0 +1,284 @@
+"""One full simulated grasp trial, from the camera to the evaluated estimate.
+
+    sensor -> segmenter -> initialiser.propose -> planner -> grasp -> tactile
+      -> initialiser.refine -> estimator -> evaluation
+
+Every file the trial writes goes into one output folder (see :data:`TRIAL_FILES`); the
+stages are timed one by one, and the resolved config is written next to the results.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .catalogue import CatalogueObject, load_object
+from .config import Config
+from .errors import StageFailure
+from .evaluation import GroundTruth, evaluate_stage
+from .formats import (
+    bias_to_json,
+    contacts_to_json,
+    estimate_to_json,
+    plan_to_json,
+    plane_to_json,
+    write_cloud,
+    write_completed_clouds,
+    write_json,
+)
+from .registry import StageRegistry
+from .runner import estimate
+from .types import DepthObservation, EstimateResult, ObjectPose, SymmetryPlane
+
+#: What every completed trial writes into its output folder (VC adds ``vc_scores.png``).
+TRIAL_FILES = (
+    "rgb.png",
+    "depth.png",
+    "depth.npy",
+    "camera.json",
+    "cloud.ply",
+    "contacts.json",
+    "completed_stage0.ply",
+    "completed_stage1.ply",
+    "completed_stage2.ply",
+    "object_final.ply",
+    "topdown.png",
+    "deviation.png",
+    "result.json",
+    "config.toml",
+)
+
+
+@dataclass
+class PhaseTimer:
+    """Wall time per named phase, in seconds, in the order the phases ran."""
+
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    @contextmanager
+    def phase(self, name: str) -> Iterator[None]:
+        started = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - started
+
+
+@dataclass(frozen=True)
+class TrialRecord:
+    """What :func:`run_trial` returns: the estimate, its evaluation and the output folder."""
+
+    out_dir: Path
+    result: EstimateResult
+    metrics: list[dict[str, Any]]
+    timings: dict[str, float]
+    document: dict[str, Any]
+
+
+def pose_to_json(pose: ObjectPose) -> dict[str, Any]:
+    return {
+        "position": [float(v) for v in pose.position_m],
+        "quaternion_xyzw": [float(v) for v in pose.quaternion_xyzw],
+    }
+
+
+def camera_to_json(observation: DepthObservation) -> dict[str, Any]:
+    """Intrinsics (px) and the believed camera pose ``T_robot_camera`` (OpenCV frame)."""
+    k = observation.intrinsics
+    return {
+        "intrinsics": {
+            "width": k.width,
+            "height": k.height,
+            "fx": k.fx,
+            "fy": k.fy,
+            "cx": k.cx,
+            "cy": k.cy,
+        },
+        "T_robot_camera": np.asarray(observation.T_robot_camera).tolist(),
+        "frame": "opencv optical frame (x right, y down, z forward), metres",
+        "table_height_m": observation.table_height_m,
+    }
+
+
+def ground_truth(obj: CatalogueObject, pose_after: ObjectPose) -> GroundTruth:
+    """The object's truth in frame R after the grasp."""
+    T = pose_after.transform
+    vertices = np.asarray(obj.mesh.vertices) @ T[:3, :3].T + T[:3, 3]
+    plane = None
+    if obj.symmetry == "planar" and obj.symmetry_plane is not None:
+        normal = T[:3, :3] @ obj.symmetry_plane.normal
+        anchor = T[:3, 3] + T[:3, :3] @ (obj.symmetry_plane.normal * obj.symmetry_plane.offset_m)
+        plane = SymmetryPlane.from_normal(normal[:2], float(normal[:2] @ anchor[:2]))
+    dims = obj.dimensions_m
+    return GroundTruth(
+        vertices=vertices,
+        faces=np.asarray(obj.mesh.faces),
+        symmetry=obj.symmetry,
+        plane=plane,
+        axis_xy_m=T[:2, 3].copy(),
+        thickness_m=dims.get("thickness") if obj.kind == "box" else None,
+        diameter_m=dims.get("diameter") if obj.kind == "cylinder" else None,
+    )
+
+
+def run_trial(
+    config: Config,
+    registry: StageRegistry,
+    out_dir: Path,
+    report: Callable[[str], None] = lambda message: None,
+) -> TrialRecord:
+    """Run one simulated trial as ``config`` says and write everything to ``out_dir``.
+
+    Args:
+        report: called with a short message as each phase starts (progress output).
+
+    Raises:
+        StageFailure: a stage could not produce a result (empty segmentation, refused grasp,
+            rejected initialisation); ``result.json`` records how far the trial got.
+    """
+    from .images import save_depth, save_rgb
+    from .perception.plots import plot_cloud_with_plane, plot_vc_scores
+    from .plots import DeviationPanel, deviation_heatmap
+    from .sim.world import PybulletWorld
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    config.write(out_dir / "config.toml")
+    settings = config.trial
+    timer = PhaseTimer()
+    document: dict[str, Any] = {
+        "symfuse": __version__,
+        "command": "trial",
+        "object": settings.object,
+        "gripper": settings.gripper,
+        "seed": settings.seed,
+        "stages_used": dict(config.choices),
+        "status": "running",
+        "config": config.to_dict(),
+    }
+
+    def fail(message: str) -> StageFailure:
+        document.update(status="failed", reason=message, timings=timer.seconds)
+        write_json(out_dir / "result.json", document)
+        return StageFailure(message)
+
+    stages = {stage: config.create(registry, stage) for stage in config.choices}
+    report(f"scene: {settings.object} with {settings.gripper}")
+    with timer.phase("scene"):
+        obj = load_object(settings.object)
+        world = PybulletWorld.create(
+            obj,
+            settings.gripper,
+            x=settings.x_m,
+            y=settings.y_m,
+            yaw=np.radians(settings.yaw_deg),
+            seed=settings.seed,
+        )
+    with world:
+        pose_before = world.object_pose()
+        document["object_pose_before"] = pose_to_json(pose_before)
+        report("sensing")
+        with timer.phase("sensor"):
+            observation = stages["sensor"].observe(world)
+        with timer.phase("write"):
+            save_rgb(out_dir / "rgb.png", observation.rgb)
+            save_depth(out_dir / "depth.png", observation.depth_m)
+            np.save(out_dir / "depth.npy", observation.depth_m)
+            write_json(out_dir / "camera.json", camera_to_json(observation))
+        report("segmenting")
+        try:
+            with timer.phase("segmenter"):
+                cloud = stages["segmenter"].segment(observation)
+        except StageFailure as exc:
+            raise fail(str(exc)) from exc
+        with timer.phase("write"):
+            write_cloud(out_dir / "cloud.ply", cloud.points)
+        document["points"] = len(cloud)
+        report("initialising and planning")
+        with timer.phase("initialiser"):
+            proposal = stages["initialiser"].propose(cloud, observation)
+        with timer.phase("planner"):
+            plan = stages["planner"].plan(cloud, proposal, world.gripper)
+        document["plan"] = plan_to_json(plan)
+        if plan.status != "ok":
+            raise fail(f"grasp planner '{config.choices['planner']}' refused: {plan.reason}")
+        report("grasping")
+        with timer.phase("grasp"):
+            outcome = world.execute_grasp(plan)
+        document["object_pose_after"] = pose_to_json(outcome.object_after)
+        document["grasp"] = {
+            "executed": outcome.executed,
+            "aperture_m": outcome.aperture_m,
+            "joint_positions": outcome.joint_positions,
+            "reason": outcome.reason,
+        }
+        if not outcome.executed:
+            raise fail(f"grasp not executed: {outcome.reason}")
+        with timer.phase("tactile"):
+            contacts = stages["tactile"].read(world, outcome)
+        with timer.phase("write"):
+            write_json(out_dir / "contacts.json", contacts_to_json([contacts], [plan]))
+            truth = ground_truth(obj, outcome.object_after)
+            mesh_after = obj.mesh.copy().apply_transform(outcome.object_after.transform)
+            mesh_after.export(out_dir / "object_final.ply")
+        document["taxels_in_contact"] = len(contacts)
+
+    report("estimating")
+    with timer.phase("initialiser"):
+        init = stages["initialiser"].refine(proposal, cloud, plan, contacts)
+    document["init"] = {
+        "plane": plane_to_json(init.plane),
+        "bias": bias_to_json(init.bias),
+        "status": init.status,
+        "hypotheses": [
+            {**plane_to_json(h.plane), "score": h.score, "violations": h.violations}
+            for h in init.hypotheses[:20]
+        ],
+    }
+    if init.status != "ok":
+        raise fail(f"initialiser '{config.choices['initialiser']}' rejected: {init.reason}")
+    with timer.phase("estimator"):
+        result = estimate(config, registry, cloud, init, [contacts])
+
+    report("evaluating")
+    with timer.phase("evaluation"):
+        grasp_centre = np.asarray(plan.T_robot_hand)[:2, 3]
+        evaluated = [evaluate_stage(stage, truth, grasp_centre) for stage in result.stages]
+        metrics = [stage_metrics for stage_metrics, _ in evaluated]
+    with timer.phase("write"):
+        write_completed_clouds(out_dir, result)
+        panels = [
+            DeviationPanel(f"Stage {stage.stage}", stage.completed, distances)
+            for stage, (_, distances) in zip(result.stages, evaluated, strict=True)
+        ]
+        deviation_heatmap(
+            panels,
+            out_dir / "deviation.png",
+            mesh=(truth.vertices, truth.faces),
+            title=f"{settings.object}: deviation from the true surface",
+        )
+        plot_cloud_with_plane(
+            cloud.points,
+            init.plane,
+            out_dir / "topdown.png",
+            title=f"{settings.object}: initial symmetry plane ({config.choices['initialiser']})",
+        )
+        if init.hypotheses:
+            plot_vc_scores(init.hypotheses, cloud.points.mean(axis=0), out_dir / "vc_scores.png")
+    document.update(
+        status=result.final.status,
+        stages=[
+            {**stage_json, "metrics": stage_metrics}
+            for stage_json, stage_metrics in zip(estimate_to_json(result), metrics, strict=True)
+        ],
+        timings=timer.seconds,
+    )
+    write_json(out_dir / "result.json", document)
+    return TrialRecord(out_dir, result, metrics, dict(timer.seconds), document)

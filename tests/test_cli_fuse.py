@@ -1,0 +1,241 @@
+"""`symfuse fuse` on recorded files: outputs, exit codes, one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.cli import main
+from pipeline.formats import contacts_to_json, read_cloud, write_cloud, write_json
+from pipeline.metrics import fit_circle_taubin
+from pipeline.synthetic import make_case
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """A synthetic cylinder (r = 40 mm) seen from one side, grasped by two pads, with a
+    15 deg / 10 mm wrong initial plane; files as a robot would record them."""
+    folder = tmp_path_factory.mktemp("recording")
+    case = make_case(np.random.default_rng(3), theta_error_rad=np.radians(15.0), r_error_m=0.010)
+    write_cloud(folder / "cloud.ply", case.cloud.points)
+    np.save(folder / "cloud.npy", case.cloud.points)
+    write_json(folder / "contacts.json", contacts_to_json([case.contacts]))
+    plane = case.init_plane
+    return folder, case, ",".join(repr(float(v)) for v in (*plane.normal[:2], plane.offset_m))
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_fuse_writes_results_and_improves_the_diameter(recording, tmp_path, capsys):
+    folder, case, plane = recording
+    code, out, err = run(
+        capsys,
+        "fuse",
+        "--cloud",
+        folder / "cloud.ply",
+        "--contacts",
+        folder / "contacts.json",
+        f"--plane={plane}",
+        "--out",
+        tmp_path,
+    )
+    assert code == 0, err
+    document = json.loads((tmp_path / "result.json").read_text())
+    assert [s["stage"] for s in document["stages"]] == [0, 1, 2]
+    for stage in document["stages"]:
+        assert set(stage) >= {"plane", "bias", "status", "iterations", "seconds"}
+        assert set(stage["plane"]) >= {"normal", "offset"}
+        assert set(stage["bias"]) >= {"yaw", "translation"}
+    assert document["stages"][2]["status"] in ("converged", "max_iterations")
+    assert document["config"]["estimator"]["use"] == "iekf"
+    true_diameter = 2 * case.cylinder.radius_m
+    errors = [
+        abs(
+            fit_circle_taubin(read_cloud(tmp_path / f"completed_stage{i}.ply").points).diameter_m
+            - true_diameter
+        )
+        for i in range(3)
+    ]
+    assert errors[2] < 0.004 < errors[0]
+    assert "stage" in out and "wrote" in out
+
+
+def test_npy_cloud_gives_the_same_estimate(recording, tmp_path, capsys):
+    folder, _, plane = recording
+    for suffix, out in ((".ply", tmp_path / "a"), (".npy", tmp_path / "b")):
+        code, _, err = run(
+            capsys,
+            "fuse",
+            "--cloud",
+            folder / f"cloud{suffix}",
+            "--contacts",
+            folder / "contacts.json",
+            f"--plane={plane}",
+            "--out",
+            out,
+        )
+        assert code == 0, err
+    a = json.loads((tmp_path / "a" / "result.json").read_text())["stages"][2]
+    b = json.loads((tmp_path / "b" / "result.json").read_text())["stages"][2]
+    assert a["plane"]["normal"] == pytest.approx(b["plane"]["normal"])
+    assert a["plane"]["offset"] == pytest.approx(b["plane"]["offset"])
+
+
+@pytest.mark.parametrize(
+    ("schedule", "status"), [("standard", "no_correspondence"), ("hybrid", "diverged")]
+)
+def test_failed_estimate_still_writes_result_and_exits_3(
+    recording, tmp_path, capsys, schedule, status
+):
+    """Taxels 5 m from the object: eq. 9 finds no correspondence; eq. 13 (hybrid's start)
+    always finds some, by design, and the estimate runs away."""
+    folder, case, plane = recording
+    far = case.contacts.positions + np.array([5.0, 0.0, 0.0])
+    moved = type(case.contacts)(
+        far, case.contacts.normals, case.contacts.pads, case.contacts.taxel_indices
+    )
+    write_json(tmp_path / "far.json", contacts_to_json([moved]))
+    code, _, err = run(
+        capsys,
+        "fuse",
+        "--cloud",
+        folder / "cloud.ply",
+        "--contacts",
+        tmp_path / "far.json",
+        f"--plane={plane}",
+        "--set",
+        f"estimator.iekf.schedule={schedule}",
+        "--out",
+        tmp_path / "out",
+    )
+    assert code == 3
+    assert err.strip().splitlines() == [
+        f"symfuse: error: estimate {status} (see {tmp_path / 'out'}/result.json)"
+    ]
+    document = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert document["status"] == status
+    assert (tmp_path / "out" / "completed_stage2.ply").exists()
+
+
+def test_initialiser_by_name_and_one_that_needs_a_depth_image(recording, tmp_path, capsys):
+    folder, _, _ = recording
+    code, _, err = run(
+        capsys,
+        "fuse",
+        "--cloud",
+        folder / "cloud.ply",
+        "--contacts",
+        folder / "contacts.json",
+        "--init",
+        "pca",
+        "--out",
+        tmp_path,
+    )
+    assert code == 0, err
+    code, _, err = run(
+        capsys,
+        "fuse",
+        "--cloud",
+        folder / "cloud.ply",
+        "--contacts",
+        folder / "contacts.json",
+        "--init",
+        "vc",
+        "--out",
+        tmp_path,
+    )
+    assert code == 2
+    assert err.startswith("symfuse: error: initialiser 'vc' needs a depth image")
+    assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda d: d / "missing.ply", r"missing\.ply: no such file"),
+        (lambda d: (np.save(d / "e.npy", np.zeros((0, 3))), d / "e.npy")[1], "has no points"),
+        (
+            lambda d: (np.save(d / "n.npy", np.full((3, 3), np.inf)), d / "n.npy")[1],
+            "NaN or infinite",
+        ),
+    ],
+)
+def test_bad_cloud_is_one_line_exit_2(recording, tmp_path, capsys, make, message):
+    folder, _, plane = recording
+    code, _, err = run(
+        capsys,
+        "fuse",
+        "--cloud",
+        make(tmp_path),
+        "--contacts",
+        folder / "contacts.json",
+        f"--plane={plane}",
+        "--out",
+        tmp_path / "out",
+    )
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith("symfuse: error: ")
+    assert __import__("re").search(message, err)
+
+
+@pytest.mark.parametrize(
+    ("document", "message"),
+    [
+        ({"frame": "robot", "units": "mm", "grasps": []}, 'units must be "m"'),
+        ({"frame": "robot", "units": "m", "grasps": []}, "'grasps' must be a non-empty list"),
+        (
+            {
+                "units": "m",
+                "grasps": [
+                    {"taxels": [{"position": [0, 0, 0], "normal": [0, 0, 0], "pad": "left"}]}
+                ],
+            },
+            "normal has zero length",
+        ),
+    ],
+)
+def test_bad_contacts_is_one_line_exit_2(recording, tmp_path, capsys, document, message):
+    folder, _, plane = recording
+    (tmp_path / "c.json").write_text(json.dumps(document))
+    code, _, err = run(
+        capsys,
+        "fuse",
+        "--cloud",
+        folder / "cloud.ply",
+        "--contacts",
+        tmp_path / "c.json",
+        f"--plane={plane}",
+        "--out",
+        tmp_path / "out",
+    )
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+    assert message in err
+
+
+def test_bad_plane_and_bad_override(recording, tmp_path, capsys):
+    folder, _, _ = recording
+    base = [
+        "fuse",
+        "--cloud",
+        folder / "cloud.ply",
+        "--contacts",
+        folder / "contacts.json",
+        "--out",
+        tmp_path,
+    ]
+    code, _, err = run(capsys, *base, "--plane", "0,0,1")
+    assert (code, err.strip()) == (
+        2,
+        "symfuse: error: --plane '0,0,1': expected NX,NY,D with a non-zero normal",
+    )
+    code, _, err = run(capsys, *base, "--plane", "1,0,0", "--set", "estimator.iekf.bogus=1")
+    assert code == 2
+    assert err.startswith("symfuse: error: unknown config key 'estimator.iekf.bogus'")
