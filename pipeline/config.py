@@ -45,6 +45,7 @@ class TrialSettings:
     x_m: float = param(0.0, "object position on the table, robot frame x (m)")
     y_m: float = param(0.0, "object position on the table, robot frame y (m)")
     yaw_deg: float = param(0.0, "object rotation about the table normal (deg)")
+    pictures: bool = param(True, "write the PNG pictures (sweeps of many trials may skip them)")
 
 
 #: Sections that are not stages, and the dataclass each one is validated against.

@@ -10,6 +10,7 @@ import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .config import Config
 from .errors import ConfigError, StageFailure
@@ -77,7 +78,11 @@ def estimate(
     if init.status != "ok":
         raise StageFailure(f"initialiser gave no usable symmetry plane: {init.reason}")
     estimator = config.create(registry, "estimator")
-    return estimator.estimate(EstimationProblem(cloud=cloud, init=init, grasps=tuple(grasps)))
+    problem = EstimationProblem(cloud=cloud, init=init, grasps=tuple(grasps))
+    # The estimator's matrices are small (hundreds of rows): a multi-threaded BLAS only
+    # contends with itself and with sweep workers (4x slower on a loaded 2-core machine).
+    with threadpool_limits(limits=1, user_api="blas"):
+        return estimator.estimate(problem)
 
 
 def fuse(

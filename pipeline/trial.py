@@ -35,12 +35,12 @@ from .formats import (
 )
 from .registry import StageRegistry
 from .runner import estimate
-from .types import DepthObservation, EstimateResult, ObjectPose, SymmetryPlane
+from .types import DepthObservation, EstimateResult, ObjectPose, SymmetryInit, SymmetryPlane
 
-#: What every completed trial writes into its output folder (VC adds ``vc_scores.png``).
+#: The pictures a trial draws unless ``trial.pictures = false`` (VC adds ``vc_scores.png``).
+PICTURE_FILES = ("rgb.png", "depth.png", "topdown.png", "deviation.png")
+#: The data every completed trial writes into its output folder.
 TRIAL_FILES = (
-    "rgb.png",
-    "depth.png",
     "depth.npy",
     "camera.json",
     "cloud.ply",
@@ -49,8 +49,6 @@ TRIAL_FILES = (
     "completed_stage1.ply",
     "completed_stage2.ply",
     "object_final.ply",
-    "topdown.png",
-    "deviation.png",
     "result.json",
     "config.toml",
 )
@@ -128,6 +126,41 @@ def ground_truth(obj: CatalogueObject, pose_after: ObjectPose) -> GroundTruth:
     )
 
 
+def draw_pictures(
+    out_dir: Path,
+    config: Config,
+    points: np.ndarray,
+    init: SymmetryInit,
+    result: EstimateResult,
+    evaluated: list[tuple[dict[str, Any], np.ndarray]],
+    truth: GroundTruth,
+) -> None:
+    """``deviation.png`` (Stages 0-2 over the true mesh), ``topdown.png`` (cloud and initial
+    plane) and, when the initialiser ranked hypotheses, ``vc_scores.png``."""
+    from .perception.plots import plot_cloud_with_plane, plot_vc_scores
+    from .plots import DeviationPanel, deviation_heatmap
+
+    name = config.trial.object
+    panels = [
+        DeviationPanel(f"Stage {stage.stage}", stage.completed, distances)
+        for stage, (_, distances) in zip(result.stages, evaluated, strict=True)
+    ]
+    deviation_heatmap(
+        panels,
+        out_dir / "deviation.png",
+        mesh=(truth.vertices, truth.faces),
+        title=f"{name}: deviation from the true surface",
+    )
+    plot_cloud_with_plane(
+        points,
+        init.plane,
+        out_dir / "topdown.png",
+        title=f"{name}: initial symmetry plane ({config.choices['initialiser']})",
+    )
+    if init.hypotheses:
+        plot_vc_scores(init.hypotheses, points.mean(axis=0), out_dir / "vc_scores.png")
+
+
 def run_trial(
     config: Config,
     registry: StageRegistry,
@@ -144,8 +177,6 @@ def run_trial(
             rejected initialisation); ``result.json`` records how far the trial got.
     """
     from .images import save_depth, save_rgb
-    from .perception.plots import plot_cloud_with_plane, plot_vc_scores
-    from .plots import DeviationPanel, deviation_heatmap
     from .sim.world import PybulletWorld
 
     out_dir = Path(out_dir)
@@ -188,8 +219,9 @@ def run_trial(
         with timer.phase("sensor"):
             observation = stages["sensor"].observe(world)
         with timer.phase("write"):
-            save_rgb(out_dir / "rgb.png", observation.rgb)
-            save_depth(out_dir / "depth.png", observation.depth_m)
+            if settings.pictures:
+                save_rgb(out_dir / "rgb.png", observation.rgb)
+                save_depth(out_dir / "depth.png", observation.depth_m)
             np.save(out_dir / "depth.npy", observation.depth_m)
             write_json(out_dir / "camera.json", camera_to_json(observation))
         report("segmenting")
@@ -254,24 +286,9 @@ def run_trial(
         metrics = [stage_metrics for stage_metrics, _ in evaluated]
     with timer.phase("write"):
         write_completed_clouds(out_dir, result)
-        panels = [
-            DeviationPanel(f"Stage {stage.stage}", stage.completed, distances)
-            for stage, (_, distances) in zip(result.stages, evaluated, strict=True)
-        ]
-        deviation_heatmap(
-            panels,
-            out_dir / "deviation.png",
-            mesh=(truth.vertices, truth.faces),
-            title=f"{settings.object}: deviation from the true surface",
-        )
-        plot_cloud_with_plane(
-            cloud.points,
-            init.plane,
-            out_dir / "topdown.png",
-            title=f"{settings.object}: initial symmetry plane ({config.choices['initialiser']})",
-        )
-        if init.hypotheses:
-            plot_vc_scores(init.hypotheses, cloud.points.mean(axis=0), out_dir / "vc_scores.png")
+    if settings.pictures:
+        with timer.phase("pictures"):
+            draw_pictures(out_dir, config, cloud.points, init, result, evaluated, truth)
     document.update(
         status=result.final.status,
         stages=[

@@ -13,12 +13,9 @@ mesh itself.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import os
-import sys
 import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
 
@@ -29,6 +26,8 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import InputError
 from pipeline.types import ObjectPose
+
+from . import native_output_silenced
 
 #: Half-extents of the table box (m): 2 m x 2 m, 5 cm thick.
 TABLE_HALF_EXTENTS_M = (1.0, 1.0, 0.025)
@@ -73,7 +72,7 @@ def convex_decomposition(mesh: trimesh.Trimesh, resolution: int) -> Path:
         source = Path(scratch) / "source.obj"
         result = Path(scratch) / "parts.obj"
         mesh.export(source)
-        with _stdout_silenced():
+        with native_output_silenced(1):
             pybullet.vhacd(
                 str(source),
                 str(result),
@@ -123,21 +122,6 @@ def _write_obj_parts(path: Path, parts: list[trimesh.Trimesh | np.ndarray]) -> N
         lines.extend(f"f {a + offset} {b + offset} {c + offset}" for a, b, c in hull.faces)
         offset += len(hull.vertices)
     path.write_text("\n".join(lines) + "\n")
-
-
-@contextlib.contextmanager
-def _stdout_silenced() -> Iterator[None]:
-    """Send the process-level stdout (file descriptor 1) to /dev/null; V-HACD prints its
-    progress there from C++."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    try:
-        with open(os.devnull, "wb") as devnull:
-            os.dup2(devnull.fileno(), 1)
-            yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
 
 
 def _quaternion_yaw(yaw_rad: float) -> list[float]:
