@@ -11,7 +11,7 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -314,10 +314,12 @@ def _add_sweep_parser(verbs) -> None:
     sweep = verbs.add_parser(
         "sweep",
         help="run one of the paper's experiments as a resumable sweep",
-        description="Run an experiment's trials in parallel (or on Dask), appending each "
-        "finished trial to OUT/results.jsonl at once; a re-run skips finished trials. "
-        "Then write the CSV, figures and report.md. Experiments: "
-        + "; ".join(f"{name}: {text}" for name, text in experiment_descriptions().items()),
+        describe=lambda: (
+            "Run an experiment's trials in parallel (or on Dask), appending each "
+            "finished trial to OUT/results.jsonl at once; a re-run skips finished trials. "
+            "Then write the CSV, figures and report.md. Experiments: "
+            + "; ".join(f"{name}: {text}" for name, text in experiment_descriptions().items())
+        ),
     )
     sweep.add_argument(
         "experiment",
@@ -345,8 +347,22 @@ def _add_sweep_parser(verbs) -> None:
 # --- the parser ------------------------------------------------------------------------
 
 
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose description can be computed only when help is shown
+    (``describe=``), so building the CLI never imports what only the help text needs."""
+
+    def __init__(self, *args, describe: Callable[[], str] | None = None, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._describe = describe
+
+    def format_help(self) -> str:
+        if self._describe is not None:
+            self.description = self._describe()
+        return super().format_help()
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="symfuse",
         description="Visuo-tactile reconstruction of symmetric objects: mirror-complete a "
         "single depth view, grasp, and fuse taxel contacts with the cloud (IEKF).",

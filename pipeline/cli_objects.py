@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .catalogue import list_objects, load_object
 from .errors import InputError
 from .tables import format_table
 
@@ -53,6 +52,8 @@ def catalogue_table() -> str:
     """The catalogue as a plain-text table, one object per line."""
     header = ("name", "kind", "x, y, z (mm)", "symmetry", "watertight", "description")
     rows = []
+    from .catalogue import list_objects, load_object  # trimesh: only when used
+
     for info in list_objects():
         mesh = load_object(info.name).mesh
         size_mm = " x ".join(f"{extent * 1000.0:.0f}" for extent in mesh.extents)
@@ -69,6 +70,8 @@ def export_meshes(directory: Path, formats: tuple[str, ...] = EXPORT_FORMATS) ->
     except OSError as exc:
         raise InputError(f"{directory}: cannot create export folder ({exc.strerror})") from exc
     written = []
+    from .catalogue import list_objects, load_object  # trimesh: only when used
+
     for info in list_objects():
         mesh = load_object(info.name).mesh
         for suffix in formats:

@@ -42,7 +42,7 @@ def test_file_then_overrides_in_order(registry, tmp_path):
 
 
 def test_swapping_a_stage_is_one_line(registry):
-    other = [n for n in registry.names("estimator") if n != "iekf"][0]
+    other = next(n for n in registry.names("estimator") if n != "iekf")
     config = load_config(registry, overrides=[f"estimator.use={other}"])
     assert config.choices["estimator"] == other
 
@@ -52,7 +52,8 @@ def test_unknown_key_is_named(registry, tmp_path):
     with pytest.raises(ConfigError) as error:
         load_config(registry, [path])
     assert str(error.value) == (
-        "unknown config key 'trial.sede' (known keys: object, gripper, seed, x_m, y_m, yaw_deg, pictures)"
+        "unknown config key 'trial.sede' "
+        "(known keys: object, gripper, seed, x_m, y_m, yaw_deg, pictures)"
     )
 
 
@@ -99,9 +100,9 @@ def test_override_syntax():
     assert parse_override("a.b.c=[1, 2.5]") == {"a": {"b": {"c": [1, 2.5]}}}
     assert parse_override("a.b=icp") == {"a": {"b": "icp"}}
     assert parse_override('a.b="x y"') == {"a": {"b": "x y"}}
-    with pytest.raises(ConfigError, match="expected section.key=value"):
+    with pytest.raises(ConfigError, match=r"expected section\.key=value"):
         parse_override("seed=3")
-    with pytest.raises(ConfigError, match="expected section.key=value"):
+    with pytest.raises(ConfigError, match=r"expected section\.key=value"):
         parse_override("trial.seed")
 
 
