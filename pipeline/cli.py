@@ -272,16 +272,17 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     _, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
     experiment = importlib.import_module(EXPERIMENTS[args.experiment])
     estimator = config.choices["estimator"]
+    out = args.out or Path("runs") / f"sweep-{args.experiment}-{estimator}"
+    out.mkdir(parents=True, exist_ok=True)
     options = ExperimentOptions(
         estimator=estimator,
         estimator_params=config.to_dict()["estimator"][estimator],
         quick=args.quick,
         seed=args.seed,
         repeats=args.repeats,
+        out_dir=out.resolve(),
     )
     tasks = experiment.tasks(options)
-    out = args.out or Path("runs") / f"sweep-{args.experiment}-{estimator}"
-    out.mkdir(parents=True, exist_ok=True)
     config.write(out / "config.toml")
     try:
         rows = run_sweep(

@@ -19,6 +19,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 #: Experiment name -> module that implements it.
@@ -52,6 +53,8 @@ class ExperimentOptions:
         quick: a reduced grid (a few points per axis) for smoke tests and CI.
         seed: base seed; every task derives its own seed from this and its key.
         repeats: trials per grid point where the experiment repeats (None: the paper's).
+        out_dir: the sweep's output folder; experiments that run full trials keep each
+            trial's files under ``out_dir/trials/<key>/`` (None: trials are not kept).
     """
 
     estimator: str = "iekf"
@@ -59,6 +62,7 @@ class ExperimentOptions:
     quick: bool = False
     seed: int = 0
     repeats: int | None = None
+    out_dir: Path | None = None
 
 
 def experiment_descriptions() -> dict[str, str]:

@@ -82,15 +82,22 @@ def run_one(params: dict) -> dict[str, Any]:
 def report(rows: list[dict], out_dir: Path) -> list[Path]:
     """``results.csv``, ``kth.png`` (deviation boxes per object and stage) and ``report.md``;
     the targets are checked per object."""
-    by_object = group_rows(rows, lambda row: row["params"]["object"])
+    order = list(POSES)
+    by_object = dict(
+        sorted(
+            group_rows(rows, lambda row: row["params"]["object"]).items(),
+            key=lambda item: order.index(item[0]) if item[0] in order else len(order),
+        )
+    )
     categories = [(float(i), group) for i, group in enumerate(by_object.values(), start=1)]
-    legend = ", ".join(f"{i} {name}" for i, name in enumerate(by_object, start=1))
+    labels = [f"{i} {name}" for i, name in enumerate(by_object, start=1)]
+    legend = "\n".join(", ".join(labels[i : i + 3]) for i in range(0, len(labels), 3))
     return report_deviation(
         rows,
         out_dir,
         name=NAME,
         title="Three-finger set, SDH-2, VC",
         groups=by_object,
-        figures=[(NAME, categories, f"object ({legend})")],
+        figures=[(NAME, categories, f"object:\n{legend}")],
         paper=PAPER,
     )

@@ -93,10 +93,8 @@ def reference_yaw_deg(object_name: str) -> float:
 
 
 def trial_root(options: ExperimentOptions) -> Path | None:
-    """Where per-trial folders go: ``<out_dir>/trials`` when the options carry the sweep's
-    output folder (an ``out_dir`` attribute), else None (trial files are not kept)."""
-    out_dir = getattr(options, "out_dir", None)
-    return None if out_dir is None else Path(out_dir) / "trials"
+    """Where per-trial folders go: ``<out_dir>/trials``, or None (trial files not kept)."""
+    return None if options.out_dir is None else Path(options.out_dir) / "trials"
 
 
 def object_tasks(

@@ -1,0 +1,120 @@
+"""The real-object experiments' rows and reports, on rows of real simulated trials.
+
+The module fixture runs two trials through the sweep engine: the CD drive with the PG-70
+(PS initialisation, the IEKF capped at 2 iterations to keep it short), and the coffee can
+(99 mm) with the PG-70, whose grasp the planner must refuse (a ``failed`` row).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipeline.experiments import ExperimentOptions, table1
+from pipeline.experiments.paper_objects import (
+    object_tasks,
+    report_deviation,
+    report_measure,
+    run_paper_trial,
+)
+from pipeline.sweep import run_sweep
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory):
+    root = tmp_path_factory.mktemp("paper")
+    options = ExperimentOptions(estimator="iekf", estimator_params={"max_iterations": 2})
+    tasks = object_tasks(options, "cd_drive", inits=("ps",), view_offsets_deg=(10.0,))
+    tasks += object_tasks(options, "coffee", inits=("ps",), view_offsets_deg=(0.0,))
+    tasks = [
+        type(task)(task.key, {**task.params, "trial_dir": str(root / "trials" / str(n))})
+        for n, task in enumerate(tasks)
+    ]
+    rows = run_sweep(tasks, run_paper_trial, root / "results.jsonl", workers=1, progress=False)
+    return root, rows
+
+
+def test_a_finished_trial_row_matches_its_files(sweep):
+    _, rows = sweep
+    row = rows[0]
+    assert "error" not in row
+    assert row["failed"] is None
+    trial_dir = row["params"]["trial_dir"]
+    document = json.loads(Path(trial_dir, "result.json").read_text())
+    assert row["status"] == document["status"]
+    assert row["points"] == document["points"]
+    mesh = trimesh.load(f"{trial_dir}/object_final.ply", force="mesh")
+    for stage in document["stages"]:
+        k = stage["stage"]
+        assert row[f"stage{k}_thickness_mm"] == pytest.approx(stage["metrics"]["thickness_mm"])
+        # independent oracle: trimesh's closest points on every 10th completed point
+        completed = np.asarray(trimesh.load(f"{trial_dir}/completed_stage{k}.ply").vertices)
+        _, distances, _ = trimesh.proximity.closest_point(mesh, completed[::10])
+        assert row[f"stage{k}_deviation_median_mm"] == pytest.approx(
+            1e3 * np.median(distances), abs=1.0
+        )
+        assert row[f"stage{k}_deviation_max_mm"] >= 1e3 * distances.max() - 1e-6
+    assert row["seconds"] > 0.0
+
+
+def test_a_refused_grasp_becomes_a_failed_row(sweep):
+    _, rows = sweep
+    row = rows[1]
+    assert "error" not in row
+    assert "refused" in row["failed"]
+    assert row["status"] == "failed"
+    assert not row["diverged"]
+
+
+def test_measure_report_lists_each_trial_and_the_papers_numbers(sweep, tmp_path):
+    _, rows = sweep
+    paths = report_measure(rows, tmp_path, table1.STUDY)
+    assert [p.name for p in paths] == [
+        "results.csv",
+        "table1_error.png",
+        "table1_deviation.png",
+        "report.md",
+    ]
+    for path in paths[1:3]:
+        assert path.read_bytes()[:8] == PNG_SIGNATURE
+    text = (tmp_path / "report.md").read_text()
+    row = rows[0]
+    for k in (0, 1, 2):
+        assert f"{row[f'stage{k}_thickness_mm']:.2f}" in text
+    error_pct = abs(row["stage2_thickness_mm"] - 42.0) / 42.0 * 100.0
+    assert f"| {error_pct:.1f} (1.9) |" in text
+    assert "1/2 finished, 1 failed, 0 diverged, 0 raised" in text
+    assert "coffee/ps/view+0/rep0: failed:" in text
+    with open(tmp_path / "results.csv", newline="") as handle:
+        table = list(csv.DictReader(handle))
+    assert [line["key"] for line in table] == [r["key"] for r in rows]
+    assert float(table[0]["stage2_thickness_mm"]) == pytest.approx(row["stage2_thickness_mm"])
+    assert table[1]["stage2_thickness_mm"] == ""
+
+
+def test_deviation_report_averages_the_finished_trials(sweep, tmp_path):
+    _, rows = sweep
+    paths = report_deviation(
+        rows,
+        tmp_path,
+        name="demo",
+        title="demo",
+        groups={"all": rows},
+        figures=[("demo_boxes", [(1.0, rows)], "group")],
+        paper=("a claim",),
+    )
+    assert [p.name for p in paths] == ["results.csv", "demo_boxes.png", "report.md"]
+    assert paths[1].read_bytes()[:8] == PNG_SIGNATURE
+    text = paths[2].read_text()
+    row = rows[0]
+    medians = " / ".join(f"{row[f'stage{k}_deviation_median_mm']:.1f}" for k in (0, 1, 2))
+    assert f"| all | 1/2 finished, 1 failed, 0 diverged, 0 raised | {medians} |" in text
+    improves = row["stage2_deviation_median_mm"] < row["stage0_deviation_median_mm"]
+    assert ("| yes |" if improves else "| NO |") in text
