@@ -123,6 +123,9 @@ class CatalogueObject:
         watertight: whether ``mesh`` is closed (always True for catalogue objects; scans
             may not be, and are accepted anyway).
         source: ``"catalogue"`` or the mesh file's path.
+        urdf_path: for an object given as a URDF, the file: the simulator loads the body
+            (collision shapes, inertia) from it, and ``mesh`` is its visual geometry in the
+            URDF's base frame.
     """
 
     name: str
@@ -136,6 +139,7 @@ class CatalogueObject:
     kind: str = "mesh"
     watertight: bool = True
     source: str = "catalogue"
+    urdf_path: str | None = None
 
 
 # ---------------------------------------------------------------- specification
@@ -222,6 +226,8 @@ def load_object(name_or_path: str | os.PathLike[str], *, recentre: bool = True) 
             source="catalogue",
         )
     path = Path(text)
+    if path.suffix.lower() == ".urdf":
+        return _load_urdf(path)
     if path.suffix.lower() in MESH_SUFFIXES or path.exists() or os.sep in text:
         return _load_mesh_file(path, recentre=recentre)
     raise InputError(f"unknown object '{text}'; catalogue objects: {', '.join(catalogue)}")
@@ -257,6 +263,41 @@ def _load_mesh_file(path: Path, *, recentre: bool) -> CatalogueObject:
         kind="mesh",
         watertight=watertight,
         source=str(path),
+    )
+
+
+def _load_urdf(path: Path) -> CatalogueObject:
+    """A single-body object described by a URDF: its visual meshes, in the base link frame,
+    are the ground truth; the simulator loads the URDF itself for the physics."""
+    import yourdfpy
+
+    if not path.is_file():
+        raise InputError(f"{path}: no such URDF file")
+    try:
+        urdf = yourdfpy.URDF.load(str(path), load_meshes=True)
+        mesh = urdf.scene.to_geometry()
+    except Exception as exc:  # yourdfpy/lxml/trimesh raise many types for malformed files
+        detail = (str(exc).splitlines() or [""])[0]
+        raise InputError(f"{path}: cannot read URDF ({type(exc).__name__}: {detail})") from exc
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InputError(f"{path}: the URDF has no visual mesh")
+    inertial = urdf.link_map[urdf.base_link].inertial
+    mass = inertial.mass if inertial is not None and inertial.mass else DEFAULT_MASS_KG
+    return CatalogueObject(
+        name=urdf.robot.name or path.stem,
+        mesh=mesh,
+        mass_kg=float(mass),
+        friction=DEFAULT_FRICTION,
+        symmetry="none",
+        symmetry_plane=None,
+        dimensions_m={
+            f"extent_{axis}": float(v) for axis, v in zip("xyz", mesh.extents, strict=True)
+        },
+        description=f"URDF body loaded from {path}",
+        kind="urdf",
+        watertight=bool(mesh.is_watertight),
+        source=str(path),
+        urdf_path=str(path),
     )
 
 

@@ -418,7 +418,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     what = trial.add_mutually_exclusive_group()
     what.add_argument("--object", metavar="NAME", help="catalogue object (symfuse objects)")
-    what.add_argument("--mesh", type=Path, metavar="PATH", help="OBJ/STL/PLY mesh in metres")
+    what.add_argument(
+        "--mesh", type=Path, metavar="PATH", help="OBJ/STL/PLY mesh or URDF, in metres"
+    )
     trial.add_argument(
         "--gripper",
         choices=sorted(PLANNER_FOR_GRIPPER),

@@ -39,7 +39,9 @@ from .stages import STAGES
 class TrialSettings:
     """The ``[trial]`` section: the simulated scene of ``symfuse trial``."""
 
-    object: str = param("cd_drive", "catalogue name or path of an OBJ/STL/PLY mesh (metres)")
+    object: str = param(
+        "cd_drive", "catalogue name, or path of an OBJ/STL/PLY mesh or a URDF (metres)"
+    )
     gripper: Literal["pg70", "sdh"] = param("pg70", "hand: Schunk PG-70 or SDH-2")
     seed: int = param(0, "seed of every random choice in the trial")
     x_m: float = param(0.0, "object position on the table, robot frame x (m)")

@@ -149,7 +149,9 @@ def draw_pictures(
         panels,
         out_dir / "deviation.png",
         mesh=(truth.vertices, truth.faces),
-        title=f"{name}: deviation from the true surface",
+        azimuth_rad=np.radians(-150.0),
+        elevation_rad=np.radians(35.0),
+        title=f"{name}: deviation from the true surface (3/4 view)",
     )
     plot_cloud_with_plane(
         points,
@@ -211,6 +213,7 @@ def run_trial(
             y=settings.y_m,
             yaw=np.radians(settings.yaw_deg),
             seed=settings.seed,
+            urdf_path=obj.urdf_path,
         )
     with world:
         pose_before = world.object_pose()

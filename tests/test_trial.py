@@ -103,6 +103,27 @@ def test_pictures_can_be_left_out(tmp_path):
     assert not any((tmp_path / name).exists() for name in PICTURE_FILES)
 
 
+def test_a_user_urdf_goes_through_a_whole_trial(tmp_path):
+    """A URDF whose visual mesh sits off the base frame (like a scan's): the world loads the
+    URDF, the ground truth is its visual mesh in the base frame."""
+    trimesh.creation.box((0.045, 0.12, 0.10)).export(tmp_path / "brick.obj")
+    (tmp_path / "brick.urdf").write_text(
+        '<robot name="brick"><link name="base">'
+        '<visual><origin xyz="0.01 -0.02 0.05"/><geometry><mesh filename="brick.obj"/>'
+        "</geometry></visual>"
+        '<collision><origin xyz="0.01 -0.02 0.05"/><geometry><box size="0.045 0.12 0.10"/>'
+        "</geometry></collision>"
+        '<inertial><mass value="0.3"/><inertia ixx="4e-4" iyy="3e-4" izz="4e-4" ixy="0" '
+        'ixz="0" iyz="0"/></inertial></link></robot>'
+    )
+    out = tmp_path / "out"
+    code = main(["trial", "--mesh", str(tmp_path / "brick.urdf"),
+                 "--set", "trial.pictures=false", "--out", str(out)])  # fmt: skip
+    assert code == 0
+    stages = json.loads((out / "result.json").read_text())["stages"]
+    assert stages[2]["metrics"]["deviation_m"]["median"] < 0.003
+
+
 def test_unknown_object_is_one_line_exit_2(tmp_path, capsys):
     code = main(["trial", "--object", "teapot", "--out", str(tmp_path)])
     err = capsys.readouterr().err
