@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 
 from pipeline.estimation.dense import DenseCovariance  # noqa: E402
 from pipeline.estimation.geometry import apply_bias  # noqa: E402
-from pipeline.estimation.iekf import IekfSettings, fuse  # noqa: E402
+from pipeline.estimation.iekf import fuse  # noqa: E402
 from pipeline.types import (  # noqa: E402
     Bias,
     Contacts,
@@ -69,15 +69,7 @@ def cylinder_problem(n_points: int, seed: int = 0) -> EstimationProblem:
 
 def run(n_points: int, dense: bool) -> tuple[float, str, int, int]:
     estimator = IekfEstimator()
-    p = estimator.params
-    settings = IekfSettings(
-        schedule=p.schedule,
-        max_iterations=p.max_iterations,
-        tolerance_m=p.tolerance_m,
-        tolerance_rad=p.tolerance_rad,
-        divergence_sigmas=p.divergence_sigmas,
-        exclusive_sides=p.exclusive_sides,
-    )
+    settings = estimator.settings()
     fusion = estimator.fusion_problem(cylinder_problem(n_points))
     model = DenseCovariance if dense else None
     started = time.perf_counter()

@@ -12,6 +12,7 @@ from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.estimation.iekf import FusionProblem, IekfSettings, fuse
 from pipeline.estimation.problem import (
+    bias_plane_covariance,
     checked_points,
     diagonal_covariance,
     grasp_contacts,
@@ -53,10 +54,15 @@ class IekfEstimator(Estimator):
         )
         prior_b_xyz_m: float = param(0.01, "prior std of each bias translation component (m)")
         prior_m_r_m: float = param(
-            0.0325, "prior std of the plane offset m_r: half the 65 mm gripper aperture (m)"
+            0.0325,
+            "prior std of the plane's distance from the pivot (the cloud centroid), "
+            "independent of m_theta: half the 65 mm gripper aperture (m)",
         )
         prior_m_theta_rad: float = param(
-            0.17, "prior std of the plane normal angle m_theta: initialiser error, ~10 deg (rad)"
+            0.4,
+            "prior std of the plane normal angle m_theta: the initialiser's orientation error "
+            "(VC hypotheses, or PCA axes of a nearly round cloud, can be off by tens of "
+            "degrees; 23 deg puts a 45 deg error at 2 std, inside the 95 % gate) (rad)",
         )
         point_std_m: float = param(0.002, "prior std of each cloud point (sensor noise) (m)")
         regrasp_b_theta_rad: float = param(
@@ -71,9 +77,17 @@ class IekfEstimator(Estimator):
         exclusive_sides: bool = param(
             True, "explain each taxel by its better-supported side only (False: both, eq. 11)"
         )
-        max_iterations: int = param(20, "IEKF iteration cap per grasp and stage")
-        tolerance_m: float = param(1e-5, "convergence: largest linear step (m)")
-        tolerance_rad: float = param(1e-4, "convergence: largest angular step (rad)")
+        max_iterations: int = param(30, "IEKF iteration cap per grasp and stage")
+        tolerance_m: float = param(
+            1e-4,
+            "convergence: largest motion of any completed-model point (front or mirrored) "
+            "between iterations, well under the ~2 mm sensor noise (m)",
+        )
+        max_step_m: float = param(
+            0.02,
+            "trust region: largest motion of any completed-model point in one iteration; "
+            "longer Gauss-Newton steps are shortened (m)",
+        )
         divergence_sigmas: float = param(
             10.0, "diverged when b or m leave this many prior stds around Stage 0"
         )
@@ -95,7 +109,7 @@ class IekfEstimator(Estimator):
             "prior_m_theta_rad": p.prior_m_theta_rad,
             "point_std_m": p.point_std_m,
             "tolerance_m": p.tolerance_m,
-            "tolerance_rad": p.tolerance_rad,
+            "max_step_m": p.max_step_m,
             "divergence_sigmas": p.divergence_sigmas,
         }
         for key, value in positive.items():
@@ -116,30 +130,35 @@ class IekfEstimator(Estimator):
         window = (p.window_along_normal_m, p.window_across_normal_m)
         noise = (p.noise_along_normal_m, p.noise_across_normal_m)
         xyz, q_xyz = p.prior_b_xyz_m, p.regrasp_b_xyz_m
+        g_init = initial_state(problem, pivot)
+        stds = (p.prior_b_theta_rad, xyz, xyz, xyz, p.prior_m_r_m, p.prior_m_theta_rad)
         return FusionProblem(
             points_m=points,
             pivot_m=pivot,
-            g_init=initial_state(problem, pivot),
-            covariance_init=diagonal_covariance(
-                (p.prior_b_theta_rad, xyz, xyz, xyz, p.prior_m_r_m, p.prior_m_theta_rad)
-            ),
+            g_init=g_init,
+            covariance_init=bias_plane_covariance(stds, g_init[5], pivot),
             point_variance_m2=np.full(len(points), p.point_std_m**2),
             grasps=tuple(grasp_contacts(c, window, noise) for c in problem.grasps),
             regrasp_noise=diagonal_covariance((p.regrasp_b_theta_rad, q_xyz, q_xyz, q_xyz, 0, 0)),
+        )
+
+    def settings(self) -> IekfSettings:
+        """The kernel's iteration control under these parameters."""
+        p = self.params
+        return IekfSettings(
+            schedule=p.schedule,
+            max_iterations=p.max_iterations,
+            tolerance_m=p.tolerance_m,
+            max_step_m=p.max_step_m,
+            divergence_sigmas=p.divergence_sigmas,
+            exclusive_sides=p.exclusive_sides,
         )
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         started = time.perf_counter()
         fusion = self.fusion_problem(problem)
         p = self.params
-        settings = IekfSettings(
-            schedule=p.schedule,
-            max_iterations=p.max_iterations,
-            tolerance_m=p.tolerance_m,
-            tolerance_rad=p.tolerance_rad,
-            divergence_sigmas=p.divergence_sigmas,
-            exclusive_sides=p.exclusive_sides,
-        )
+        settings = self.settings()
         initial = stage_estimate(
             0,
             fusion.g_init,

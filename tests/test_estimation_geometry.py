@@ -124,3 +124,38 @@ def test_standard_weights_match_dense_gaussian_densities():
             got[side.point[side.taxel == i]] = side.weight[side.taxel == i]
             np.testing.assert_allclose(got, expected, rtol=1e-9)
             assert side.mass[i] == pytest.approx(expected.sum(), rel=1e-9)
+
+
+@pytest.mark.parametrize("need_pairs", [True, False])
+def test_wide_gate_sums_match_dense_gaussian_densities(need_pairs):
+    points = RNG.uniform(-0.03, 0.03, (3000, 3))
+    taxels = RNG.uniform(-0.02, 0.02, (5, 3))
+    window = normal_ellipsoids(RNG.normal(size=(5, 3)), 0.004, 0.0015)
+    # A plane offset std of 30 mm: the back's gates cover the whole cloud.
+    state_covariance = np.diag([0.05, 0.01, 0.01, 0.01, 0.03, 0.3]) ** 2
+    found = find_correspondences(
+        PointIndex(points),
+        points,
+        G,
+        PIVOT,
+        taxels,
+        window,
+        state_covariance,
+        alternative=False,
+        need_pairs=need_pairs,
+    )
+    assert found.complete() == need_pairs
+    assert not found.back.complete or need_pairs
+    active = np.zeros(len(points), dtype=bool)
+    for side in found.sides():
+        covariance = side_covariances(taxels, window, G, PIVOT, state_covariance, side.back)
+        images = apply_side(points, G, PIVOT, side.back)
+        for i in range(len(taxels)):
+            offsets = images - taxels[i]
+            d2 = np.einsum("ni,ij,nj->n", offsets, np.linalg.inv(covariance[i]), offsets)
+            expected = multivariate_normal(taxels[i], covariance[i]).pdf(images)
+            expected[d2 >= GATE_CHI2_3DOF_95] = 0.0
+            active |= expected > 0
+            assert side.mass[i] == pytest.approx(expected.sum(), rel=1e-9)
+            np.testing.assert_allclose(side.weighted_sum[i], expected @ points, rtol=1e-9)
+    np.testing.assert_array_equal(found.active_points(), np.flatnonzero(active))

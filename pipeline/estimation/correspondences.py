@@ -12,6 +12,14 @@ the filter has moved since (Stage 2) are covered by widening the search radius b
 largest displacement so far, and every candidate is then tested exactly at its current
 position. The cost of a search therefore grows with N only through the tree queries and the
 number of points that really fall inside the gates.
+
+Wide gates: before the first update the back's gates span the whole object (a prior ``m_r``
+std of tens of millimetres), so listing every (taxel, point) pair would cost ``O(M N)``
+memory. When the caller does not need the pairs (Stage 1 holds the points fixed and only
+needs each taxel's weight mass and weighted mean), taxels whose gate radius exceeds
+:data:`WIDE_GATE_FRACTION` of the cloud's bounding-box diagonal are summed over the whole
+cloud in blocks instead (whitened coordinates through one matrix product), which is exact and
+needs ``O(M)`` memory. Which taxels take which path changes only the speed, never a weight.
 """
 
 from __future__ import annotations
@@ -28,6 +36,11 @@ from .geometry import apply_side, invert_side, side_jacobian, side_linear_part
 GATE_CHI2_3DOF_95 = 7.815
 #: Object points whose vector median replaces the taxel in the alternative weights (eq. 13).
 ALTERNATIVE_NEIGHBOURS = 5
+#: A gate whose radius exceeds this fraction of the cloud's bounding-box diagonal is summed
+#: over the whole cloud instead of listed pair by pair (when the pairs are not needed).
+WIDE_GATE_FRACTION = 0.25
+#: Points per block of the whole-cloud sums (bounds their temporary memory).
+_SUM_BLOCK_POINTS = 4096
 
 
 class PointIndex:
@@ -41,6 +54,7 @@ class PointIndex:
     def __init__(self, reference_points: np.ndarray) -> None:
         self.reference = reference_points
         self.tree = cKDTree(reference_points)
+        self.diagonal_m = float(np.linalg.norm(self.tree.maxes - self.tree.mins))
         self._moved = np.empty(0, dtype=np.int64)
 
     def note_moved(self, indices: np.ndarray) -> None:
@@ -58,13 +72,18 @@ class PointIndex:
 
 @dataclass(frozen=True)
 class SideCorrespondences:
-    """Gated weights of one side for all taxels, as a list of (taxel, point) pairs.
+    """Gated weights of one side for all taxels, as (taxel, point) pairs plus per-taxel sums.
 
     Attributes:
         back: True for the mirrored side ``f_mb``, False for the front ``f_b``.
-        taxel, point: ``(K,)`` indices of each pair with a non-zero weight.
+        taxel, point: ``(K,)`` indices of each listed pair with a non-zero weight.
         weight: ``(K,)`` Gaussian density ``N(f(p); centre, C)`` (1/m^3).
         mass: ``(M,)`` per-taxel sum of weights, ``a_i`` of eq. 11.
+        weighted_sum: ``(M, 3)`` per-taxel ``sum_n w_n p_n`` over the current (unbiased)
+            points, frame R (m/m^3).
+        complete: True when the pairs list every non-zero weight; False when wide gates
+            were summed without listing them (see the module docstring).
+        wide_active: sorted indices of the points inside some unlisted (wide) gate.
     """
 
     back: bool
@@ -72,6 +91,9 @@ class SideCorrespondences:
     point: np.ndarray
     weight: np.ndarray
     mass: np.ndarray
+    weighted_sum: np.ndarray
+    complete: bool
+    wide_active: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -94,9 +116,14 @@ class Correspondences:
         """``(M,)`` bool: taxels with a non-zero weight on either side."""
         return (self.front.mass > 0) | (self.back.mass > 0)
 
+    def complete(self) -> bool:
+        """True when both sides list every non-zero weight as a pair."""
+        return self.front.complete and self.back.complete
+
     def active_points(self) -> np.ndarray:
         """Sorted indices of the points inside some taxel's gate (the active set A)."""
-        return np.union1d(self.front.point, self.back.point)
+        listed = [side.point for side in self.sides()] + [s.wide_active for s in self.sides()]
+        return np.unique(np.concatenate(listed))
 
 
 def exclusive_sides(correspondences: Correspondences) -> Correspondences:
@@ -118,6 +145,9 @@ def exclusive_sides(correspondences: Correspondences) -> Correspondences:
                 point=side.point[pairs],
                 weight=side.weight[pairs],
                 mass=np.where(keep, side.mass, 0.0),
+                weighted_sum=np.where(keep[:, None], side.weighted_sum, 0.0),
+                complete=side.complete,
+                wide_active=side.wide_active,
             )
         )
     return Correspondences(front=sides[0], back=sides[1], alternative=correspondences.alternative)
@@ -165,25 +195,106 @@ def _gated_weights(
     points: np.ndarray,
     centres_pre: np.ndarray,
     covariance_pre: np.ndarray,
-    displacement_m: float,
+    radii_m: np.ndarray,
+    normaliser: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pairs (taxel, point, density) inside each centre's gate, in the pre-image frame."""
-    eigenvalues = np.linalg.eigvalsh(covariance_pre)
-    radii = np.sqrt(GATE_CHI2_3DOF_95 * eigenvalues[:, -1]) + displacement_m
-    centre_tree = cKDTree(centres_pre)
-    pairs = centre_tree.sparse_distance_matrix(
-        index.tree, float(radii.max()), output_type="ndarray"
-    )
-    taxel = pairs["i"].astype(np.int64)
-    point = pairs["j"].astype(np.int64)
-    inside = pairs["v"] <= radii[taxel]
-    taxel, point = taxel[inside], point[inside]
+    """Pairs (taxel, point, density) inside each centre's gate, in the pre-image frame.
+
+    Each centre's ball of radius ``radii_m`` (its gate's largest semi-axis plus the
+    displacement bound) is searched on the tree, then every candidate is tested exactly.
+    """
+    if len(centres_pre) == 0:
+        empty = np.empty(0, dtype=np.int64)
+        return empty, empty, np.empty(0)
+    neighbours = index.tree.query_ball_point(centres_pre, radii_m, return_sorted=False)
+    counts = np.array([len(found) for found in neighbours], dtype=np.int64)
+    taxel = np.repeat(np.arange(len(centres_pre)), counts)
+    point = np.concatenate([np.asarray(found, dtype=np.int64) for found in neighbours])
     inverse = np.linalg.inv(covariance_pre)
     d2 = _quadratic_forms(inverse, taxel, points[point] - centres_pre[taxel])
     gated = d2 < GATE_CHI2_3DOF_95
     taxel, point, d2 = taxel[gated], point[gated], d2[gated]
-    normaliser = 1.0 / np.sqrt((2.0 * np.pi) ** 3 * np.prod(eigenvalues, axis=1))
     return taxel, point, normaliser[taxel] * np.exp(-0.5 * d2)
+
+
+def _summed_weights(
+    points: np.ndarray, centres_pre: np.ndarray, covariance_pre: np.ndarray, normaliser: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-centre weight mass and ``sum w p`` over every point, without listing pairs.
+
+    Points are whitened for all centres at once (``L_i^-1 p`` for ``C_i = L_i L_i^T``, one
+    matrix product per block of points), so ``D2 = |L_i^-1 (p - c_i)|^2`` exactly.
+
+    Returns:
+        ``(T,)`` masses, ``(T, 3)`` weighted sums and the sorted indices of the points
+        inside some gate.
+    """
+    count = len(centres_pre)
+    whitening = np.linalg.inv(np.linalg.cholesky(covariance_pre))
+    # Columns 3 t + k hold row k of L_t^-1, so (p @ stacked)[3 t + k] = (L_t^-1 p)_k.
+    stacked = whitening.transpose(2, 0, 1).reshape(3, 3 * count)
+    whitened_centres = np.einsum("tij,tj->ti", whitening, centres_pre).ravel()
+    mass = np.zeros(count)
+    weighted_sum = np.zeros((count, 3))
+    inside_any = np.zeros(len(points), dtype=bool)
+    for first in range(0, len(points), _SUM_BLOCK_POINTS):
+        block = points[first : first + _SUM_BLOCK_POINTS]
+        offsets = block @ stacked - whitened_centres
+        offsets *= offsets
+        d2 = offsets[:, 0::3] + offsets[:, 1::3] + offsets[:, 2::3]
+        inside = d2 < GATE_CHI2_3DOF_95
+        weights = np.exp(-0.5 * d2)
+        weights[~inside] = 0.0
+        weights *= normaliser
+        mass += weights.sum(axis=0)
+        weighted_sum += weights.T @ block
+        inside_any[first : first + len(block)] = inside.any(axis=1)
+    return mass, weighted_sum, np.flatnonzero(inside_any)
+
+
+def _side_weights(
+    index: PointIndex,
+    points: np.ndarray,
+    back: bool,
+    centres_pre: np.ndarray,
+    covariance_pre: np.ndarray,
+    displacement_m: float,
+    need_pairs: bool,
+) -> SideCorrespondences:
+    """One side's weights: listed pairs for ordinary gates, whole-cloud sums for wide ones
+    (only when ``need_pairs`` is False)."""
+    eigenvalues = np.linalg.eigvalsh(covariance_pre)
+    radii = np.sqrt(GATE_CHI2_3DOF_95 * eigenvalues[:, -1]) + displacement_m
+    normaliser = 1.0 / np.sqrt((2.0 * np.pi) ** 3 * np.prod(eigenvalues, axis=1))
+    count = len(centres_pre)
+    wide = np.zeros(count, dtype=bool)
+    if not need_pairs:
+        wide = radii > WIDE_GATE_FRACTION * index.diagonal_m
+    listed = np.flatnonzero(~wide)
+    taxel, point, weight = _gated_weights(
+        index,
+        points,
+        centres_pre[listed],
+        covariance_pre[listed],
+        radii[listed],
+        normaliser[listed],
+    )
+    taxel = listed[taxel]
+    # float64 even without pairs (bincount of nothing is an integer array).
+    mass = np.bincount(taxel, weights=weight, minlength=count).astype(float)
+    weighted_sum = np.stack(
+        [np.bincount(taxel, weights=weight * points[point, k], minlength=count) for k in range(3)],
+        axis=1,
+    ).astype(float)
+    wide_active = np.empty(0, dtype=np.int64)
+    if wide.any():
+        summed = np.flatnonzero(wide)
+        mass[summed], weighted_sum[summed], wide_active = _summed_weights(
+            points, centres_pre[summed], covariance_pre[summed], normaliser[summed]
+        )
+    return SideCorrespondences(
+        back, taxel, point, weight, mass, weighted_sum, not wide.any(), wide_active
+    )
 
 
 def _mahalanobis_nearest(
@@ -279,6 +390,7 @@ def find_correspondences(
     window: np.ndarray,
     state_covariance: np.ndarray,
     alternative: bool,
+    need_pairs: bool = True,
 ) -> Correspondences:
     """Weights of every taxel against the front and back images of the current points.
 
@@ -291,6 +403,8 @@ def find_correspondences(
         window: ``(M, 3, 3)`` taxel windows ``C_t``.
         state_covariance: ``(6, 6)`` covariance of ``g`` propagated into ``C_i``.
         alternative: use the eq. 13 centres instead of the taxels (eq. 9).
+        need_pairs: list every non-zero weight as a pair (needed to differentiate with
+            respect to the points); False lets wide gates be summed without listing.
     """
     displacement_m = index.displacement_bound(points)
     covariances = tuple(
@@ -307,9 +421,9 @@ def find_correspondences(
         linear = side_linear_part(g, back)
         covariance_pre = np.einsum("ji,mjk,kl->mil", linear, covariance, linear)
         centres_pre = invert_side(centres, g, pivot_m, back)
-        taxel, point, weight = _gated_weights(
-            index, points, centres_pre, covariance_pre, displacement_m
+        sides.append(
+            _side_weights(
+                index, points, back, centres_pre, covariance_pre, displacement_m, need_pairs
+            )
         )
-        mass = np.bincount(taxel, weights=weight, minlength=len(taxels_m))
-        sides.append(SideCorrespondences(back, taxel, point, weight, mass))
     return Correspondences(front=sides[0], back=sides[1], alternative=alternative)

@@ -130,6 +130,37 @@ def side_jacobian(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray, back: 
     return jacobian
 
 
+def box_corners(lower_m: np.ndarray, upper_m: np.ndarray) -> np.ndarray:
+    """The 8 corners of the axis-aligned box ``[lower, upper]``, shape (8, 3)."""
+    pick = (np.arange(8)[:, None] >> np.arange(3)[None, :]) & 1
+    return np.where(pick == 1, upper_m, lower_m)
+
+
+def image_step_bound(
+    corners_m: np.ndarray, g_old: np.ndarray, g_new: np.ndarray, pivot_m: np.ndarray
+) -> float:
+    """Largest distance (m) any point of a box moves, front (``f_b``) or mirrored (``f_mb``),
+    when ``g`` changes from ``g_old`` to ``g_new``.
+
+    For a fixed pair of states ``f(p; g_new) - f(p; g_old)`` is affine in ``p``, so its norm
+    is convex and its maximum over the box is reached at a corner: the value bounds the
+    motion of every model point inside the box. It turns angular steps into metres through
+    the real lever arm (about the pivot for ``b_theta``, about the plane for ``m_theta``).
+    """
+    return max(
+        float(
+            np.max(
+                np.linalg.norm(
+                    apply_side(corners_m, g_new, pivot_m, back)
+                    - apply_side(corners_m, g_old, pivot_m, back),
+                    axis=1,
+                )
+            )
+        )
+        for back in (False, True)
+    )
+
+
 def rebase_bias_translation(
     yaw_rad: float, translation_m: np.ndarray, old_pivot_m: np.ndarray, new_pivot_m: np.ndarray
 ) -> np.ndarray:

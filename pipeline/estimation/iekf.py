@@ -12,10 +12,19 @@ symmetric downdate in :mod:`.structured`, textbook in :mod:`.dense`).
 
 Choices this module makes where the paper is silent:
 
-* **Correspondence covariance.** ``C_i = C_t + J P J^T`` uses the covariance of the current
-  iterate: ``P-`` at the first iteration, then ``(I - K_{i-1} H_{i-1}) P-``. The paper
-  indexes the covariance by iteration (``P+_{k,i+1}``, eq. 7) and evaluates eq. 14 "at the
-  current state"; this also shrinks the gates as the state firms up.
+* **Correspondence covariance.** ``C_i = C_t + J P J^T`` is evaluated at the current state
+  but with a covariance ``P`` that is fixed for the whole grasp: Stage 1 uses its prior
+  ``P-``, Stage 2 the covariance Stage 1 ended with. (The paper indexes it by iteration,
+  eq. 7. Measured on the Fig. 8 study, shrinking the gates to each iterate's posterior
+  makes the iteration oscillate: after a large step the narrowed gates lose the back, the
+  plane falls back to its prior, the wide gates find the back again, and so on. Fixed gates
+  keep one objective per grasp; Stage 2 then refines with Stage 1's narrow gates. The price:
+  Stage 1's wide-gate weighted means are pulled toward the inside of a curved surface, so
+  Stage 1 alone is less precise than with shrinking gates.)
+* **Trust region.** A Gauss-Newton step that would move some point of the completed model
+  by more than ``max_step_m`` is shortened along its direction to that length (a damped
+  IEKF), so the weights are recomputed before the model travels further; from a 45 deg
+  plane error an undamped first step overshoots by tens of centimetres.
 * **Stages.** Stage 1 holds the points fixed (6 states). Stage 2 estimates points too; like
   the paper it *starts from the Stage-1 result*: each grasp's iterations begin at Stage 1's
   ``(b, m)`` for that grasp and its gates use Stage 1's covariance, but the prior
@@ -30,11 +39,19 @@ Choices this module makes where the paper is silent:
   every pad in contact has eq.-9 correspondences on more than one taxel, then eq. 9 for the
   rest of that grasp's iterations.
 * **Status** of a grasp: ``converged``; ``max_iterations``; ``no_correspondence`` (at some
-  iteration no taxel has any weight) and ``diverged`` (a non-finite state, or some component
+  iteration no taxel has any weight) and ``diverged`` (a non-finite state, some component
   of ``(b, m)`` further than ``divergence_sigmas`` prior standard deviations from the
-  Stage-0 value) both leave that grasp's prior state and covariance unchanged. A stage's
-  status is the worst of its grasps' in the order diverged > no_correspondence >
-  max_iterations > converged.
+  Stage-0 value, or some point further than ``divergence_sigmas`` of its own prior std from
+  its prior position) both leave that grasp's prior state and covariance unchanged. A
+  stage's status is the worst of its grasps' in the order diverged > no_correspondence >
+  max_iterations > converged. A Stage 2 that ends ``diverged`` or ``no_correspondence``
+  reports Stage 1's result (see :func:`fuse`).
+* **Convergence** is measured where it matters, on the model: the iteration stops when no
+  point of the completed model, front ``f_b(p)`` or mirrored ``f_mb(p)``, moves by more than
+  ``tolerance_m`` between iterates (:func:`~.geometry.image_step_bound` plus the largest
+  point step). A per-component test on ``g`` would never stop on a cylinder, whose yaw about
+  a pivot off its axis trades against a translation and creeps along that weakly observable
+  direction by ~1e-4 rad per iteration (a few hundredths of a millimetre on the model).
 """
 
 from __future__ import annotations
@@ -53,15 +70,15 @@ from .correspondences import (
     exclusive_sides,
     find_correspondences,
 )
+from .geometry import box_corners, image_step_bound
 from .measurement import Linearisation, freeze, linearise
 from .structured import StructuredCovariance
 
 Schedule = Literal["standard", "alternative", "hybrid"]
 GraspStatus = Literal["converged", "max_iterations", "no_correspondence", "diverged"]
-#: Components of g measured in metres and in radians.
-_LINEAR = np.array([1, 2, 3, 4])
-_ANGULAR = np.array([0, 5])
 _SEVERITY = ("converged", "max_iterations", "no_correspondence", "diverged")
+#: Stage-2 statuses whose result is replaced by Stage 1's (status and counts kept).
+_FALL_BACK = ("no_correspondence", "diverged")
 
 
 class Gain(Protocol):
@@ -89,17 +106,21 @@ class IekfSettings:
     Attributes:
         schedule: correspondence weights, see the module docstring.
         max_iterations: iteration cap per grasp and stage.
-        tolerance_m: convergence when no linear component (bias translation, ``m_r``,
-            points) changes by more than this between iterations (m) ...
-        tolerance_rad: ... and no angle (``b_theta``, ``m_theta``) by more than this (rad).
-        divergence_sigmas: sane region half-width, in prior standard deviations of g.
+        tolerance_m: convergence when no point of the completed model (front ``f_b(p)`` or
+            mirrored ``f_mb(p)``) moves by more than this between iterations (m); see
+            :func:`~.geometry.image_step_bound`.
+        max_step_m: trust region: an iterate whose completed model would move further than
+            this (m) is shortened along its Gauss-Newton direction to this length, so the
+            correspondences are re-weighted before the model moves further.
+        divergence_sigmas: sane region half-width, in prior standard deviations of ``g`` and
+            of each point's position.
         exclusive_sides: explain each taxel by its better-supported side only.
     """
 
     schedule: Schedule = "hybrid"
     max_iterations: int = 30
-    tolerance_m: float = 1e-6
-    tolerance_rad: float = 1e-5
+    tolerance_m: float = 1e-4
+    max_step_m: float = 0.02
     divergence_sigmas: float = 10.0
     exclusive_sides: bool = True
 
@@ -188,6 +209,7 @@ def _correspondences(
     gate_covariance: np.ndarray,
     use_alternative: bool,
     exclusive: bool,
+    need_pairs: bool,
 ) -> Correspondences:
     found = find_correspondences(
         index,
@@ -198,6 +220,7 @@ def _correspondences(
         contacts.window,
         gate_covariance,
         alternative=use_alternative,
+        need_pairs=need_pairs,
     )
     return exclusive_sides(found) if exclusive else found
 
@@ -215,6 +238,7 @@ def update_grasp(
     gate_covariance: np.ndarray,
     sane_centre: np.ndarray,
     sane_halfwidth: np.ndarray,
+    point_variance_m2: np.ndarray,
     keep_point_covariance: bool,
 ) -> _GraspResult:
     """Iterate one grasp's update and commit its covariance (see the module docstring).
@@ -225,7 +249,10 @@ def update_grasp(
         return _GraspResult(g_prior, points_prior, "no_correspondence", 0, 0)
     g_i = np.array(g_start, dtype=float)
     points_i = points_prior.copy() if move_points else points_prior
+    lower_m, upper_m = points_prior.min(axis=0), points_prior.max(axis=0)
+    point_limit_m = settings.divergence_sigmas * np.sqrt(point_variance_m2)
     moved = np.empty(0, dtype=np.int64)
+    spread_m = 0.0
     use_alternative = settings.schedule != "standard"
     exclusive = settings.exclusive_sides
     gain, status, active = None, "max_iterations", 0
@@ -234,13 +261,29 @@ def update_grasp(
         corr = None
         if settings.schedule == "hybrid" and use_alternative:
             standard = _correspondences(
-                index, points_i, g_i, pivot_m, contacts, gate_covariance, False, exclusive
+                index,
+                points_i,
+                g_i,
+                pivot_m,
+                contacts,
+                gate_covariance,
+                False,
+                exclusive,
+                move_points,
             )
             if every_pad_supported(standard, contacts.pads):
                 use_alternative, corr = False, standard
         if corr is None:
             corr = _correspondences(
-                index, points_i, g_i, pivot_m, contacts, gate_covariance, use_alternative, exclusive
+                index,
+                points_i,
+                g_i,
+                pivot_m,
+                contacts,
+                gate_covariance,
+                use_alternative,
+                exclusive,
+                move_points,
             )
         if not corr.supported_taxels().any():
             return _GraspResult(g_prior, points_prior, "no_correspondence", iterations, 0)
@@ -254,24 +297,35 @@ def update_grasp(
         gain = covariance.gain(lin, measurement.noise)
         delta_g, step_points, delta_p = gain.step(innovation)
         g_next = g_prior + delta_g
-        point_step = 0.0
+        touched = np.union1d(moved, step_points) if move_points else moved
+        before = points_i[touched]
+        target = points_prior[touched].copy()
         if move_points:
-            touched = np.union1d(moved, step_points)
-            before = points_i[touched].copy()
-            points_i[moved] = points_prior[moved]
-            points_i[step_points] = points_prior[step_points] + delta_p
-            point_step = float(np.max(np.abs(points_i[touched] - before), initial=0.0))
-            moved = step_points
+            target[np.searchsorted(touched, step_points)] += delta_p
+        point_steps_m = np.linalg.norm(target - before, axis=1)
+        corners_m = box_corners(lower_m - spread_m, upper_m + spread_m)
+        model_step_m = image_step_bound(corners_m, g_i, g_next, pivot_m) + float(
+            np.max(point_steps_m, initial=0.0)
+        )
+        if model_step_m > settings.max_step_m:
+            fraction = settings.max_step_m / model_step_m
+            g_next = g_i + fraction * (g_next - g_i)
+            target = before + fraction * (target - before)
+            model_step_m = settings.max_step_m
+        sane_points = True
+        if move_points:
+            points_i[touched] = target
+            offsets_m = np.linalg.norm(target - points_prior[touched], axis=1)
+            sane_points = bool(np.all(offsets_m <= point_limit_m[touched]))
+            spread_m = float(np.max(offsets_m, initial=0.0))
+            moved = touched
             index.note_moved(moved)
-        sane = np.all(np.abs(g_next - sane_centre) <= sane_halfwidth)
-        if not (np.all(np.isfinite(g_next)) and np.isfinite(point_step) and sane):
+        sane = sane_points and np.all(np.abs(g_next - sane_centre) <= sane_halfwidth)
+        if not (np.all(np.isfinite(g_next)) and np.isfinite(model_step_m) and sane):
             return _GraspResult(g_prior, points_prior, "diverged", iterations, 0)
-        step = np.abs(g_next - g_i)
         g_i = g_next
-        gate_covariance = gain.bias_plane_posterior()
         active = int(corr.active_points().size)
-        linear_step = max(float(step[_LINEAR].max()), point_step)
-        if linear_step < settings.tolerance_m and step[_ANGULAR].max() < settings.tolerance_rad:
+        if model_step_m < settings.tolerance_m:
             status = "converged"
             break
     covariance.commit(gain, with_points=keep_point_covariance)
@@ -321,6 +375,7 @@ def run_stage(
             gate_covariance=gate,
             sane_centre=problem.g_init,
             sane_halfwidth=halfwidth,
+            point_variance_m2=problem.point_variance_m2,
             keep_point_covariance=stage == 2 and k < len(problem.grasps) - 1,
         )
         g, points = result.g, result.points
@@ -359,7 +414,10 @@ def fuse(
 
     Returns:
         The Stage 1 outcome, then the Stage 2 outcome when ``last_stage == 2``. The KD-tree
-        over the points is built once and its time is counted in Stage 1.
+        over the points is built once and its time is counted in Stage 1. When Stage 2
+        diverges or loses every correspondence its outcome carries Stage 1's state,
+        covariance and points (with Stage 2's status, iterations and time), so a failed
+        point update never makes the model worse than Stage 1.
     """
     started = time.perf_counter()
     index = PointIndex(problem.points_m)
@@ -368,7 +426,16 @@ def fuse(
     stage_one = _with_seconds(stage_one, stage_one.seconds + build_seconds)
     if last_stage == 1:
         return (stage_one,)
-    return stage_one, run_stage(problem, settings, 2, index, covariance_model, stage_one)
+    stage_two = run_stage(problem, settings, 2, index, covariance_model, stage_one)
+    if stage_two.status in _FALL_BACK:
+        stage_two = replace(
+            stage_one,
+            status=stage_two.status,
+            iterations=stage_two.iterations,
+            seconds=stage_two.seconds,
+            active_points=stage_two.active_points,
+        )
+    return stage_one, stage_two
 
 
 def _with_seconds(outcome: StageOutcome, seconds: float) -> StageOutcome:

@@ -14,7 +14,10 @@ its own maximum gives the densest contact of either side unit scale even when th
 has no support; the paper's text uses ``max_j a_b,j`` for both.
 
 Weights and scales are constants of a :class:`FrozenMeasurement`; the IEKF recomputes them at
-every iteration and differentiates with them held fixed (eq. 12).
+every iteration and differentiates with them held fixed (eq. 12). A measurement also keeps
+each block's weighted mean at the points it was frozen at; when the points are held fixed
+(Stage 1) that is all it needs, so its pair list may be left out (wide gates, see
+:mod:`.correspondences`).
 """
 
 from __future__ import annotations
@@ -40,6 +43,9 @@ class FrozenMeasurement:
         pair_block, pair_point: ``(K,)`` block and point index of each non-zero weight.
         pair_omega: ``(K,)`` normalised weights; they sum to one within a block.
         noise: ``(B, 3, 3)`` measurement covariance ``R_i`` of each block (m^2).
+        means_m: ``(B, 3)`` ``sum_n omega_n p_n`` at the points the weights were computed
+            for (unbiased frame R).
+        complete: True when the pairs list every weight (empty pair arrays otherwise).
     """
 
     observed_m: np.ndarray
@@ -50,6 +56,8 @@ class FrozenMeasurement:
     pair_point: np.ndarray
     pair_omega: np.ndarray
     noise: np.ndarray
+    means_m: np.ndarray
+    complete: bool
 
     @property
     def n_blocks(self) -> int:
@@ -70,8 +78,9 @@ def freeze(
         taxels_m: ``(M, 3)`` taxel positions.
         noise: ``(M, 3, 3)`` per-taxel ``R``.
     """
-    blocks_taxel, blocks_back, blocks_scale = [], [], []
+    blocks_taxel, blocks_back, blocks_scale, blocks_mean = [], [], [], []
     pair_block, pair_point, pair_omega = [], [], []
+    complete = correspondences.complete()
     first_block = 0
     for side in correspondences.sides():
         supported = np.flatnonzero(side.mass > 0)
@@ -82,13 +91,18 @@ def freeze(
         blocks_taxel.append(supported)
         blocks_back.append(np.full(supported.size, side.back))
         blocks_scale.append(side.mass[supported] / side.mass.max())
-        pair_block.append(block_of_taxel[side.taxel])
-        pair_point.append(side.point)
-        pair_omega.append(side.weight / side.mass[side.taxel])
+        blocks_mean.append(side.weighted_sum[supported] / side.mass[supported, None])
+        if complete:
+            pair_block.append(block_of_taxel[side.taxel])
+            pair_point.append(side.point)
+            pair_omega.append(side.weight / side.mass[side.taxel])
         first_block += supported.size
     if not blocks_taxel:
         raise ValueError("no taxel has a correspondence; nothing to measure")
     taxel = np.concatenate(blocks_taxel)
+    if not complete:
+        pair_block = pair_point = [np.empty(0, dtype=np.int64)]
+        pair_omega = [np.empty(0)]
     return FrozenMeasurement(
         observed_m=taxels_m[taxel],
         back=np.concatenate(blocks_back),
@@ -98,11 +112,19 @@ def freeze(
         pair_point=np.concatenate(pair_point),
         pair_omega=np.concatenate(pair_omega),
         noise=noise[taxel],
+        means_m=np.concatenate(blocks_mean),
+        complete=complete,
     )
 
 
 def weighted_means(measurement: FrozenMeasurement, points: np.ndarray) -> np.ndarray:
-    """``sum_n omega_n p_n`` of each block, in the unbiased point frame, (B, 3)."""
+    """``sum_n omega_n p_n`` of each block, in the unbiased point frame, (B, 3).
+
+    Raises:
+        ValueError: the measurement does not list its pairs.
+    """
+    if not measurement.complete:
+        raise ValueError("the measurement's pairs were not listed; only its frozen means exist")
     weighted = measurement.pair_omega[:, None] * points[measurement.pair_point]
     return np.stack(
         [
@@ -197,8 +219,13 @@ def linearise(
     pivot_m: np.ndarray,
     with_points: bool,
 ) -> Linearisation:
-    """Evaluate ``h`` and its Jacobian at ``(g, points)`` with the weights frozen (eq. 12)."""
-    means = weighted_means(measurement, points)
+    """Evaluate ``h`` and its Jacobian at ``(g, points)`` with the weights frozen (eq. 12).
+
+    With ``with_points`` False the points are those the measurement was frozen at (Stage 1
+    holds them fixed) and its stored block means are used; otherwise the means are
+    recomputed from the pairs at ``points``.
+    """
+    means = weighted_means(measurement, points) if with_points else measurement.means_m
     predicted = np.empty_like(means)
     jacobian_g = np.empty((measurement.n_blocks, 3, BIAS_PLANE_DIM))
     block_matrix = np.empty((measurement.n_blocks, 3, 3))

@@ -76,3 +76,22 @@ def stage_estimate(
 def diagonal_covariance(stds: tuple[float, ...]) -> np.ndarray:
     """``diag(stds^2)``."""
     return np.diag(np.square(np.asarray(stds, dtype=float)))
+
+
+def bias_plane_covariance(
+    stds: tuple[float, ...], m_theta_rad: float, pivot_m: np.ndarray
+) -> np.ndarray:
+    """Prior covariance of ``g`` with the plane's offset uncertainty stated at the object.
+
+    ``stds`` are ``(b_theta, b_x, b_y, b_z, offset, m_theta)`` with ``offset`` the std of the
+    plane's distance from ``pivot_m``, independent of ``m_theta``. ``m_r`` is measured from
+    the robot origin, so ``m_r = offset + n(m_theta) . pivot`` and turning the normal moves
+    ``m_r`` by ``n' . pivot`` per radian: with the object half a metre away a diagonal prior
+    on ``(m_r, m_theta)`` would put the plane hundreds of millimetres off the object for a
+    few tens of degrees of ``m_theta``. The result is ``J diag(stds^2) J^T`` with
+    ``J = d(m_r, m_theta) / d(offset, m_theta)``.
+    """
+    jacobian = np.eye(6)
+    n_prime = np.array([-np.sin(m_theta_rad), np.cos(m_theta_rad), 0.0])
+    jacobian[4, 5] = float(n_prime @ np.asarray(pivot_m, dtype=float))
+    return jacobian @ diagonal_covariance(stds) @ jacobian.T
