@@ -12,7 +12,13 @@ from typing import Any
 
 import numpy as np
 
-from .metrics import box_thickness, fit_circle_taubin, mesh_deviation, plane_after_bias
+from .metrics import (
+    box_thickness,
+    fit_circle_taubin,
+    mesh_deviation,
+    plane_after_bias,
+    side_wall,
+)
 from .types import StageEstimate, SymmetryPlane
 
 
@@ -61,7 +67,8 @@ def evaluate_stage(
     """Metrics of one stage and each completed point's distance to the true surface (m).
 
     The metrics are the deviation summary (m), the plane errors, and the object's measure
-    (thickness or diameter, with the error in mm and percent) where defined.
+    (thickness or diameter, with the error in mm and percent) where defined: thickness by
+    robust lines through the grasp centre, diameter by a circle fit to the side wall.
     """
     plane = plane_after_bias(stage.plane, stage.bias)
     distances, deviation = mesh_deviation(stage.completed, truth.vertices, truth.faces)
@@ -75,7 +82,7 @@ def evaluate_stage(
             metrics.update(_measure("thickness", fit.thickness_m, truth.thickness_m))
             metrics["side_angle_deg"] = float(np.degrees(fit.angle_rad))
     if truth.diameter_m is not None:
-        circle = fit_circle_taubin(stage.completed)
+        circle = fit_circle_taubin(side_wall(stage.completed))
         metrics.update(_measure("diameter", circle.diameter_m, truth.diameter_m))
     return metrics, distances
 

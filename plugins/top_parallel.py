@@ -26,16 +26,21 @@ class TopParallel(GraspPlanner):
     The closing direction is the proposed plane's normal rotated about z by
     ``tactile_angle_deg``; the hand's x axis points from the front jaw (the PG-70's
     ``"left"`` pad, camera side) to the back jaw. The closing line passes through the
-    cloud's centroid projected onto the proposed plane; the front pad's surface stands
-    ``jaw_clearance_m`` in front of the first visible point on that line (within the pad's
-    width and height range). Pads cover the object's upper part (top edge ``top_margin_m``
-    below the cloud's top) but the fingertips stay ``table_clearance_m`` above the table,
-    which is taken to lie ``cloud_base_above_table_m`` below the cloud's lowest point (the
-    segmentation's height cut). Palm-to-pad-centre and pad-centre-to-fingertip distances
-    default to ``robots/pg70.urdf`` (125 mm and 29 mm). ``predicted_contacts`` are the
-    visible points the front pad meets first. The plan is refused when the object's width
-    along the closing direction (visible cloud and its mirror image, between the pads'
-    paths) plus the jaw clearance exceeds the gripper's aperture.
+    cloud's centroid projected onto the proposed plane (the centroid of the cloud completed
+    by that plane; METHOD.md section 5); the front pad's surface
+    stands ``jaw_clearance_m`` in front of where it would first touch the visible surface on
+    that line (within the pad's width and height range; a curved face at its fitted
+    extreme, :func:`pipeline.perception.grasp_geometry.pad_touch`). Pads cover the object's
+    upper part (top edge ``top_margin_m`` below the cloud's top) but the fingertips stay
+    ``table_clearance_m`` above the table, which is taken to lie ``cloud_base_above_table_m``
+    below the cloud's lowest point (the segmentation's height cut), and the pads' lower edge
+    stays above the cloud's bottom (``pad_above_cloud``; on short objects the pads reach
+    above the top instead of touching unseen surface). Palm-to-pad-centre and
+    pad-centre-to-fingertip distances default to ``robots/pg70.urdf`` (125 mm and 29 mm).
+    ``predicted_contacts`` are the visible points the front pad meets first, moved onto the
+    pad's plane at that touch. The plan is refused when the object's width along the
+    closing direction (visible cloud and its mirror image, between the pads' paths) plus the
+    jaw clearance exceeds the gripper's aperture.
     """
 
     name = "top-parallel"
@@ -48,6 +53,9 @@ class TopParallel(GraspPlanner):
         jaw_clearance_m: float = param(0.01, "front pad distance before the visible surface (m)")
         top_margin_m: float = param(0.005, "pad top edge below the object's top (m)")
         table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
+        pad_above_cloud: bool = param(
+            True, "keep the pads' lower edge above the cloud's bottom (short objects)"
+        )
         cloud_base_above_table_m: float = param(
             0.02, "the table lies this far below the cloud's lowest point (m)"
         )
@@ -55,6 +63,14 @@ class TopParallel(GraspPlanner):
         pad_centre_to_fingertip_m: float = param(0.029, "pad centre to fingertip along z (m)")
         contact_band_m: float = param(
             0.008, "depth of the first-touched surface layer, about 4 sigma of depth noise (m)"
+        )
+        flat_radius_m: float = param(
+            0.15,
+            "a visible face curved less than this radius counts as flat: the pad touches it "
+            "on the closing line, a more curved one at its extreme (m)",
+        )
+        touch_depth_m: float = param(
+            0.001, "visible surface within this depth of the pad's first touch is touched (m)"
         )
         pregrasp_height_m: float = param(0.1, "start of the descent above the grasp pose (m)")
 
@@ -78,6 +94,7 @@ class TopParallel(GraspPlanner):
             top_margin_m=p.top_margin_m,
             pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
             table_clearance_m=p.table_clearance_m,
+            keep_above_cloud=p.pad_above_cloud,
         )
         opening = gripper.max_aperture_m
         grasp = parallel_top_grasp(
@@ -90,6 +107,8 @@ class TopParallel(GraspPlanner):
             jaw_clearance_m=p.jaw_clearance_m,
             palm_above_pad_centre_m=p.palm_to_pad_centre_m,
             contact_band_m=p.contact_band_m,
+            flat_radius_m=p.flat_radius_m,
+            touch_depth_m=p.touch_depth_m,
         )
         if grasp is None:
             return GraspPlan(

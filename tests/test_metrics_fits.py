@@ -155,3 +155,23 @@ def test_deviation_summary_of_known_values():
     assert summary.mean == 50.0 and summary.count == 101
     with pytest.raises(ValueError):
         DeviationSummary.from_distances(np.array([]))
+
+
+def test_side_wall_drops_the_cap_so_the_circle_fit_is_unbiased():
+    """A 53 mm cylinder's side wall plus its filled top cap: the cap shrinks a fit to all
+    points; the side wall alone gives the true diameter."""
+    from pipeline.metrics import fit_circle_taubin, side_wall
+
+    rng = np.random.default_rng(4)
+    angle = rng.uniform(0, 2 * np.pi, 4000)
+    wall = np.column_stack([0.0265 * np.cos(angle), 0.0265 * np.sin(angle),
+                            rng.uniform(0, 0.13, 4000)])  # fmt: skip
+    radius = 0.0265 * np.sqrt(rng.uniform(0, 1, 3000))
+    cap_angle = rng.uniform(0, 2 * np.pi, 3000)
+    cap = np.column_stack([radius * np.cos(cap_angle), radius * np.sin(cap_angle),
+                           np.full(3000, 0.13)])  # fmt: skip
+    cloud = np.vstack([wall, cap])
+    assert fit_circle_taubin(cloud).diameter_m < 0.050
+    kept = side_wall(cloud)
+    assert np.all(kept[:, 2] < 0.13 - 0.005)
+    assert fit_circle_taubin(kept).diameter_m == pytest.approx(0.053, abs=1e-4)
