@@ -32,6 +32,7 @@ EXPERIMENTS: dict[str, str] = {
     "table3": "pipeline.experiments.table3",
     "spray": "pipeline.experiments.spray",
     "kth": "pipeline.experiments.kth",
+    "init": "pipeline.experiments.init",
 }
 
 

@@ -73,7 +73,7 @@ DEVIATION_TARGET_MM = 5.0
 FIVE_NUMBERS = ("min", "q1", "median", "q3", "max")
 STAGES = (0, 1, 2)
 #: Display names of the initialisers.
-INIT_LABELS = {"ps": "PS", "vc": "VC"}
+INIT_LABELS = {"ps": "PS", "vc": "VC", "pca": "PCA"}
 
 
 # ------------------------------------------------------------------------- tasks
