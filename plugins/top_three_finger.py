@@ -10,6 +10,11 @@ from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.params import param
 from pipeline.perception.grasp_geometry import (
+    SDH_FINGER_ANGLES_RAD,
+    SDH_PARALLEL_FINGER_ANGLES_RAD,
+    SDH_PARALLEL_FINGER_LATERAL_M,
+    SDH_PARALLEL_FINGER_OFFSETS_M,
+    back_face_is_flat,
     cylindrical_top_grasp,
     front_to_back,
     pad_band,
@@ -24,13 +29,17 @@ class TopThreeFinger(GraspPlanner):
 
     The cloud is completed by mirroring it through the proposed plane; the palm descends
     on the vertical line through the completed cloud's centroid with the fingers 120 deg
-    apart (SDH base rotation ``spread_deg`` = 60) and closes radially. The palm's x axis is
-    the plane normal rotated about z by ``tactile_angle_deg``, oriented from the visible
-    (camera) side to the back, so at tactile angle 0 the thumb touches the visible front
-    and the two fingers the mirrored back. The distal pads cover the object's upper part
-    (their top edge ``top_margin_m`` below the top), the fingertips stay
+    apart (SDH base rotation ``spread_deg`` = 60) and closes radially - or, with
+    ``flat_spread`` and a flat completed back face at least as wide as the two fingers
+    (:func:`back_face_is_flat`), with fingers 1 and 2 facing the thumb (spread 0) so that
+    their pads lie flat on the back instead of meeting it with their edges. The palm's x
+    axis is the plane normal rotated about z by ``tactile_angle_deg``, oriented from the
+    visible (camera) side to the back, so at tactile angle 0 the thumb touches the visible
+    front and the two fingers the mirrored back. The distal pads cover the object's upper
+    part (their top edge ``top_margin_m`` below the top), the fingertips stay
     ``table_clearance_m`` above the table (taken ``cloud_base_above_table_m`` below the
-    cloud's lowest point). ``palm_to_pad_centre_m`` defaults to the SDH-2 URDF's distal pad
+    cloud's lowest point) and, with ``keep_above_cloud``, the pads' lower edge above the
+    cloud's bottom. ``palm_to_pad_centre_m`` defaults to the SDH-2 URDF's distal pad
     centre depth with the distal link vertical and the pads touching a 60-150 mm wide
     object (74.5 + 16.5 + 86.5 cos(alpha) + 42 mm = 0.20-0.22 m). ``predicted_contacts``
     are the completed-cloud points each finger meets first (thumb, f1, f2). Refused when
@@ -45,10 +54,24 @@ class TopThreeFinger(GraspPlanner):
             0.0, "rotation of the palm x axis from the plane normal about z (deg)"
         )
         spread_deg: float = param(60.0, "SDH base rotation; 60 puts the fingers 120 deg apart")
-        top_margin_m: float = param(0.005, "pad top edge below the object's top (m)")
+        flat_spread: bool = param(
+            True, "use spread 0 (fingers facing the thumb) when the completed back is flat"
+        )
+        flat_radius_m: float = param(
+            0.15, "a back face curved less than this radius counts as flat (m)"
+        )
+        top_margin_m: float = param(
+            0.015,
+            "pad top edge below the object's top (m); 5 mm put the pads on lids and domed tops",
+        )
         table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
         cloud_base_above_table_m: float = param(
             0.02, "the table lies this far below the cloud's lowest point (m)"
+        )
+        keep_above_cloud: bool = param(
+            True,
+            "raise the pads so their lower edge stays above the cloud's bottom: taxels below "
+            "the segmented cloud touch surface no cloud point represents",
         )
         palm_to_pad_centre_m: float = param(0.21, "palm origin to distal pad centre along z (m)")
         pad_centre_to_fingertip_m: float = param(
@@ -79,6 +102,15 @@ class TopThreeFinger(GraspPlanner):
             top_margin_m=p.top_margin_m,
             pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
             table_clearance_m=p.table_clearance_m,
+            keep_above_cloud=p.keep_above_cloud,
+        )
+        flat = p.flat_spread and back_face_is_flat(
+            completed,
+            direction,
+            band,
+            half_span_m=SDH_PARALLEL_FINGER_LATERAL_M + band.width_m / 2,
+            band_m=p.contact_band_m,
+            flat_radius_m=p.flat_radius_m,
         )
         grasp = cylindrical_top_grasp(
             completed,
@@ -86,6 +118,8 @@ class TopThreeFinger(GraspPlanner):
             band,
             palm_above_pad_centre_m=p.palm_to_pad_centre_m,
             contact_band_m=p.contact_band_m,
+            finger_angles_rad=SDH_PARALLEL_FINGER_ANGLES_RAD if flat else SDH_FINGER_ANGLES_RAD,
+            finger_offsets_m=SDH_PARALLEL_FINGER_OFFSETS_M if flat else None,
         )
         refused = grasp.width_m > gripper.max_aperture_m
         return GraspPlan(
@@ -96,7 +130,7 @@ class TopThreeFinger(GraspPlanner):
             opening_m=gripper.max_aperture_m,
             closing_direction=grasp.closing_direction,
             predicted_contacts=grasp.predicted_contacts,
-            spread_rad=float(np.deg2rad(p.spread_deg)),
+            spread_rad=0.0 if flat else float(np.deg2rad(p.spread_deg)),
             reason=(
                 f"object is {grasp.width_m * 1000:.1f} mm wide along the closing direction, "
                 f"wider than the {gripper.name} aperture of "

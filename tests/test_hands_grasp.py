@@ -194,6 +194,24 @@ def test_sdh_grasp_closes_three_fingers_on_a_cylinder(client):
     np.testing.assert_allclose(radii, radius, atol=1.5 * MM)
 
 
+def test_sdh_guarded_close_barely_moves_a_light_tall_box(client):
+    # A 0.3 kg box, 65 x 130 x 170 mm, tips at about 0.7 N pushed near its top. The palm
+    # is 10 mm off its centre toward the fingers, so fingers 1 and 2 (spread 0: facing the
+    # thumb) arrive first; they must wait at the surface until the thumb arrives, and then
+    # press only about 4 mm further, so the box moves a few millimetres, not centimetres.
+    box = _box(client, [0.0325, 0.065, 0.085], [0.5, 0.1, 0.085])
+    pb.changeDynamics(box, -1, mass=0.3, physicsClientId=client)
+    hand = Hand.load(client, "sdh")
+    plan = _top_grasp("sdh", 0.49, 0.1, 0.353, GRIPPERS["sdh"].max_aperture_m, spread_rad=0.0)
+    outcome = execute_grasp(client, hand, plan, box)
+    assert outcome.executed, outcome.reason
+    forces = dict(zip(hand.pad_ids, hand.pad_contact_forces(box), strict=True))
+    for finger in ("f1", "f2", "thumb"):
+        assert forces[f"{finger}_distal"] > 0.5
+    moved = outcome.object_after.position_m - outcome.object_before.position_m
+    assert np.hypot(moved[0], moved[1]) < 7 * MM
+
+
 def _in_hand_many(hand: Hand, points_robot: np.ndarray) -> np.ndarray:
     T = hand.pose()
     return (points_robot - T[:3, 3]) @ T[:3, :3]

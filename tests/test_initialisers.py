@@ -154,6 +154,22 @@ def test_vc_on_a_cylinder_puts_the_plane_through_the_axis():
     assert abs(init.plane.normal[:2] @ [0.6, 0.05] - init.plane.offset_m) < 0.006
 
 
+def test_vc_searches_every_orientation_on_a_round_footprint(box_view):
+    # A cylinder's PCA axes are arbitrary: +-90 deg at the same 5 deg step (37 angles);
+    # a box keeps +-45 deg around its seed.
+    vc = VcInitialiser(VcInitialiser.Params(round_axis_ratio=1.5))
+    observation = synthetic_observation(
+        cylinder_object(0.04, 0.12), (0.6, 0.0, 0.0), rng=np.random.default_rng(4)
+    )
+    cylinder = vc.propose(TableCluster().segment(observation), observation)
+    _, box_observation, box_cloud = box_view
+    box = vc.propose(box_cloud, box_observation)
+    for init, count, span_deg in ((cylinder, 37, 180.0), (box, 19, 90.0)):
+        theta = np.unique(np.round([h.plane.theta_rad for h in init.hypotheses], 9))
+        assert len(theta) == count
+        assert np.degrees(theta.max() - theta.min()) == pytest.approx(span_deg)
+
+
 def test_pca_and_given():
     points = np.random.default_rng(0).uniform([0.0, -0.01, 0.0], [0.2, 0.01, 0.1], (5000, 3))
     init = PcaInitialiser().propose(PointCloud(points), None)

@@ -6,6 +6,13 @@ import numpy as np
 import pytest
 
 from pipeline.errors import ConfigError
+from pipeline.perception.grasp_geometry import (
+    PadBand,
+    back_face_is_flat,
+    corridor,
+    first_touched,
+    pad_touch,
+)
 from pipeline.perception.synthetic import box_object, cylinder_object, synthetic_observation
 from pipeline.types import Bias, GripperSpec, PadLayout, SymmetryInit, SymmetryPlane
 from plugins.table_cluster import TableCluster
@@ -90,6 +97,79 @@ def test_parallel_refuses_a_too_wide_object():
     assert "65.0 mm" in plan.reason
 
 
+def _cylinder_front(axis_y=0.0, seed=0):
+    """Visible points of a 26.5 mm cylinder on the axis (0.6, axis_y) inside a pad corridor
+    along +x through (0.6, 0), and the corridor geometry."""
+    observation = synthetic_observation(
+        cylinder_object(0.0265, 0.13), (0.6, axis_y, 0.0), rng=np.random.default_rng(seed)
+    )
+    points = TableCluster().segment(observation).points
+    band = PadBand(0.1, 0.0476, 0.0204)
+    centre, direction = np.array([0.6, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])
+    return points, corridor(points, centre, direction, band), centre, direction
+
+
+@pytest.mark.parametrize("axis_y", [0.0, 0.004])
+def test_pad_touch_finds_the_extreme_of_a_curved_face(axis_y):
+    # The flat pad first touches the cylinder at x = 0.6 - r, on the line y = axis_y; the
+    # median of the surface layer lies about w^2 / 6r = 0.65 mm behind (plus noise).
+    points, mask, centre, direction = _cylinder_front(axis_y)
+    median, _ = first_touched(points, mask, direction, 0.008)
+    touch, touched = pad_touch(
+        points,
+        mask,
+        centre,
+        direction,
+        band_m=0.008,
+        half_width_m=0.0102,
+        flat_radius_m=0.15,
+        touch_depth_m=0.001,
+    )
+    front = 0.6 - 0.0265
+    assert median - front > 0.0005
+    assert touch == pytest.approx(front, abs=0.0004)
+    assert touched[:, 1].mean() == pytest.approx(axis_y, abs=0.0015)
+    np.testing.assert_allclose(touched @ direction, touch, atol=1e-12)
+
+
+def test_pad_touch_on_a_turned_flat_face_is_its_position_on_the_closing_line():
+    # A flat face turned 5 deg about z, depth noise 1.5 mm: the squeeze turns it flat
+    # against the pad, so its position on the closing line (0.55, the layer's median) is
+    # the touch, not its front edge 0.9 mm nearer.
+    rng = np.random.default_rng(3)
+    u = rng.uniform(-0.0102, 0.0102, 400)
+    z = rng.uniform(0.08, 0.12, 400)
+    depth = 0.55 + np.tan(np.deg2rad(5.0)) * u + rng.normal(0.0, 0.0015, 400)
+    points = np.column_stack([depth, u, z])
+    touch, touched = pad_touch(
+        points,
+        np.ones(400, dtype=bool),
+        np.zeros(3),
+        np.array([1.0, 0.0, 0.0]),
+        band_m=0.008,
+        half_width_m=0.0102,
+        flat_radius_m=0.15,
+        touch_depth_m=0.001,
+    )
+    assert touch == pytest.approx(0.55, abs=0.0004)
+    assert len(touched) > 50
+
+
+def test_parallel_pads_stay_above_the_cloud_bottom_on_a_short_object():
+    # 50 mm tall box, cloud cut 20 mm above the table: a 47.6 mm pad covering the top would
+    # reach below the cloud; it is raised so its lower edge stays above the cloud's bottom.
+    cloud = _view(box_object(0.04, 0.1, 0.05))
+    bottom = np.percentile(cloud.points[:, 2], 2.0)
+    pad_bottom = {}
+    for keep in (True, False):
+        plan = TopParallel(TopParallel.Params(pad_above_cloud=keep)).plan(
+            cloud, _true_plane(), PG70
+        )
+        pad_bottom[keep] = plan.T_robot_hand[2, 3] - 0.125 - 0.0238
+    assert pad_bottom[True] == pytest.approx(bottom, abs=1e-6)
+    assert pad_bottom[False] < bottom - 0.004
+
+
 def test_three_finger_grasp_on_a_cylinder():
     cloud = _view(cylinder_object(0.04, 0.15))
     plan = TopThreeFinger().plan(cloud, _true_plane(), SDH)
@@ -101,6 +181,56 @@ def test_three_finger_grasp_on_a_cylinder():
     # Contacts on the cylinder wall, one group per finger direction.
     radius = np.hypot(plan.predicted_contacts[:, 0] - 0.6, plan.predicted_contacts[:, 1])
     assert np.all(np.abs(radius - 0.04) < 0.01)
+
+
+def test_three_finger_faces_the_thumb_on_a_flat_back():
+    # Box 65 mm thick along x (back face at x = 0.6325), 130 mm long: fingers 1 and 2 at
+    # spread 0 close along -x on lines 33 mm either side of the closing line.
+    cloud = _view(box_object(0.065, 0.13, 0.15))
+    plan = TopThreeFinger().plan(cloud, _true_plane(), SDH)
+    assert plan.status == "ok" and plan.spread_rad == 0.0
+    contacts = plan.predicted_contacts
+    back = contacts[contacts[:, 0] > 0.6]
+    assert np.abs(back[:, 0] - 0.6325).max() < 0.006
+    for side in (1.0, -1.0):
+        lateral = back[side * back[:, 1] > 0, 1] * side
+        assert lateral.size > 0 and np.abs(lateral - 0.033).max() <= 0.0102 + 1e-9
+    front = contacts[contacts[:, 0] < 0.6]
+    assert np.abs(front[:, 0] - 0.5675).max() < 0.006 and np.abs(front[:, 1]).max() <= 0.0103
+
+
+@pytest.mark.parametrize(
+    ("obj", "flat"),
+    [
+        (box_object(0.065, 0.13, 0.15), True),
+        (box_object(0.065, 0.05, 0.15), False),  # back narrower than the two fingers
+        (cylinder_object(0.04, 0.15), False),
+    ],
+)
+def test_back_face_is_flat_needs_a_wide_flat_back(obj, flat):
+    visible = _view(obj).points
+    completed = np.concatenate([visible, visible * [-1, 1, 1] + [1.2, 0.0, 0.0]])  # x = 0.6
+    band = PadBand(0.12, 0.0442, 0.0204)
+    result = back_face_is_flat(
+        completed,
+        np.array([1.0, 0.0, 0.0]),
+        band,
+        half_span_m=0.0432,
+        band_m=0.008,
+        flat_radius_m=0.15,
+    )
+    assert result is flat
+
+
+def test_three_finger_pads_stay_above_the_cloud_bottom_on_a_low_object():
+    # 60 mm tall: the segmented cloud starts 20 mm above the table; the table-clearance
+    # bound alone would put the distal pad's (44.2 mm) lower edge at 15 mm, on surface that
+    # no cloud point represents.
+    cloud = _view(box_object(0.065, 0.13, 0.06))
+    plan = TopThreeFinger().plan(cloud, _true_plane(), SDH)
+    pad_bottom_z = plan.T_robot_hand[2, 3] - 0.21 - 13 * 0.0034 / 2
+    assert pad_bottom_z >= np.percentile(cloud.points[:, 2], 2.0) - 1e-5
+    assert pad_bottom_z >= 0.019
 
 
 def test_three_finger_refuses_when_the_aperture_is_too_small():

@@ -71,15 +71,22 @@ def pad_band(
     top_margin_m: float,
     pad_centre_to_fingertip_m: float,
     table_clearance_m: float,
+    keep_above_cloud: bool = False,
 ) -> PadBand:
     """Pad placement covering the object's upper part: the pad's top edge ``top_margin_m``
     below the cloud's top (98th height percentile, robust to noise), raised if needed so
     the fingertip (``pad_centre_to_fingertip_m`` below the pad centre) stays
-    ``table_clearance_m`` above the table."""
+    ``table_clearance_m`` above the table and, with ``keep_above_cloud``, so the pad's lower
+    edge stays above the cloud's bottom (2nd height percentile): taxels below the segmented
+    cloud would touch surface that no cloud point represents, and pull the fused model
+    down. On an object shorter than the pad plus the segmentation's height cut the pad
+    then reaches above the object's top."""
     length, width = pad.rows * pad.pitch_m, pad.cols * pad.pitch_m
-    z_top = float(np.percentile(points_robot[:, 2], 98.0))
+    z_bottom, z_top = np.percentile(points_robot[:, 2], [2.0, 98.0])
     lowest = table_height_m + table_clearance_m + pad_centre_to_fingertip_m
-    return PadBand(max(z_top - top_margin_m - length / 2, lowest), length, width)
+    if keep_above_cloud:
+        lowest = max(lowest, float(z_bottom) + length / 2)
+    return PadBand(max(float(z_top) - top_margin_m - length / 2, lowest), length, width)
 
 
 def corridor(
@@ -114,6 +121,67 @@ def first_touched(
     return float(np.median(along[layer])), candidates[layer]
 
 
+#: Residuals beyond this many robust sigmas are dropped before the surface is refitted.
+_TRIM_SIGMAS = 3.0
+#: Fewest layer points a surface fit needs (five unknowns); fewer: the layer's median.
+_MIN_FIT_POINTS = 12
+
+
+def pad_touch(
+    points_robot: np.ndarray,
+    mask: np.ndarray,
+    centre_m: np.ndarray,
+    direction: np.ndarray,
+    *,
+    band_m: float,
+    half_width_m: float,
+    flat_radius_m: float,
+    touch_depth_m: float,
+) -> tuple[float, np.ndarray]:
+    """Where a flat pad moving along ``direction`` first touches the surface among
+    ``points_robot[mask]``, and the cloud points it touches there.
+
+    The surface is the :func:`first_touched` layer. Its depth along ``direction`` is fitted
+    by least squares (one trimming pass at 3 robust sigmas) as
+    ``d = a + b u + e u^2 + c (z - z_mean) + g (z - z_mean)^2``, ``u`` the lateral offset
+    from the closing line through ``centre_m``. A curved face (``e`` above
+    ``1 / (2 flat_radius_m)``: radius of curvature below ``flat_radius_m``) is first
+    touched at its extreme ``u* = -b / 2e``, clipped to the pad's ``half_width_m``, and the
+    touch position is the fit at ``(u*, z_mean)``: the depth noise averages out instead of
+    biasing the layer's median backward (a cylinder of radius r across a pad of half-width
+    w: about ``w^2 / 6r``). A flatter face is left to :func:`first_touched` (its median and
+    layer), which is unbiased there.
+
+    Returns:
+        The touch position (projection on ``direction``, m) and the ``(K, 3)`` layer points
+        whose fitted depth lies within ``touch_depth_m`` of it, moved onto the pad's plane
+        (their centroid's projection is the touch position). For a flat face, or fewer
+        than ``_MIN_FIT_POINTS`` layer points: the :func:`first_touched` median and layer.
+    """
+    median, layer = first_touched(points_robot, mask, direction, band_m)
+    if len(layer) < _MIN_FIT_POINTS:
+        return median, layer
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    u = (layer - centre_m) @ lateral
+    dz = layer[:, 2] - layer[:, 2].mean()
+    depth = layer @ direction
+    design = np.column_stack([np.ones_like(u), u, u * u, dz, dz * dz])
+    keep = np.ones(len(u), dtype=bool)
+    for _ in range(2):
+        coef = np.linalg.lstsq(design[keep], depth[keep], rcond=None)[0]
+        residual = depth - design @ coef
+        sigma = 1.4826 * np.median(np.abs(residual[keep])) + 1e-9
+        keep = np.abs(residual) <= _TRIM_SIGMAS * sigma
+    a, b, e = coef[:3]
+    if e <= 1.0 / (2.0 * flat_radius_m):
+        return median, layer
+    u_touch = float(np.clip(-b / (2.0 * e), -half_width_m, half_width_m))
+    touch = float(a + b * u_touch + e * u_touch**2)
+    fitted = a + b * u + e * u * u
+    touched = layer[fitted <= touch + touch_depth_m]
+    return touch, touched + np.outer(touch - touched @ direction, direction)
+
+
 @dataclass(frozen=True)
 class ParallelGrasp:
     """Geometry of a parallel-jaw top grasp (robot frame, metres).
@@ -125,7 +193,8 @@ class ParallelGrasp:
         width_m: from the visible front surface to the far end (98th percentile) of the
             reachable visible and completed points, along the closing direction (mirrored points in
             front of the visible surface are ignored: they cannot be there).
-        predicted_contacts: ``(K, 3)`` cloud points the front pad touches first.
+        predicted_contacts: ``(K, 3)`` cloud points the front pad touches first, moved
+            onto the pad's plane (:func:`pad_touch`).
     """
 
     T_robot_hand: np.ndarray
@@ -146,9 +215,13 @@ def parallel_top_grasp(
     jaw_clearance_m: float,
     palm_above_pad_centre_m: float,
     contact_band_m: float,
+    flat_radius_m: float = 0.15,
+    touch_depth_m: float = 0.001,
 ) -> ParallelGrasp | None:
     """Place a parallel gripper opened to ``opening_m`` so the front jaw stands
     ``jaw_clearance_m`` in front of the visible surface on the line through ``centre_m``.
+    The visible surface's position is where the front pad first touches it
+    (:func:`pad_touch`).
 
     Args:
         points_robot: ``(N, 3)`` visible cloud.
@@ -159,7 +232,9 @@ def parallel_top_grasp(
         opening_m: jaw opening between the pad surfaces.
         jaw_clearance_m: gap between the front pad and the visible surface.
         palm_above_pad_centre_m: palm origin height above the pad centre.
-        contact_band_m: depth of the surface layer reported as predicted contacts.
+        contact_band_m: depth of the visible surface layer the pad's touch is fitted to.
+        flat_radius_m: faces curved less than this radius count as flat (:func:`pad_touch`).
+        touch_depth_m: surface within this depth of the touch counts as touched.
 
     Returns:
         The grasp, or None when no visible point lies between the pads' paths.
@@ -167,7 +242,16 @@ def parallel_top_grasp(
     reachable = corridor(points_robot, centre_m, closing_direction, band)
     if not np.any(reachable):
         return None
-    front, contacts = first_touched(points_robot, reachable, closing_direction, contact_band_m)
+    front, contacts = pad_touch(
+        points_robot,
+        reachable,
+        centre_m,
+        closing_direction,
+        band_m=contact_band_m,
+        half_width_m=band.width_m / 2,
+        flat_radius_m=flat_radius_m,
+        touch_depth_m=touch_depth_m,
+    )
     behind = completed_robot[corridor(completed_robot, centre_m, closing_direction, band)]
     along = np.concatenate([points_robot[reachable], behind]) @ closing_direction
     back = float(np.percentile(along, 98.0))
@@ -186,6 +270,44 @@ def parallel_top_grasp(
 #: SDH finger directions from the palm axis in the palm frame at spread 60 degrees: thumb
 #: at 180 deg (front), fingers 1 and 2 at +-60 deg (HARDWARE.md finger base triangle).
 SDH_FINGER_ANGLES_RAD = (np.pi, np.pi / 3, -np.pi / 3)
+#: At spread 0 fingers 1 and 2 face the thumb (closing along -x), their distal pads this far
+#: either side of the closing line along the palm's y axis (robots/sdh2.urdf).
+SDH_PARALLEL_FINGER_LATERAL_M = 0.033
+#: Finger directions and lateral offsets (palm y, m) at spread 0: thumb, finger 1, finger 2.
+SDH_PARALLEL_FINGER_ANGLES_RAD = (np.pi, 0.0, 0.0)
+SDH_PARALLEL_FINGER_OFFSETS_M = (0.0, SDH_PARALLEL_FINGER_LATERAL_M, -SDH_PARALLEL_FINGER_LATERAL_M)
+
+
+def back_face_is_flat(
+    completed_robot: np.ndarray,
+    closing_direction: np.ndarray,
+    band: PadBand,
+    *,
+    half_span_m: float,
+    band_m: float,
+    flat_radius_m: float,
+) -> bool:
+    """Whether the completed cloud's back face, seen along ``-closing_direction`` within
+    ``half_span_m`` either side of the closing line through the centroid and inside the pad
+    band's heights, is flat and spans that width: its first-touched layer (``band_m`` deep)
+    reaches both ends of the span and a quadratic ``d = a + b u + e u^2`` fitted to its depth
+    has a radius of curvature ``1 / 2|e|`` above ``flat_radius_m``. A flat back is grasped
+    best with the SDH-2's fingers facing the thumb (spread 0): their pads lie flat on it,
+    where at 120 deg apart the pads' edges would meet it first."""
+    centre = completed_robot.mean(axis=0)
+    backward = -np.asarray(closing_direction, dtype=np.float64)
+    span = PadBand(band.z_centre_m, band.length_m, 2.0 * half_span_m)
+    mask = corridor(completed_robot, centre, backward, span)
+    if np.count_nonzero(mask) < 12:
+        return False
+    _, layer = first_touched(completed_robot, mask, backward, band_m)
+    lateral = np.array([-backward[1], backward[0], 0.0])
+    u = (layer - centre) @ lateral
+    if len(layer) < 12 or u.min() > -0.8 * half_span_m or u.max() < 0.8 * half_span_m:
+        return False
+    design = np.column_stack([np.ones_like(u), u, u * u])
+    e = np.linalg.lstsq(design, layer @ backward, rcond=None)[0][2]
+    return bool(abs(e) < 1.0 / (2.0 * flat_radius_m))
 
 
 @dataclass(frozen=True)
@@ -214,6 +336,7 @@ def cylindrical_top_grasp(
     palm_above_pad_centre_m: float,
     contact_band_m: float,
     finger_angles_rad: tuple[float, ...] = SDH_FINGER_ANGLES_RAD,
+    finger_offsets_m: tuple[float, ...] | None = None,
 ) -> CylindricalGrasp:
     """A top grasp toward the centroid of the completed cloud, fingers closing radially.
 
@@ -224,12 +347,16 @@ def cylindrical_top_grasp(
         palm_above_pad_centre_m: palm origin height above the pad centre.
         contact_band_m: depth of the surface layer reported as predicted contacts.
         finger_angles_rad: bearing of each finger about the palm axis, from +x.
+        finger_offsets_m: each finger's closing line, shifted this far along the palm's y
+            axis from the palm axis (None: all on the axis).
     """
     centre = completed_robot.mean(axis=0)
+    y_hand = np.cross([0.0, 0.0, -1.0], closing_direction)
+    offsets = finger_offsets_m or (0.0,) * len(finger_angles_rad)
     contacts = []
-    for angle in finger_angles_rad:
+    for angle, offset in zip(finger_angles_rad, offsets, strict=True):
         outward = rotate_z(closing_direction, angle)
-        reachable = corridor(completed_robot, centre, outward, band)
+        reachable = corridor(completed_robot, centre + offset * y_hand, outward, band)
         if np.any(reachable):
             contacts.append(first_touched(completed_robot, reachable, -outward, contact_band_m)[1])
     wide = corridor(completed_robot, centre, closing_direction, band)

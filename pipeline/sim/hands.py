@@ -55,6 +55,12 @@ SDH_BASE_RADIUS_M = 0.03811
 SDH_PROXIMAL_LENGTH_M = 0.0865
 SDH_DISTAL_PAD_OFFSET_M = 0.0148
 SDH_FINGERS = ("f1", "f2", "thumb")
+#: How far (rad, each bending joint) an SDH-2 finger's targets move past the contact to press.
+#: Fingers 1 and 2 together overpower the thumb and push the object toward it until they
+#: reach their targets, so theirs is small (about 4 mm at the distal pad); the thumb's is
+#: large so that it presses with its full force cap.
+SDH_FINGER_SQUEEZE_RAD = 0.03
+SDH_THUMB_SQUEEZE_RAD = 0.1
 
 #: Where an unused hand waits: high above the table, out of the camera's view (m).
 PARK_POSITION_M = (0.0, 0.0, 2.0)
@@ -181,9 +187,10 @@ def _sdh_model() -> HandModel:
         distal = f"{finger}_distal"
         pads.append(PadGeometry(PadLayout(proximal, f"{proximal}_pad", 14, 6, TAXEL_PITCH_M)))
         pads.append(PadGeometry(PadLayout(distal, f"{distal}_pad", 13, 6, TAXEL_PITCH_M), 9, 0.059))
+        squeeze = SDH_THUMB_SQUEEZE_RAD if finger == "thumb" else SDH_FINGER_SQUEEZE_RAD
         fingers.append(
             FingerDrive(
-                finger, (proximal, distal), (proximal, distal), (1.0, -1.0), 1.0, (0.1, 0.1)
+                finger, (proximal, distal), (proximal, distal), (1.0, -1.0), 1.0, (squeeze,) * 2
             )
         )
     max_aperture_m = 2.0 * (SDH_BASE_RADIUS_M - SDH_DISTAL_PAD_OFFSET_M + SDH_PROXIMAL_LENGTH_M)
