@@ -140,8 +140,10 @@ def test_converged_iterate_is_the_map_least_squares_minimiser():
         )
 
     z0 = np.concatenate([G_INIT, points_prior[used].ravel()])
+    # Levenberg-Marquardt (MINPACK): same optimum and tolerances, ~8x fewer evaluations of
+    # the 3-point Jacobian than the default trust-region reflective method here.
     solution = scipy.optimize.least_squares(
-        residuals, z0, jac="3-point", xtol=1e-15, ftol=1e-15, gtol=1e-15
+        residuals, z0, jac="3-point", method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15
     )
     np.testing.assert_allclose(g, solution.x[:6], atol=1e-8)
     np.testing.assert_allclose(points[used], solution.x[6:].reshape(-1, 3), atol=1e-8)

@@ -35,14 +35,19 @@ def initial_state(problem: EstimationProblem, pivot_m: np.ndarray) -> np.ndarray
 
 
 def grasp_contacts(
-    contacts: Contacts, window_std_m: tuple[float, float], noise_std_m: tuple[float, float]
+    contacts: Contacts,
+    window_std_m: tuple[float, float],
+    noise_std_m: tuple[float, float],
+    facing_filter: bool = True,
 ) -> GraspContacts:
-    """Taxels of one grasp with ``C_t`` and ``R`` built from (along, across) normal stds."""
+    """Taxels of one grasp with ``C_t`` and ``R`` built from (along, across) normal stds;
+    with ``facing_filter`` their normals are kept for the surface-orientation filter."""
     return GraspContacts(
         positions_m=contacts.positions,
         pads=contacts.pads,
         window=normal_ellipsoids(contacts.normals, *window_std_m),
         noise=normal_ellipsoids(contacts.normals, *noise_std_m),
+        normals=contacts.normals if facing_filter else None,
     )
 
 

@@ -1,0 +1,189 @@
+"""Gated Gaussian sums over a voxel-aggregated cloud, for gates much wider than a voxel.
+
+Stage 1 needs, per taxel, only the weight mass ``a = sum_n w(p_n)`` and the weighted sum
+``sum_n w(p_n) p_n`` with ``w = N(p; t, C)`` gated at ``D2 < 7.815`` (METHOD.md section 2).
+Before the first update the gates are tens of millimetres wide and cover most of the cloud,
+so exact sums cost ``O(M N)`` per iteration. Here the points are binned once into an
+axis-aligned voxel grid and every voxel keeps its count ``n``, centroid ``c`` and scatter
+``S = sum (p - c)(p - c)^T``. With ``u = c - t``, ``A = C^-1`` and ``a = A u`` the
+second-order expansion of the Gaussian about the centroid gives, per voxel,
+
+    sum w(p)   ~ w(c) (n + (a^T S a - tr(A S)) / 2)
+    sum w(p) p ~ c sum w(p) - w(c) S a
+
+(the first-order term vanishes because ``c`` is the centroid); a voxel is inside the gate
+when its centroid is. The voxel edges ``h`` are chosen from the gates so that
+``||H A H|| <= ratio^2`` for every gate (``H = diag(h)``): a voxel is then at most
+``ratio * sqrt(3) / 2`` wide in whitened units, the neglected terms are third order in
+``ratio``, and the only other error is from voxels straddling the gate boundary, where the
+density is ``exp(-7.815 / 2) = 2 %`` of its peak. With ``ratio = 0.5`` the masses and weighted
+means agree with the exact sums to well under 1 % of the mass / a fraction of a millimetre
+(``tests/test_estimation_aggregation.py``), while a 20,000-point cloud shrinks to a few
+thousand voxels. The cost per call grows with the number of (taxel, voxel) pairs near each
+gate (a KD-tree query over the voxel centroids), independent of ``N`` once the grid is built
+(``O(N log N)``, once per voxel size).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+#: chi-square quantile, 3 degrees of freedom, 95 % (paper eq. 9).
+GATE_CHI2_3DOF_95 = 7.815
+#: Largest voxel extent in whitened gate units (see the module docstring).
+VOXEL_RATIO = 0.5
+
+
+@dataclass(frozen=True)
+class VoxelMoments:
+    """Per-voxel moments of a cloud.
+
+    Attributes:
+        count: ``(V,)`` points per voxel.
+        centroid: ``(V, 3)`` mean position of each voxel's points (m).
+        scatter: ``(V, 3, 3)`` ``sum (p - c)(p - c)^T`` over each voxel's points (m^2).
+        voxel_of_point: ``(N,)`` voxel index of every point.
+        size_m: ``(3,)`` voxel edge lengths along x, y, z (m).
+        label: ``(V,)`` label shared by each voxel's points (all 0 without labels).
+    """
+
+    count: np.ndarray
+    centroid: np.ndarray
+    scatter: np.ndarray
+    voxel_of_point: np.ndarray
+    size_m: np.ndarray
+    label: np.ndarray
+    _tree: list = field(default_factory=list, repr=False, compare=False)
+
+    def tree(self) -> cKDTree:
+        """KD-tree over the centroids in voxel units (``centroid / size_m``), built once."""
+        if not self._tree:
+            self._tree.append(cKDTree(self.centroid / self.size_m))
+        return self._tree[0]
+
+
+def voxel_moments(
+    points_m: np.ndarray, size_m: np.ndarray, labels: np.ndarray | None = None
+) -> VoxelMoments:
+    """Bin ``points_m`` (N, 3) into voxels of edges ``size_m`` (grid anchored at the origin);
+    with ``labels`` ((N,) small non-negative or -1 ints) points of different labels never
+    share a voxel."""
+    cells = np.floor(points_m / size_m).astype(np.int64)
+    cells -= cells.min(axis=0)
+    if labels is None:
+        labels = np.zeros(len(points_m), dtype=np.int64)
+    label_shift = labels - labels.min(initial=0)
+    extent = np.append(cells.max(axis=0, initial=0), label_shift.max(initial=0)) + 1
+    keys = np.ravel_multi_index((*cells.T, label_shift), tuple(int(e) for e in extent))
+    unique_keys, voxel_of_point, count = np.unique(keys, return_inverse=True, return_counts=True)
+    voxel_of_point = voxel_of_point.ravel()
+    label = np.unravel_index(unique_keys, tuple(int(e) for e in extent))[3] + labels.min(initial=0)
+    voxels = len(count)
+    centroid = (
+        np.stack(
+            [
+                np.bincount(voxel_of_point, weights=points_m[:, k], minlength=voxels)
+                for k in range(3)
+            ],
+            axis=1,
+        )
+        / count[:, None]
+    )
+    offsets = points_m - centroid[voxel_of_point]
+    scatter = np.empty((voxels, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            column = np.bincount(
+                voxel_of_point, weights=offsets[:, i] * offsets[:, j], minlength=voxels
+            )
+            scatter[:, i, j] = scatter[:, j, i] = column
+    return VoxelMoments(count.astype(float), centroid, scatter, voxel_of_point, size_m, label)
+
+
+def voxel_exponents(covariances: np.ndarray, ratio: float = VOXEL_RATIO) -> np.ndarray:
+    """Exponents ``e`` of voxel edges ``h = 2^(e / 4)`` (m) with ``||H C^-1 H|| <= ratio^2``
+    for every covariance in ``covariances`` (T, 3, 3), rounded down to quarter octaves so
+    that nearby gates share one grid."""
+    scale = np.sqrt(np.min(np.diagonal(covariances, axis1=1, axis2=2), axis=0))
+    normalised = covariances / np.outer(scale, scale)[None]
+    smallest = float(np.min(np.linalg.eigvalsh(normalised)[:, 0]))
+    edges_m = ratio * np.sqrt(smallest) * scale
+    return np.floor(4.0 * np.log2(edges_m)).astype(np.int64)
+
+
+def gaussian_sums(
+    moments: VoxelMoments,
+    centres: np.ndarray,
+    covariances: np.ndarray,
+    normaliser: np.ndarray,
+    allowed: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gated mass and weighted sum of every centre over the aggregated cloud.
+
+    Candidate voxels come from a KD-tree over the centroids in voxel units (where the gates
+    are about equally wide along every axis): each centre's ball circumscribes its gate's
+    axis-aligned bounding box; every candidate is then tested exactly on its centroid.
+
+    Args:
+        moments: the voxel moments of the points.
+        centres: ``(T, 3)`` Gaussian centres, same frame as the points.
+        covariances: ``(T, 3, 3)`` Gaussian covariances (m^2).
+        normaliser: ``(T,)`` density normalisers ``1 / sqrt((2 pi)^3 det C)``.
+        allowed: optional ``allowed(centre_indices, voxel_indices)`` -> bool array, False
+            where a centre must ignore a voxel.
+
+    Returns:
+        ``(T,)`` masses, ``(T, 3)`` weighted sums ``sum w p`` and a ``(V,)`` bool mask of the
+        voxels inside some gate.
+    """
+    count = len(centres)
+    half_box = np.sqrt(GATE_CHI2_3DOF_95 * np.diagonal(covariances, axis1=1, axis2=2))
+    radii = np.linalg.norm(half_box / moments.size_m, axis=1)
+    found = moments.tree().query_ball_point(centres / moments.size_m, radii, return_sorted=False)
+    lengths = np.array([len(f) for f in found], dtype=np.int64)
+    taxel = np.repeat(np.arange(count), lengths)
+    voxel = np.concatenate([np.asarray(f, dtype=np.int64) for f in found] + [np.empty(0, int)])
+    inverse = np.linalg.inv(covariances).reshape(count, 9)
+    offsets = moments.centroid[voxel] - centres[taxel]
+    rows = inverse[taxel]
+    a = np.stack(
+        [
+            rows[:, 3 * k] * offsets[:, 0]
+            + rows[:, 3 * k + 1] * offsets[:, 1]
+            + rows[:, 3 * k + 2] * offsets[:, 2]
+            for k in range(3)
+        ],
+        axis=1,
+    )
+    d2 = offsets[:, 0] * a[:, 0] + offsets[:, 1] * a[:, 1] + offsets[:, 2] * a[:, 2]
+    inside = d2 < GATE_CHI2_3DOF_95
+    if allowed is not None:
+        inside &= allowed(taxel, voxel)
+    taxel, voxel, a, d2 = taxel[inside], voxel[inside], a[inside], d2[inside]
+    scatter = moments.scatter[voxel].reshape(-1, 9)
+    scattered = np.stack(
+        [
+            scatter[:, 3 * k] * a[:, 0]
+            + scatter[:, 3 * k + 1] * a[:, 1]
+            + scatter[:, 3 * k + 2] * a[:, 2]
+            for k in range(3)
+        ],
+        axis=1,
+    )
+    curvature = a[:, 0] * scattered[:, 0] + a[:, 1] * scattered[:, 1] + a[:, 2] * scattered[:, 2]
+    curvature -= np.einsum("ki,ki->k", inverse[taxel], scatter)
+    density = normaliser[taxel] * np.exp(-0.5 * d2)
+    voxel_mass = density * (moments.count[voxel] + 0.5 * curvature)
+    mass = np.bincount(taxel, weights=voxel_mass, minlength=count).astype(float)
+    contribution = voxel_mass[:, None] * moments.centroid[voxel] - density[:, None] * scattered
+    weighted_sum = np.stack(
+        [np.bincount(taxel, weights=contribution[:, k], minlength=count) for k in range(3)],
+        axis=1,
+    ).astype(float)
+    inside_any = np.zeros(len(moments.count), dtype=bool)
+    inside_any[voxel] = True
+    return mass, weighted_sum, inside_any
