@@ -467,6 +467,7 @@ class Hand:
                 starts[candidates],
                 ends[candidates],
                 collisionFilterMask=~HAND_COLLISION_GROUP,
+                numThreads=0,  # all cores: the ray tests are independent
                 physicsClientId=self.client,
             )
             bodies = np.fromiter((h[0] for h in hits), dtype=np.int64, count=len(hits))
