@@ -9,7 +9,7 @@ from typing import Literal
 from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.estimation.icp import IcpSettings, icp_fuse
-from pipeline.estimation.problem import stage_estimate
+from pipeline.estimation.problem import estimate_result
 from pipeline.params import param
 from pipeline.types import EstimateResult, EstimationProblem
 
@@ -48,33 +48,7 @@ class IcpEstimator(IekfEstimator):
             max_match_distance_m=p.max_match_distance_m,
             divergence_sigmas=p.divergence_sigmas,
         )
-        initial = stage_estimate(
-            0,
-            fusion.g_init,
-            fusion.covariance_init,
-            fusion.points_m,
-            fusion.pivot_m,
-            0,
-            "initial",
-            time.perf_counter() - started,
-            0,
-        )
-        outcomes = icp_fuse(fusion, settings, last_stage=p.last_stage)
-        stages = [initial] + [
-            stage_estimate(
-                stage,
-                o.g,
-                o.covariance,
-                o.points,
-                fusion.pivot_m,
-                o.iterations,
-                o.status,
-                o.seconds,
-                o.active_points,
-            )
-            for stage, o in enumerate(outcomes, start=1)
-        ]
-        return EstimateResult(stages=tuple(stages))
+        return estimate_result(fusion, icp_fuse(fusion, settings, last_stage=p.last_stage), started)
 
 
 @hookimpl

@@ -15,9 +15,9 @@ from pipeline.estimation.problem import (
     bias_plane_covariance,
     checked_points,
     diagonal_covariance,
+    estimate_result,
     grasp_contacts,
     initial_state,
-    stage_estimate,
 )
 from pipeline.params import param
 from pipeline.stages import Estimator
@@ -183,33 +183,7 @@ class IekfEstimator(Estimator):
         fusion = self.fusion_problem(problem)
         p = self.params
         settings = self.settings()
-        initial = stage_estimate(
-            0,
-            fusion.g_init,
-            fusion.covariance_init,
-            fusion.points_m,
-            fusion.pivot_m,
-            0,
-            "initial",
-            time.perf_counter() - started,
-            0,
-        )
-        outcomes = fuse(fusion, settings, last_stage=p.last_stage)
-        stages = [initial] + [
-            stage_estimate(
-                stage,
-                o.g,
-                o.covariance,
-                o.points,
-                fusion.pivot_m,
-                o.iterations,
-                o.status,
-                o.seconds,
-                o.active_points,
-            )
-            for stage, o in enumerate(outcomes, start=1)
-        ]
-        return EstimateResult(stages=tuple(stages))
+        return estimate_result(fusion, fuse(fusion, settings, last_stage=p.last_stage), started)
 
 
 @hookimpl

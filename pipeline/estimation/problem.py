@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import time
+from collections.abc import Sequence
+
 import numpy as np
 
 from ..errors import StageFailure
 from ..types import (
     Bias,
     Contacts,
+    EstimateResult,
     EstimateStatus,
     EstimationProblem,
     StageEstimate,
@@ -15,7 +19,7 @@ from ..types import (
 )
 from .covariances import normal_ellipsoids
 from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
-from .iekf import GraspContacts
+from .iekf import FusionProblem, GraspContacts, StageOutcome
 
 
 def checked_points(problem: EstimationProblem, estimator: str) -> np.ndarray:
@@ -76,6 +80,39 @@ def stage_estimate(
         seconds=seconds,
         active_points=active_points,
     )
+
+
+def estimate_result(
+    fusion: FusionProblem, outcomes: Sequence[StageOutcome], started_s: float
+) -> EstimateResult:
+    """Stage 0 (the initial state, timed from ``started_s``, a ``time.perf_counter()``
+    reading) followed by the fused stages ``outcomes`` (1, then 2)."""
+    initial = stage_estimate(
+        0,
+        fusion.g_init,
+        fusion.covariance_init,
+        fusion.points_m,
+        fusion.pivot_m,
+        0,
+        "initial",
+        time.perf_counter() - started_s,
+        0,
+    )
+    fused = [
+        stage_estimate(
+            stage,
+            o.g,
+            o.covariance,
+            o.points,
+            fusion.pivot_m,
+            o.iterations,
+            o.status,
+            o.seconds,
+            o.active_points,
+        )
+        for stage, o in enumerate(outcomes, start=1)
+    ]
+    return EstimateResult(stages=(initial, *fused))
 
 
 def diagonal_covariance(stds: tuple[float, ...]) -> np.ndarray:
