@@ -9,7 +9,9 @@ A stage implementation declares its parameters as a frozen dataclass named ``Par
 
 Supported field types: ``bool``, ``int``, ``float``, ``str``, ``Literal[...]`` of str/int,
 and ``tuple[float, ...]`` / ``tuple[int, ...]`` / ``tuple[str, ...]``. An ``int`` is accepted
-where a ``float`` is declared; nothing else is converted silently.
+where a ``float`` is declared; nothing else is converted silently. Numbers may declare a
+bound, ``param(0.001, "...", above=0.0)`` or ``at_least=1``, which :func:`build` enforces
+with an error naming the dotted key.
 """
 
 from __future__ import annotations
@@ -22,9 +24,14 @@ from typing import Any, Literal, get_args, get_origin
 from .errors import ConfigError
 
 
-def param(default: Any, doc: str) -> Any:
-    """Declare a parameter with its default and a one-line description (with units)."""
-    return dataclasses.field(default=default, metadata={"doc": doc})
+def param(
+    default: Any, doc: str, *, above: float | None = None, at_least: float | None = None
+) -> Any:
+    """Declare a parameter with its default, a one-line description (with units) and,
+    for numbers, an optional strict (``above``) or inclusive (``at_least``) lower bound."""
+    return dataclasses.field(
+        default=default, metadata={"doc": doc, "above": above, "at_least": at_least}
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,6 +53,22 @@ def _field_types(params_cls: type) -> dict[str, Any]:
     return typing.get_type_hints(params_cls)
 
 
+def _bound(field: dataclasses.Field) -> str:
+    if field.metadata.get("above") is not None:
+        return f" > {field.metadata['above']:g}"
+    if field.metadata.get("at_least") is not None:
+        return f" >= {field.metadata['at_least']:g}"
+    return ""
+
+
+def _check_bound(field: dataclasses.Field, value: Any, key: str) -> None:
+    above, at_least = field.metadata.get("above"), field.metadata.get("at_least")
+    if above is not None and not value > above:
+        raise ConfigError(f"config key '{key}': must be > {above:g}, got {value!r}")
+    if at_least is not None and not value >= at_least:
+        raise ConfigError(f"config key '{key}': must be >= {at_least:g}, got {value!r}")
+
+
 def _type_name(annotation: Any) -> str:
     if get_origin(annotation) is Literal:
         return " | ".join(repr(a) for a in get_args(annotation))
@@ -58,7 +81,9 @@ def describe(params_cls: type) -> list[ParamInfo]:
     """List the declared parameters of a ``Params`` dataclass."""
     hints = _field_types(params_cls)
     return [
-        ParamInfo(f.name, _type_name(hints[f.name]), f.default, f.metadata.get("doc", ""))
+        ParamInfo(
+            f.name, _type_name(hints[f.name]) + _bound(f), f.default, f.metadata.get("doc", "")
+        )
         for f in dataclasses.fields(params_cls)
     ]
 
@@ -115,8 +140,8 @@ def build(params_cls: type, values: Mapping[str, Any], section: str) -> Any:
         section: dotted config section the values came from, used in error messages.
 
     Raises:
-        ConfigError: an unknown key or a value of the wrong type; the message names the
-            full dotted key.
+        ConfigError: an unknown key, a value of the wrong type or out of its declared
+            bound; the message names the full dotted key.
     """
     hints = _field_types(params_cls)
     known = [f.name for f in dataclasses.fields(params_cls)]
@@ -125,4 +150,12 @@ def build(params_cls: type, values: Mapping[str, Any], section: str) -> Any:
             listing = ", ".join(known) if known else "none"
             raise ConfigError(f"unknown config key '{section}.{key}' (known keys: {listing})")
     converted = {k: _convert(v, hints[k], f"{section}.{k}") for k, v in values.items()}
-    return params_cls(**converted)
+    params = params_cls(**converted)
+    check_bounds(params, section)
+    return params
+
+
+def check_bounds(params: Any, section: str) -> None:
+    """Raise :class:`ConfigError` for any field of ``params`` outside its declared bound."""
+    for field in dataclasses.fields(params):
+        _check_bound(field, getattr(params, field.name), f"{section}.{field.name}")

@@ -23,7 +23,7 @@ from typing import ClassVar, Protocol
 
 import numpy as np
 
-from .params import NoParams
+from .params import NoParams, check_bounds
 from .types import (
     Contacts,
     DepthObservation,
@@ -71,6 +71,7 @@ class StageImplementation(ABC):
 
     def __init__(self, params: object | None = None) -> None:
         self.params = self.Params() if params is None else params
+        check_bounds(self.params, f"{self.stage}.{self.name}")
 
     @classmethod
     def description(cls) -> str:

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 from pipeline import hookimpl
-from pipeline.errors import ConfigError
 from pipeline.estimation.icp import IcpSettings, icp_fuse
 from pipeline.estimation.problem import estimate_result
 from pipeline.params import param
@@ -30,14 +29,9 @@ class IcpEstimator(IekfEstimator):
     @dataclass(frozen=True)
     class Params(IekfEstimator.Params):
         max_match_distance_m: float = param(
-            0.02, "a taxel farther than this from every point has no match (m)"
+            0.02, "a taxel farther than this from every point has no match (m)", above=0.0
         )
         last_stage: Literal[1, 2] = param(2, "1: bias + plane only; 2: also the points")
-
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        if not self.params.max_match_distance_m > 0:
-            raise ConfigError("config key 'estimator.max_match_distance_m': must be > 0")
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         started = time.perf_counter()

@@ -9,7 +9,6 @@ from typing import Literal
 import numpy as np
 
 from pipeline import hookimpl
-from pipeline.errors import ConfigError
 from pipeline.estimation.iekf import FusionProblem, IekfSettings, fuse
 from pipeline.estimation.problem import (
     bias_plane_covariance,
@@ -38,24 +37,27 @@ class IekfEstimator(Estimator):
     @dataclass(frozen=True)
     class Params:
         noise_along_normal_m: float = param(
-            0.001, "R: std along the taxel normal (pad surface position, compliance) (m)"
+            0.001, "R: std along the taxel normal (pad surface position, compliance) (m)", above=0.0
         )
         noise_across_normal_m: float = param(
-            0.003, "R: std within the pad plane (about one taxel pitch) (m)"
+            0.003, "R: std within the pad plane (about one taxel pitch) (m)", above=0.0
         )
         window_along_normal_m: float = param(
-            0.003, "C_t: how far a taxel 'sees' along its normal, std (m)"
+            0.003, "C_t: how far a taxel 'sees' along its normal, std (m)", above=0.0
         )
         window_across_normal_m: float = param(
-            0.0017, "C_t: std across the normal, half the 3.4 mm taxel pitch (m)"
+            0.0017, "C_t: std across the normal, half the 3.4 mm taxel pitch (m)", above=0.0
         )
         prior_b_theta_rad: float = param(
-            0.05, "prior std of the bias yaw: calibration plus object rotation in the grasp (rad)"
+            0.05,
+            "prior std of the bias yaw: calibration plus object rotation in the grasp (rad)",
+            above=0.0,
         )
         prior_b_xy_m: float = param(
             0.01,
             "prior std of each horizontal bias translation component: camera calibration plus "
             "the object sliding on the table as the jaws close (m)",
+            above=0.0,
         )
         prior_b_z_m: float = param(
             0.002,
@@ -63,24 +65,29 @@ class IekfEstimator(Estimator):
             "a top grasp neither lifts it from nor pushes it into, so only the depth "
             "calibration and the table-plane fit (about 1-2 mm) remain; side contacts on "
             "vertical faces barely observe b_z, so a wide prior lets it drift (m)",
+            above=0.0,
         )
         prior_m_r_m: float = param(
             0.0325,
             "prior std of the plane's distance from the pivot (the cloud centroid), "
             "independent of m_theta: half the 65 mm gripper aperture (m)",
+            above=0.0,
         )
         prior_m_theta_rad: float = param(
             0.4,
             "prior std of the plane normal angle m_theta: the initialiser's orientation error "
             "(VC hypotheses, or PCA axes of a nearly round cloud, can be off by tens of "
             "degrees; 23 deg puts a 45 deg error at 2 std, inside the 95 % gate) (rad)",
+            above=0.0,
         )
-        point_std_m: float = param(0.002, "prior std of each cloud point (sensor noise) (m)")
+        point_std_m: float = param(
+            0.002, "prior std of each cloud point (sensor noise) (m)", above=0.0
+        )
         regrasp_b_theta_rad: float = param(
-            0.02, "Q: std of the yaw the object gains when re-grasped (rad)"
+            0.02, "Q: std of the yaw the object gains when re-grasped (rad)", at_least=0.0
         )
         regrasp_b_xyz_m: float = param(
-            0.005, "Q: std of each translation component gained when re-grasped (m)"
+            0.005, "Q: std of each translation component gained when re-grasped (m)", at_least=0.0
         )
         schedule: Literal["standard", "alternative", "hybrid"] = param(
             "hybrid", "correspondence weights: eq. 9, eq. 13, or eq. 13 then eq. 9"
@@ -99,51 +106,25 @@ class IekfEstimator(Estimator):
             "Stage 1 iterates each grasp again with gates narrowed to its first pass's "
             "posterior (False: prior gates only)",
         )
-        max_iterations: int = param(30, "IEKF iteration cap per grasp, stage and pass")
+        max_iterations: int = param(30, "IEKF iteration cap per grasp, stage and pass", at_least=1)
         tolerance_m: float = param(
             1e-4,
             "convergence: largest motion of any completed-model point (front or mirrored) "
             "between iterations, well under the ~2 mm sensor noise (m)",
+            above=0.0,
         )
         max_step_m: float = param(
             0.02,
             "trust region: largest motion of any completed-model point in one iteration; "
             "longer Gauss-Newton steps are shortened (m)",
+            above=0.0,
         )
         divergence_sigmas: float = param(
-            10.0, "diverged when b or m leave this many prior stds around Stage 0"
+            10.0, "diverged when b or m leave this many prior stds around Stage 0", above=0.0
         )
         last_stage: Literal[1, 2] = param(
             2, "1: bias + plane only (result holds stages 0, 1); 2: also the points"
         )
-
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        p = self.params
-        positive = {
-            "noise_along_normal_m": p.noise_along_normal_m,
-            "noise_across_normal_m": p.noise_across_normal_m,
-            "window_along_normal_m": p.window_along_normal_m,
-            "window_across_normal_m": p.window_across_normal_m,
-            "prior_b_theta_rad": p.prior_b_theta_rad,
-            "prior_b_xy_m": p.prior_b_xy_m,
-            "prior_b_z_m": p.prior_b_z_m,
-            "prior_m_r_m": p.prior_m_r_m,
-            "prior_m_theta_rad": p.prior_m_theta_rad,
-            "point_std_m": p.point_std_m,
-            "tolerance_m": p.tolerance_m,
-            "max_step_m": p.max_step_m,
-            "divergence_sigmas": p.divergence_sigmas,
-        }
-        for key, value in positive.items():
-            if not value > 0:
-                raise ConfigError(f"config key 'estimator.{key}': must be > 0, got {value}")
-        if p.regrasp_b_theta_rad < 0 or p.regrasp_b_xyz_m < 0:
-            raise ConfigError("config keys 'estimator.regrasp_*': must be >= 0")
-        if p.max_iterations < 1:
-            raise ConfigError(
-                f"config key 'estimator.max_iterations': must be >= 1, got {p.max_iterations}"
-            )
 
     def fusion_problem(self, problem: EstimationProblem) -> FusionProblem:
         """The kernel's view of ``problem`` under these parameters."""

@@ -32,16 +32,20 @@ class PybulletTaxels(TactileModel):
     @dataclass(frozen=True)
     class Params:
         contact_threshold_m: float = param(
-            0.001, "contact when the object is at most this far past the pad surface (m)"
+            0.001,
+            "contact when the object is at most this far past the pad surface (m)",
+            at_least=0.0,
         )
         ray_behind_m: float = param(
-            0.0015, "rays start this far behind the pad surface, inside the pad (m)"
+            0.0015, "rays start this far behind the pad surface, inside the pad (m)", at_least=0.0
         )
         ray_length_m: float = param(
             0.005, "rays reach this far past the pad surface; >= contact_threshold_m (m)"
         )
         position_noise_std_m: float = param(
-            0.0, "std of isotropic Gaussian noise added to each reported taxel position (m)"
+            0.0,
+            "std of isotropic Gaussian noise added to each reported taxel position (m)",
+            at_least=0.0,
         )
         dead_taxel_probability: float = param(
             0.0, "probability that a taxel in contact reports nothing (per taxel, per read)"
@@ -51,9 +55,6 @@ class PybulletTaxels(TactileModel):
         super().__init__(params)
         p = self.params
         key = f"tactile.{self.name}"
-        for field in ("contact_threshold_m", "ray_behind_m", "position_noise_std_m"):
-            if getattr(p, field) < 0.0:
-                raise ConfigError(f"config key '{key}.{field}' must be >= 0")
         if p.ray_length_m < p.contact_threshold_m:
             raise ConfigError(
                 f"config key '{key}.ray_length_m' ({p.ray_length_m}) must be >= "

@@ -137,3 +137,12 @@ def test_params_reject_bool_for_number_and_accept_int_for_float():
         build(P, {"gain": True}, "s")
     with pytest.raises(ConfigError, match=r"'s.sizes\[1\]': expected int, got str"):
         build(P, {"sizes": [1, "x"]}, "s")
+
+
+def test_declared_bounds_are_enforced_with_the_dotted_key(registry):
+    with pytest.raises(ConfigError) as error:
+        load_config(registry, overrides=["estimator.iekf.point_std_m=0"])
+    assert str(error.value) == "config key 'estimator.iekf.point_std_m': must be > 0, got 0.0"
+    with pytest.raises(ConfigError) as error:
+        load_config(registry, overrides=["estimator.iekf.max_iterations=0"])
+    assert str(error.value) == "config key 'estimator.iekf.max_iterations': must be >= 1, got 0"
