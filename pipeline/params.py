@@ -159,3 +159,9 @@ def check_bounds(params: Any, section: str) -> None:
     """Raise :class:`ConfigError` for any field of ``params`` outside its declared bound."""
     for field in dataclasses.fields(params):
         _check_bound(field, getattr(params, field.name), f"{section}.{field.name}")
+
+
+def project(target_cls: type, params: Any) -> Any:
+    """An instance of the dataclass ``target_cls`` built from the same-named fields of
+    ``params``: how a plugin hands the kernel's own settings type the subset it needs."""
+    return target_cls(**{f.name: getattr(params, f.name) for f in dataclasses.fields(target_cls)})

@@ -9,7 +9,7 @@ from typing import Literal
 from pipeline import hookimpl
 from pipeline.estimation.icp import IcpSettings, icp_fuse
 from pipeline.estimation.problem import estimate_result
-from pipeline.params import param
+from pipeline.params import param, project
 from pipeline.types import EstimateResult, EstimationProblem
 
 from .iekf import IekfEstimator
@@ -37,11 +37,7 @@ class IcpEstimator(IekfEstimator):
         started = time.perf_counter()
         fusion = self.fusion_problem(problem)
         p = self.params
-        settings = IcpSettings(
-            max_iterations=p.max_iterations,
-            max_match_distance_m=p.max_match_distance_m,
-            divergence_sigmas=p.divergence_sigmas,
-        )
+        settings = project(IcpSettings, p)
         return estimate_result(fusion, icp_fuse(fusion, settings, last_stage=p.last_stage), started)
 
 

@@ -18,7 +18,7 @@ from pipeline.estimation.problem import (
     grasp_contacts,
     initial_state,
 )
-from pipeline.params import param
+from pipeline.params import param, project
 from pipeline.stages import Estimator
 from pipeline.types import EstimateResult, EstimationProblem
 
@@ -148,16 +148,7 @@ class IekfEstimator(Estimator):
 
     def settings(self) -> IekfSettings:
         """The kernel's iteration control under these parameters."""
-        p = self.params
-        return IekfSettings(
-            schedule=p.schedule,
-            max_iterations=p.max_iterations,
-            tolerance_m=p.tolerance_m,
-            max_step_m=p.max_step_m,
-            divergence_sigmas=p.divergence_sigmas,
-            exclusive_sides=p.exclusive_sides,
-            refine_gates=p.refine_gates,
-        )
+        return project(IekfSettings, self.params)
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         started = time.perf_counter()

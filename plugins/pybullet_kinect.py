@@ -8,7 +8,7 @@ from typing import Literal
 import numpy as np
 
 from pipeline import hookimpl
-from pipeline.params import param
+from pipeline.params import param, project
 from pipeline.sim.camera import CameraParams, observe
 from pipeline.sim.depth_noise import KinectV1Noise, SimulatedDepth, simulate_kinect_v1
 from pipeline.stages import SensorSource, World
@@ -51,21 +51,7 @@ class PybulletKinect(SensorSource):
     def _corrupt(
         self, depth_m: np.ndarray, intrinsics: CameraIntrinsics, rng: np.random.Generator
     ) -> SimulatedDepth:
-        p = self.params
-        noise = KinectV1Noise(
-            baseline_m=p.baseline_m,
-            disparity_step_px=p.disparity_step_px,
-            min_range_m=p.min_range_m,
-            max_range_m=p.max_range_m,
-            axial_model=p.axial_model,
-            disparity_sigma_px=p.disparity_sigma_px,
-            axial_noise=p.axial_noise,
-            lateral_noise=p.lateral_noise,
-            shadows=p.shadows,
-            max_incidence_deg=p.max_incidence_deg,
-            edge_jump_px=p.edge_jump_px,
-            edge_margin_px=p.edge_margin_px,
-        )
+        noise = project(KinectV1Noise, self.params)
         return simulate_kinect_v1(depth_m, intrinsics, rng, noise)
 
     def observe(self, world: World) -> DepthObservation:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline import hookimpl
-from pipeline.params import param
+from pipeline.params import param, project
 from pipeline.sim.camera import CameraParams, observe
 from pipeline.sim.depth_noise import SimulatedDepth, StereoNoise, simulate_stereo
 from pipeline.stages import SensorSource, World
@@ -45,18 +45,7 @@ class PybulletStereo(SensorSource):
     def _corrupt(
         self, depth_m: np.ndarray, intrinsics: CameraIntrinsics, rng: np.random.Generator
     ) -> SimulatedDepth:
-        p = self.params
-        noise = StereoNoise(
-            baseline_m=p.baseline_m,
-            disparity_sigma_px=p.disparity_sigma_px,
-            disparity_step_px=p.disparity_step_px,
-            min_range_m=p.min_range_m,
-            max_range_m=p.max_range_m,
-            axial_noise=p.axial_noise,
-            occlusions=p.occlusions,
-            edge_jump_px=p.edge_jump_px,
-            edge_margin_px=p.edge_margin_px,
-        )
+        noise = project(StereoNoise, self.params)
         return simulate_stereo(depth_m, intrinsics, rng, noise)
 
     def observe(self, world: World) -> DepthObservation:
