@@ -106,6 +106,12 @@ class IekfEstimator(Estimator):
             "Stage 1 iterates each grasp again with gates narrowed to its first pass's "
             "posterior (False: prior gates only)",
         )
+        gate_tolerance_m: float = param(
+            1e-3,
+            "convergence of Stage 1's first pass (prior gates) when refine_gates is on: it only "
+            "narrows the gates and starts the second pass, which converges to tolerance_m (m)",
+            above=0.0,
+        )
         max_iterations: int = param(30, "IEKF iteration cap per grasp, stage and pass", at_least=1)
         tolerance_m: float = param(
             1e-4,

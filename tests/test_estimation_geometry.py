@@ -10,6 +10,7 @@ from pipeline.estimation.correspondences import (
     GATE_CHI2_3DOF_95,
     PointIndex,
     _mahalanobis_nearest,
+    alternative_centres,
     find_correspondences,
     side_covariances,
     vector_median,
@@ -101,6 +102,36 @@ def test_mahalanobis_nearest_matches_brute_force():
     all_d2 = np.einsum("tni,tij,tnj->tn", offsets, inverse, offsets)
     np.testing.assert_array_equal(chosen, np.argsort(all_d2, axis=1)[:, :5])
     np.testing.assert_allclose(d2, np.sort(all_d2, axis=1)[:, :5])
+
+
+def test_alternative_centres_match_brute_force():
+    """Eq. 13: the vector median of the five Mahalanobis-closest images over both sides."""
+    angle = RNG.uniform(np.pi / 2, 3 * np.pi / 2, 4000)
+    points = np.column_stack(
+        [0.04 * np.cos(angle), 0.04 * np.sin(angle), RNG.uniform(0, 0.1, 4000)]
+    )
+    taxels = np.array([[-0.041, 0.002, 0.05], [0.0415, -0.003, 0.04], [0.043, 0.001, 0.06]])
+    window = normal_ellipsoids(np.tile([1.0, 0.0, 0.0], (3, 1)), 0.006, 0.0015)
+    g = np.array([0.02, 0.001, -0.002, 0.0, 0.004, 0.05])
+    pivot = points.mean(axis=0)
+    state_covariance = np.diag([0.02, 0.003, 0.003, 0.001, 0.008, 0.1]) ** 2
+    covariances = tuple(
+        side_covariances(taxels, window, g, pivot, state_covariance, back) for back in (False, True)
+    )
+    got = alternative_centres(PointIndex(points), points, g, pivot, taxels, covariances, 0.0)
+    images = np.concatenate([apply_side(points, g, pivot, back) for back in (False, True)])
+    for i, taxel in enumerate(taxels):
+        d2 = np.concatenate(
+            [
+                np.einsum(
+                    "ni,ij,nj->n", side - taxel, np.linalg.inv(covariances[b][i]), side - taxel
+                )
+                for b, side in enumerate(np.split(images, 2))
+            ]
+        )
+        closest = images[np.argsort(d2)[:5]]
+        summed = np.linalg.norm(closest[:, None] - closest[None], axis=-1).sum(axis=1)
+        np.testing.assert_allclose(got[i], closest[np.argmin(summed)], atol=1e-12)
 
 
 def test_standard_weights_match_dense_gaussian_densities():

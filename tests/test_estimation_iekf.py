@@ -74,6 +74,25 @@ def test_stacked_jacobian_matches_central_differences(scene):
     assert not np.any(analytic[:, unused])
 
 
+def test_point_jacobian_products_match_the_dense_matrix(scene):
+    problem = fusion_problem(scene, G_INIT)
+    measurement = _frozen(scene, problem, G_INIT, scene.points_m)
+    jacobian = linearise(measurement, G_INIT, scene.points_m, problem.pivot_m, True).point_jacobian
+    local = jacobian.points()
+    variance = np.random.default_rng(5).uniform(1e-6, 4e-6, len(local))
+    dense = jacobian.dense(len(scene.points_m))[:, (3 * local[:, None] + np.arange(3)).ravel()]
+    np.testing.assert_allclose(
+        jacobian.weighted_gram(local, variance),
+        dense @ np.diag(np.repeat(variance, 3)) @ dense.T,
+        rtol=1e-12,
+        atol=1e-18,
+    )
+    vector = np.random.default_rng(6).normal(size=len(dense))
+    np.testing.assert_allclose(
+        jacobian.transpose_times(local, vector).ravel(), dense.T @ vector, rtol=1e-12, atol=1e-15
+    )
+
+
 def test_one_iteration_equals_filterpy_ekf_update(scene):
     problem = fusion_problem(scene, G_INIT)
     points = scene.points_m

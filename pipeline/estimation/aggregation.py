@@ -124,9 +124,10 @@ def gaussian_sums(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Gated mass and weighted sum of every centre over the aggregated cloud.
 
-    Candidate voxels come from a KD-tree over the centroids in voxel units (where the gates
-    are about equally wide along every axis): each centre's ball circumscribes its gate's
-    axis-aligned bounding box; every candidate is then tested exactly on its centroid.
+    Candidate voxels come from KD-trees over the centroids and the centres in voxel units
+    (where the gates are about equally wide along every axis), in one tree-to-tree query
+    whose radius is the longest semi-axis of any gate there; every candidate is then tested
+    exactly on its centroid.
 
     Args:
         moments: the voxel moments of the points.
@@ -141,41 +142,26 @@ def gaussian_sums(
         voxels inside some gate.
     """
     count = len(centres)
-    half_box = np.sqrt(GATE_CHI2_3DOF_95 * np.diagonal(covariances, axis1=1, axis2=2))
-    radii = np.linalg.norm(half_box / moments.size_m, axis=1)
-    found = moments.tree().query_ball_point(centres / moments.size_m, radii, return_sorted=False)
-    lengths = np.array([len(f) for f in found], dtype=np.int64)
-    taxel = np.repeat(np.arange(count), lengths)
-    voxel = np.concatenate([np.asarray(f, dtype=np.int64) for f in found] + [np.empty(0, int)])
-    inverse = np.linalg.inv(covariances).reshape(count, 9)
-    offsets = moments.centroid[voxel] - centres[taxel]
-    rows = inverse[taxel]
-    a = np.stack(
-        [
-            rows[:, 3 * k] * offsets[:, 0]
-            + rows[:, 3 * k + 1] * offsets[:, 1]
-            + rows[:, 3 * k + 2] * offsets[:, 2]
-            for k in range(3)
-        ],
-        axis=1,
+    in_voxel_units = covariances / np.outer(moments.size_m, moments.size_m)[None]
+    longest = np.max(np.linalg.eigvalsh(in_voxel_units)[:, -1], initial=0.0)
+    radius = float(np.sqrt(GATE_CHI2_3DOF_95 * longest))
+    pairs = cKDTree(centres / moments.size_m).sparse_distance_matrix(
+        moments.tree(), radius, output_type="ndarray"
     )
-    d2 = offsets[:, 0] * a[:, 0] + offsets[:, 1] * a[:, 1] + offsets[:, 2] * a[:, 2]
+    taxel, voxel = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    inverse = np.linalg.inv(covariances)
+    offsets = moments.centroid[voxel] - centres[taxel]
+    a = np.einsum("kij,kj->ki", inverse[taxel], offsets)
+    d2 = np.einsum("ki,ki->k", offsets, a)
     inside = d2 < GATE_CHI2_3DOF_95
     if allowed is not None:
         inside &= allowed(taxel, voxel)
     taxel, voxel, a, d2 = taxel[inside], voxel[inside], a[inside], d2[inside]
-    scatter = moments.scatter[voxel].reshape(-1, 9)
-    scattered = np.stack(
-        [
-            scatter[:, 3 * k] * a[:, 0]
-            + scatter[:, 3 * k + 1] * a[:, 1]
-            + scatter[:, 3 * k + 2] * a[:, 2]
-            for k in range(3)
-        ],
-        axis=1,
+    scatter = moments.scatter[voxel]
+    scattered = np.einsum("kij,kj->ki", scatter, a)
+    curvature = np.einsum("ki,ki->k", a, scattered) - np.einsum(
+        "kij,kij->k", inverse[taxel], scatter
     )
-    curvature = a[:, 0] * scattered[:, 0] + a[:, 1] * scattered[:, 1] + a[:, 2] * scattered[:, 2]
-    curvature -= np.einsum("ki,ki->k", inverse[taxel], scatter)
     density = normaliser[taxel] * np.exp(-0.5 * d2)
     voxel_mass = density * (moments.count[voxel] + 0.5 * curvature)
     mass = np.bincount(taxel, weights=voxel_mass, minlength=count).astype(float)

@@ -123,6 +123,8 @@ class IekfSettings:
         exclusive_sides: explain each taxel by its better-supported side only.
         refine_gates: Stage 1 iterates each grasp a second time with gates narrowed to the
             first pass's posterior (see the module docstring).
+        gate_tolerance_m: with ``refine_gates``, the first pass stops once the model moves
+            less than this (m); the second pass converges to ``tolerance_m``.
     """
 
     schedule: Schedule = "hybrid"
@@ -132,6 +134,7 @@ class IekfSettings:
     divergence_sigmas: float = 10.0
     exclusive_sides: bool = True
     refine_gates: bool = True
+    gate_tolerance_m: float = 1e-3
 
 
 @dataclass(frozen=True)
@@ -383,16 +386,19 @@ def run_stage(
             points,
             problem.pivot_m,
             contacts,
-            settings,
             move_points=stage == 2,
             sane_centre=problem.g_init,
             sane_halfwidth=halfwidth,
             point_variance_m2=problem.point_variance_m2,
         )
-        result = update(g_start=g_start, gate_covariance=gate)
-        if stage == 1 and settings.refine_gates and result.gain is not None:
+        refine = stage == 1 and settings.refine_gates
+        first_pass = settings
+        if refine:
+            first_pass = replace(settings, tolerance_m=settings.gate_tolerance_m)
+        result = update(settings=first_pass, g_start=g_start, gate_covariance=gate)
+        if refine and result.gain is not None:
             posterior = result.gain.bias_plane_posterior()
-            refined = update(g_start=result.g, gate_covariance=posterior)
+            refined = update(settings=settings, g_start=result.g, gate_covariance=posterior)
             if refined.gain is not None:
                 result = replace(refined, iterations=result.iterations + refined.iterations)
         if result.gain is not None:

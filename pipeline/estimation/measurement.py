@@ -182,6 +182,34 @@ class PointJacobian:
         )
         return np.einsum("bij,bj->bi", self.block_matrix, summed).ravel()
 
+    def weighted_gram(self, local_points: np.ndarray, variance: np.ndarray) -> np.ndarray:
+        """``H_p D H_p^T`` for ``D = diag(variance) (x) I_3`` over ``local_points``, (3B, 3B).
+
+        With isotropic point blocks the product factors into the scalar Gram matrix
+        ``G = C diag(variance) C^T`` of the pair coefficients (B x B, one sparse product
+        with K non-zeros) and block ``(b, c) = G_bc M_b M_c^T``; forming ``H_p`` with its
+        3 x 3 blocks would cost nine times the memory and 27 times the arithmetic.
+
+        Args:
+            local_points: sorted indices of the points with a column block.
+            variance: ``(U,)`` isotropic variance of each of those points (m^2).
+        """
+        local = np.searchsorted(local_points, self.pair_point)
+        shape = (self.n_blocks, len(local_points))
+        coefficients = scipy.sparse.csr_matrix((self.coefficient, (self.pair_block, local)), shape)
+        gram = (coefficients.multiply(variance[None, :]) @ coefficients.T).toarray()
+        blocks = np.einsum("bc,bij,ckj->bick", gram, self.block_matrix, self.block_matrix)
+        return blocks.reshape(3 * self.n_blocks, 3 * self.n_blocks)
+
+    def transpose_times(self, local_points: np.ndarray, vector: np.ndarray) -> np.ndarray:
+        """``H_p^T v`` over ``local_points`` (sorted), for ``v`` of shape (3B,); (U, 3)."""
+        local = np.searchsorted(local_points, self.pair_point)
+        per_block = np.einsum("bji,bj->bi", self.block_matrix, vector.reshape(-1, 3))
+        per_pair = self.coefficient[:, None] * per_block[self.pair_block]
+        return np.stack(
+            [np.bincount(local, per_pair[:, k], len(local_points)) for k in range(3)], axis=1
+        )
+
     def sparse(self, local_points: np.ndarray) -> scipy.sparse.csr_matrix:
         """``H_p`` restricted to the columns of ``local_points`` (sorted), (3B, 3U)."""
         local = np.searchsorted(local_points, self.pair_point)

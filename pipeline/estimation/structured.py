@@ -67,19 +67,18 @@ class StructuredGain:
     ) -> None:
         self._covariance = covariance
         self._h_g = linearisation.bias_plane_jacobian
-        point_jacobian = linearisation.point_jacobian
-        if point_jacobian is None:
+        self._point_jacobian = linearisation.point_jacobian
+        self._h_p: scipy.sparse.csr_matrix | None = None
+        if self._point_jacobian is None:
             self._local = np.empty(0, dtype=np.int64)
-            self._h_p = scipy.sparse.csr_matrix((len(self._h_g), 0))
         else:
-            self._local = point_jacobian.points()
-            self._h_p = point_jacobian.sparse(self._local)
-        local_variance = np.repeat(covariance.point_variance[self._local], 3)
-        #: ``H_p D`` with ``D`` the local points' prior variances: the point part of H B.
-        self._h_p_base = self._h_p.multiply(local_variance[None, :]).tocsr()
+            self._local = self._point_jacobian.points()
+        #: ``D``: the local points' prior variances, the point part of ``B``.
+        self._local_variance = covariance.point_variance[self._local]
 
         innovation = self._h_g @ covariance.base_bias_plane @ self._h_g.T + block_diagonal(noise)
-        innovation += (self._h_p_base @ self._h_p.T).toarray()
+        if self._point_jacobian is not None:
+            innovation += self._point_jacobian.weighted_gram(self._local, self._local_variance)
         self._cross = []  # W_k = H V_k^T, (rows, rows_k)
         coupled = [self._local]
         for downdate in covariance.downdates:
@@ -94,12 +93,18 @@ class StructuredGain:
                 )
                 if common.size:
                     block = downdate.factor[:, BIAS_PLANE_DIM + columns3(in_downdate)]
-                    cross = cross + self._h_p[:, columns3(in_local)] @ block.T
+                    cross = cross + self._point_columns()[:, columns3(in_local)] @ block.T
             innovation -= cross @ cross.T
             self._cross.append(cross)
         self._cholesky = scipy.linalg.cho_factor(innovation, lower=True)
         #: Sorted indices of every point the gain can move: this A and earlier grasps' A.
         self.points = np.unique(np.concatenate(coupled))
+
+    def _point_columns(self) -> scipy.sparse.csr_matrix:
+        """``H_p`` over the local points (3B, 3U), built on first use (several grasps only)."""
+        if self._h_p is None:
+            self._h_p = self._point_jacobian.sparse(self._local)
+        return self._h_p
 
     def _scatter(self, target: np.ndarray, points: np.ndarray, values: np.ndarray) -> None:
         """Add values laid out over ``points`` into ``target`` laid out over ``self.points``."""
@@ -118,7 +123,9 @@ class StructuredGain:
         alpha = scipy.linalg.cho_solve(self._cholesky, innovation)
         delta_g = self._covariance.base_bias_plane @ (self._h_g.T @ alpha)
         delta_p = np.zeros(3 * len(self.points))
-        self._scatter(delta_p, self._local, self._h_p_base.T @ alpha)
+        if self._point_jacobian is not None:
+            moved = self._point_jacobian.transpose_times(self._local, alpha)
+            self._scatter(delta_p, self._local, (self._local_variance[:, None] * moved).ravel())
         for downdate, cross in self._pairs():
             coefficients = cross.T @ alpha
             delta_g -= downdate.factor[:, :BIAS_PLANE_DIM].T @ coefficients
@@ -150,7 +157,9 @@ class StructuredGain:
         product = np.zeros((len(self._h_g), BIAS_PLANE_DIM + 3 * len(self.points)))
         product[:, :BIAS_PLANE_DIM] = self._h_g @ self._covariance.base_bias_plane
         point_part = product[:, BIAS_PLANE_DIM:]
-        self._scatter(point_part, self._local, self._h_p_base.toarray())
+        if self._local.size:
+            variance = np.repeat(self._local_variance, 3)
+            self._scatter(point_part, self._local, self._point_columns().toarray() * variance)
         for downdate, cross in self._pairs():
             product[:, :BIAS_PLANE_DIM] -= cross @ downdate.factor[:, :BIAS_PLANE_DIM]
             self._scatter(point_part, downdate.points, -cross @ downdate.factor[:, BIAS_PLANE_DIM:])

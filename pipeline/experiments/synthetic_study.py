@@ -33,6 +33,7 @@ import numpy as np
 
 from ..metrics import diameter_error
 from ..plots import GridPanel, error_grid_figure
+from ..runner import run_estimator
 from ..stages import Estimator
 from ..sweep import write_csv
 from ..synthetic import make_case
@@ -152,7 +153,7 @@ def run_trial(params: Mapping[str, Any]) -> dict[str, Any]:
         bias_direction_rad=math.radians(params["bias_direction_deg"]),
     )
     estimator = make_estimator(params["estimator"], params["estimator_params"])
-    result = estimator.estimate(case.problem)
+    result = run_estimator(estimator, case.problem)
     row: dict[str, Any] = {"points": len(case.cloud), "contacts": len(case.contacts)}
     for stage in result.stages:
         prefix = f"stage{stage.stage}"
