@@ -198,8 +198,9 @@ class PointJacobian:
         shape = (self.n_blocks, len(local_points))
         coefficients = scipy.sparse.csr_matrix((self.coefficient, (self.pair_block, local)), shape)
         gram = (coefficients.multiply(variance[None, :]) @ coefficients.T).toarray()
-        blocks = np.einsum("bc,bij,ckj->bick", gram, self.block_matrix, self.block_matrix)
-        return blocks.reshape(3 * self.n_blocks, 3 * self.n_blocks)
+        stacked = self.block_matrix.reshape(3 * self.n_blocks, 3)
+        # (stacked @ stacked.T) holds M_b M_c^T in block (b, c).
+        return (stacked @ stacked.T) * np.repeat(np.repeat(gram, 3, axis=0), 3, axis=1)
 
     def transpose_times(self, local_points: np.ndarray, vector: np.ndarray) -> np.ndarray:
         """``H_p^T v`` over ``local_points`` (sorted), for ``v`` of shape (3B,); (U, 3)."""
