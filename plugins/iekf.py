@@ -98,7 +98,8 @@ class IekfEstimator(Estimator):
         facing_filter: bool = param(
             True,
             "a taxel only weighs cloud points whose surface normal has an elevation within "
-            "about 45 deg of its own (a side pad cannot touch the top face); False: eq. 9 as "
+            "about 45 deg of its own (a side pad cannot touch the top face) and, on the front, "
+            "a horizontal direction within about 45 deg after the bias yaw; False: eq. 9 as "
             "in the paper",
         )
         refine_gates: bool = param(

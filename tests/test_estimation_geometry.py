@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import ConvexHull
 from scipy.stats import multivariate_normal
 
 from pipeline.estimation.correspondences import (
@@ -18,6 +19,7 @@ from pipeline.estimation.correspondences import (
 from pipeline.estimation.covariances import normal_ellipsoids
 from pipeline.estimation.geometry import (
     apply_side,
+    image_step_bound,
     invert_side,
     rebase_bias_translation,
     side_jacobian,
@@ -83,6 +85,29 @@ def test_normal_ellipsoid_eigenstructure():
     np.testing.assert_allclose(ellipsoid @ normal[0], 1e-6 * normal[0], atol=1e-15)
     tangent = np.array([1.0, 0.0, 0.0])
     np.testing.assert_allclose(ellipsoid @ tangent, 9e-6 * tangent, atol=1e-15)
+
+
+def test_image_step_bound_is_the_largest_motion_over_the_hull_and_its_margin():
+    points = RNG.normal(0.0, 0.04, (2000, 3))
+    vertices = points[ConvexHull(points).vertices]
+    g_new = G + np.array([0.02, 0.001, -0.003, 0.0005, 0.004, -0.05])
+
+    def largest_motion(cloud):
+        return max(
+            np.max(
+                np.linalg.norm(
+                    apply_side(cloud, g_new, PIVOT, b) - apply_side(cloud, G, PIVOT, b), axis=1
+                )
+            )
+            for b in (False, True)
+        )
+
+    assert image_step_bound(vertices, G, g_new, PIVOT) == pytest.approx(largest_motion(points))
+    margin = 0.01
+    offsets = RNG.normal(size=points.shape)
+    shifted = points + margin * offsets / np.linalg.norm(offsets, axis=1, keepdims=True)
+    bound = image_step_bound(vertices, G, g_new, PIVOT, margin)
+    assert largest_motion(shifted) <= bound < largest_motion(points) + 2 * margin * 0.1
 
 
 def test_vector_median_picks_the_central_member():

@@ -137,28 +137,33 @@ def box_corners(lower_m: np.ndarray, upper_m: np.ndarray) -> np.ndarray:
 
 
 def image_step_bound(
-    corners_m: np.ndarray, g_old: np.ndarray, g_new: np.ndarray, pivot_m: np.ndarray
+    vertices_m: np.ndarray,
+    g_old: np.ndarray,
+    g_new: np.ndarray,
+    pivot_m: np.ndarray,
+    margin_m: float = 0.0,
 ) -> float:
-    """Largest distance (m) any point of a box moves, front (``f_b``) or mirrored (``f_mb``),
-    when ``g`` changes from ``g_old`` to ``g_new``.
+    """Largest distance (m) any point moves, front (``f_b``) or mirrored (``f_mb``), when
+    ``g`` changes from ``g_old`` to ``g_new``, over every point within ``margin_m`` of the
+    convex hull of ``vertices_m``.
 
-    For a fixed pair of states ``f(p; g_new) - f(p; g_old)`` is affine in ``p``, so its norm
-    is convex and its maximum over the box is reached at a corner: the value bounds the
-    motion of every model point inside the box. It turns angular steps into metres through
-    the real lever arm (about the pivot for ``b_theta``, about the plane for ``m_theta``).
+    For a fixed pair of states ``f(p; g_new) - f(p; g_old) = D p + e`` is affine in ``p``,
+    so its norm is convex and its maximum over a convex polytope is reached at a vertex; a
+    point ``q = p + d`` with ``|d| <= margin_m`` moves at most ``||D||_2 margin_m`` more. It
+    turns angular steps into metres through the real lever arm (about the pivot for
+    ``b_theta``, about the plane for ``m_theta``).
     """
-    return max(
-        float(
-            np.max(
-                np.linalg.norm(
-                    apply_side(corners_m, g_new, pivot_m, back)
-                    - apply_side(corners_m, g_old, pivot_m, back),
-                    axis=1,
-                )
-            )
+    bounds = []
+    for back in (False, True):
+        moved = apply_side(vertices_m, g_new, pivot_m, back) - apply_side(
+            vertices_m, g_old, pivot_m, back
         )
-        for back in (False, True)
-    )
+        linear_change = side_linear_part(g_new, back) - side_linear_part(g_old, back)
+        bounds.append(
+            float(np.max(np.linalg.norm(moved, axis=1)))
+            + margin_m * float(np.linalg.norm(linear_change, ord=2))
+        )
+    return max(bounds)
 
 
 def rebase_bias_translation(

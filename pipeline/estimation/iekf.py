@@ -76,7 +76,7 @@ from .correspondences import (
     exclusive_sides,
     find_correspondences,
 )
-from .geometry import box_corners, image_step_bound
+from .geometry import image_step_bound
 from .measurement import Linearisation, freeze, linearise
 from .structured import StructuredCovariance
 
@@ -227,6 +227,7 @@ def _correspondences(
     use_alternative: bool,
     exclusive: bool,
     need_pairs: bool,
+    facing_g: np.ndarray,
 ) -> Correspondences:
     found = find_correspondences(
         index,
@@ -239,6 +240,7 @@ def _correspondences(
         alternative=use_alternative,
         need_pairs=need_pairs,
         taxel_normals=contacts.normals,
+        facing_g=facing_g,
     )
     return exclusive_sides(found) if exclusive else found
 
@@ -266,42 +268,29 @@ def update_grasp(
         return _GraspResult(g_prior, points_prior, "no_correspondence", 0, 0)
     g_i = np.array(g_start, dtype=float)
     points_i = points_prior.copy() if move_points else points_prior
-    lower_m, upper_m = points_prior.min(axis=0), points_prior.max(axis=0)
     point_limit_m = settings.divergence_sigmas * np.sqrt(point_variance_m2)
     moved = np.empty(0, dtype=np.int64)
-    spread_m = 0.0
     use_alternative = settings.schedule != "standard"
-    exclusive = settings.exclusive_sides
     gain, status = None, "max_iterations"
     iterations = 0
+    correspond = partial(
+        _correspondences,
+        index,
+        pivot_m=pivot_m,
+        contacts=contacts,
+        gate_covariance=gate_covariance,
+        exclusive=settings.exclusive_sides,
+        need_pairs=move_points,
+        facing_g=g_start,
+    )
     for iterations in range(1, settings.max_iterations + 1):
         corr = None
         if settings.schedule == "hybrid" and use_alternative:
-            standard = _correspondences(
-                index,
-                points_i,
-                g_i,
-                pivot_m,
-                contacts,
-                gate_covariance,
-                False,
-                exclusive,
-                move_points,
-            )
+            standard = correspond(points_i, g_i, use_alternative=False)
             if every_pad_supported(standard, contacts.pads):
                 use_alternative, corr = False, standard
         if corr is None:
-            corr = _correspondences(
-                index,
-                points_i,
-                g_i,
-                pivot_m,
-                contacts,
-                gate_covariance,
-                use_alternative,
-                exclusive,
-                move_points,
-            )
+            corr = correspond(points_i, g_i, use_alternative=use_alternative)
         if not corr.supported_taxels().any():
             return _GraspResult(g_prior, points_prior, "no_correspondence", iterations, 0)
         measurement = freeze(corr, contacts.positions_m, contacts.noise)
@@ -320,8 +309,9 @@ def update_grasp(
         if move_points:
             target[np.searchsorted(touched, step_points)] += delta_p
         point_steps_m = np.linalg.norm(target - before, axis=1)
-        corners_m = box_corners(lower_m - spread_m, upper_m + spread_m)
-        model_step_m = image_step_bound(corners_m, g_i, g_next, pivot_m) + float(
+        vertices_m, margin_m = index.hull()
+        margin_m += index.displacement_bound(points_i)
+        model_step_m = image_step_bound(vertices_m, g_i, g_next, pivot_m, margin_m) + float(
             np.max(point_steps_m, initial=0.0)
         )
         if model_step_m > settings.max_step_m:
@@ -334,7 +324,6 @@ def update_grasp(
             points_i[touched] = target
             offsets_m = np.linalg.norm(target - points_prior[touched], axis=1)
             sane_points = bool(np.all(offsets_m <= point_limit_m[touched]))
-            spread_m = float(np.max(offsets_m, initial=0.0))
             moved = touched
             index.note_moved(moved)
         sane = sane_points and np.all(np.abs(g_next - sane_centre) <= sane_halfwidth)
