@@ -64,7 +64,7 @@ class PointIndex:
 
     def __init__(self, reference_points: np.ndarray) -> None:
         self.reference = reference_points
-        self.tree = cKDTree(reference_points)
+        self.tree = cKDTree(reference_points, balanced_tree=False)
         self.diagonal_m = float(np.linalg.norm(self.tree.maxes - self.tree.mins))
         self._moved = np.empty(0, dtype=np.int64)
         self._moments: dict[tuple[tuple[int, ...], bool | None], VoxelMoments] = {}
