@@ -159,6 +159,15 @@ def test_alternative_centres_match_brute_force():
         np.testing.assert_allclose(got[i], closest[np.argmin(summed)], atol=1e-12)
 
 
+def _gated_densities(images, centre, covariance):
+    """Dense oracle of eq. 9: scipy's Gaussian density of every image, zero outside the gate."""
+    offsets = images - centre
+    d2 = np.einsum("ni,ij,nj->n", offsets, np.linalg.inv(covariance), offsets)
+    densities = multivariate_normal(centre, covariance).pdf(images)
+    densities[d2 >= GATE_CHI2_3DOF_95] = 0.0
+    return densities
+
+
 def test_standard_weights_match_dense_gaussian_densities():
     points = RNG.uniform(-0.03, 0.03, (2000, 3))
     taxels = RNG.uniform(-0.02, 0.02, (6, 3))
@@ -172,10 +181,7 @@ def test_standard_weights_match_dense_gaussian_densities():
         covariance = side_covariances(taxels, window, G, PIVOT, state_covariance, side.back)
         images = apply_side(points, G, PIVOT, side.back)
         for i in range(len(taxels)):
-            offsets = images - taxels[i]
-            d2 = np.einsum("ni,ij,nj->n", offsets, np.linalg.inv(covariance[i]), offsets)
-            expected = multivariate_normal(taxels[i], covariance[i]).pdf(images)
-            expected[d2 >= GATE_CHI2_3DOF_95] = 0.0
+            expected = _gated_densities(images, taxels[i], covariance[i])
             got = np.zeros(len(points))
             got[side.point[side.taxel == i]] = side.weight[side.taxel == i]
             np.testing.assert_allclose(got, expected, rtol=1e-9)
@@ -207,10 +213,7 @@ def test_wide_gate_sums_match_dense_gaussian_densities(need_pairs):
         covariance = side_covariances(taxels, window, G, PIVOT, state_covariance, side.back)
         images = apply_side(points, G, PIVOT, side.back)
         for i in range(len(taxels)):
-            offsets = images - taxels[i]
-            d2 = np.einsum("ni,ij,nj->n", offsets, np.linalg.inv(covariance[i]), offsets)
-            expected = multivariate_normal(taxels[i], covariance[i]).pdf(images)
-            expected[d2 >= GATE_CHI2_3DOF_95] = 0.0
+            expected = _gated_densities(images, taxels[i], covariance[i])
             active |= expected > 0
             assert side.mass[i] == pytest.approx(expected.sum(), rel=1e-9)
             np.testing.assert_allclose(side.weighted_sum[i], expected @ points, rtol=1e-9)

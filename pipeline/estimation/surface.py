@@ -87,21 +87,15 @@ def any_azimuth(labels: np.ndarray) -> np.ndarray:
     )
 
 
-def _voxel_normals(points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unit normal of each point's voxel scatter, whether it is trusted, and the voxel of
-    every point."""
+def point_labels(points_m: np.ndarray) -> np.ndarray:
+    """:func:`facing_labels` of every point's voxel normal (the scatter's least eigenvector),
+    (N,) int (:data:`UNKNOWN_BAND` where the voxel is sparse or not planar)."""
     moments = voxel_moments(points_m, np.full(3, NORMAL_VOXEL_M))
     eigenvalues, eigenvectors = np.linalg.eigh(moments.scatter)
     planar = eigenvalues[:, 0] <= PLANARITY_RATIO * eigenvalues[:, 1]
     trusted = (moments.count >= NORMAL_MIN_POINTS) & planar
-    return eigenvectors[:, :, 0], trusted, moments.voxel_of_point
-
-
-def point_labels(points_m: np.ndarray) -> np.ndarray:
-    """:func:`facing_labels` of every point's voxel normal, (N,) int (:data:`UNKNOWN_BAND`
-    where the voxel is sparse or not planar)."""
-    normals, trusted, voxel_of_point = _voxel_normals(points_m)
-    return np.where(trusted, facing_labels(normals), UNKNOWN_BAND)[voxel_of_point]
+    labels = np.where(trusted, facing_labels(eigenvectors[:, :, 0]), UNKNOWN_BAND)
+    return labels[moments.voxel_of_point]
 
 
 def compatible(point_label: np.ndarray, taxel_label: np.ndarray) -> np.ndarray:
