@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .captures import Capture, checked_depth, depth_from_organised
+from .captures import Capture, check_organised, checked_depth, depth_from_organised
 from .errors import InputError
 from .types import CameraIntrinsics
 
@@ -65,13 +65,7 @@ def cloud_points(message: Any, where: str) -> tuple[np.ndarray, np.ndarray | Non
         {"names": names, "formats": formats, "offsets": offsets, "itemsize": message.point_step}
     )
     height, width = int(message.height), int(message.width)
-    if height * width == 0:
-        raise InputError(f"{where}: the capture is empty (PointCloud2 of {width}x{height})")
-    if height == 1:
-        raise InputError(
-            f"{where}: the PointCloud2 is not organised (height 1, {width} points); "
-            "completion needs a depth image: an organised cloud or an Image + CameraInfo"
-        )
+    check_organised(width, height, where)
     data = np.frombuffer(bytes(message.data), dtype=np.uint8).reshape(height, message.row_step)
     rows = data[:, : width * message.point_step].copy().view(dtype).reshape(height, width)
     points = np.stack([rows[name].astype(np.float64) for name in "xyz"], axis=-1)

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .formats import read_camera
+from .formats import read_camera, require_file
 from .types import CameraIntrinsics
 
 #: A median depth above this many metres means the values are millimetres (a depth
@@ -111,6 +111,18 @@ def depth_from_organised(points: np.ndarray, where: str) -> tuple[np.ndarray, Ca
     return depth, CameraIntrinsics(width, height, fx, fy, cx, cy)
 
 
+def check_organised(width: int, height: int, where: str) -> None:
+    """Reject an empty or unorganised (one-row) cloud of ``width x height`` points."""
+    if width * height == 0:
+        raise InputError(f"{where}: the capture is empty ({width}x{height} points)")
+    if height == 1:
+        raise InputError(
+            f"{where}: the cloud is not organised (height 1, {width} points); completion "
+            "needs a depth image: an organised cloud (width x height pixels), a depth image "
+            "with camera.json, or a bag's Image or organised PointCloud2"
+        )
+
+
 def _pcd_header(path: Path) -> dict[str, list[str]]:
     """The header lines of a PCD file, keyed by their first word (up to ``DATA``)."""
     header: dict[str, list[str]] = {}
@@ -142,14 +154,7 @@ def read_organised_pcd(path: Path) -> Capture:
         width, height = int(header["WIDTH"][0]), int(header["HEIGHT"][0])
     except (KeyError, IndexError, ValueError):
         raise InputError(f"{path}: the PCD header has no valid WIDTH/HEIGHT") from None
-    if width * height == 0:
-        raise InputError(f"{path}: the capture is empty (WIDTH {width}, HEIGHT {height})")
-    if height == 1:
-        raise InputError(
-            f"{path}: the cloud is not organised (HEIGHT 1, {width} points); completion "
-            "needs a depth image: an organised cloud (WIDTH x HEIGHT pixels), a depth image "
-            "with camera.json, or a bag's Image or organised PointCloud2"
-        )
+    check_organised(width, height, str(path))
     o3d = open3d()
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         cloud = o3d.io.read_point_cloud(
@@ -220,7 +225,7 @@ def read_depth_image(path: Path, camera_path: Path | None, colour_path: Path | N
     colour = Path(colour_path) if colour_path else path.with_name("rgb.png")
     rgb = None
     if colour_path or colour.exists():
-        rgb = read_png(_require(colour))
+        rgb = read_png(require_file(colour))
         if rgb.ndim != 3 or rgb.shape[:2] != shape or rgb.dtype != np.uint8:
             raise InputError(f"{colour}: expected an 8-bit colour image of {shape} pixels")
         rgb = rgb[..., :3].copy()
@@ -232,12 +237,6 @@ def read_depth_image(path: Path, camera_path: Path | None, colour_path: Path | N
         camera.table_height_m,
         f"{path}: depth image {shape[1]}x{shape[0]}, camera {camera_path}",
     )
-
-
-def _require(path: Path) -> Path:
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
-    return path
 
 
 def read_capture(

@@ -42,7 +42,8 @@ from .types import (
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy")
 
 
-def _require_file(path: Path) -> Path:
+def require_file(path: Path) -> Path:
+    """``path`` when it is an existing file, else an :class:`InputError`."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such file")
@@ -58,7 +59,7 @@ def read_cloud(path: Path) -> PointCloud:
         InputError: missing/unreadable file, unknown suffix, no points, wrong shape, or
             non-finite coordinates.
     """
-    path = _require_file(path)
+    path = require_file(path)
     suffix = path.suffix.lower()
     if suffix not in CLOUD_SUFFIXES:
         raise InputError(f"{path}: unknown cloud format '{suffix}' (use .ply, .pcd or .npy)")
@@ -164,15 +165,20 @@ def contacts_from_json(document: Any, path: Path) -> RecordedGrasps:
     return RecordedGrasps(tuple(contacts), tuple(plans))
 
 
-def read_contacts(path: Path) -> RecordedGrasps:
-    """Read a contacts JSON file (one entry per grasp, in order)."""
-    path = _require_file(path)
+def read_json(path: Path) -> Any:
+    """Parse a JSON file; a file that cannot be read or parsed is an :class:`InputError`."""
     try:
-        document = json.loads(path.read_text())
+        return json.loads(Path(path).read_text())
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read: {exc}") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON: {exc}") from None
+
+
+def read_contacts(path: Path) -> RecordedGrasps:
+    """Read a contacts JSON file (one entry per grasp, in order)."""
+    path = require_file(path)
+    document = read_json(path)
     return contacts_from_json(document, path)
 
 
@@ -353,13 +359,8 @@ def read_camera(path: Path) -> CameraFile:
     ``T_robot_camera`` and ``table_height_m`` may be missing or null (a camera with
     intrinsics only); ``cx``, ``cy`` may be any finite number.
     """
-    path = _require_file(path)
-    try:
-        document = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON: {exc}") from None
+    path = require_file(path)
+    document = read_json(path)
     k = document.get("intrinsics") if isinstance(document, dict) else None
     if not isinstance(k, dict):
         raise InputError(f"{path}: 'intrinsics' must be an object with width, height, fx, ...")
