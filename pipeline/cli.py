@@ -437,8 +437,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_sweep_parser(verbs)
 
-    from . import cli_objects
+    from . import cli_complete, cli_objects
 
+    cli_complete.add_parser(verbs).set_defaults(run=cli_complete.run)
     cli_objects.add_parser(verbs).set_defaults(run=cli_objects.run)
     return parser
 

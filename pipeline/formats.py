@@ -8,6 +8,8 @@
   and are normalised on reading. The optional ``plan`` records the grasp plan (see
   :func:`plan_to_json`); PS initialisation uses its predicted contacts for the initial bias.
 * Results: ``result.json`` (see :func:`estimate_to_json`) and ``completed_stage{0,1,2}.ply``.
+* Cameras: ``camera.json`` (see :func:`camera_to_json`): intrinsics in pixels, the believed
+  ``T_robot_camera`` (OpenCV optical frame) and the table height when known.
 
 Readers validate what they read and raise :class:`~pipeline.errors.InputError` with a
 one-line message naming the file and, for JSON, the key path at fault.
@@ -27,7 +29,9 @@ import numpy as np
 from .errors import InputError
 from .types import (
     Bias,
+    CameraIntrinsics,
     Contacts,
+    DepthObservation,
     EstimateResult,
     GraspPlan,
     PointCloud,
@@ -38,7 +42,8 @@ from .types import (
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy")
 
 
-def _require_file(path: Path) -> Path:
+def require_file(path: Path) -> Path:
+    """``path`` when it is an existing file, else an :class:`InputError`."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such file")
@@ -54,7 +59,7 @@ def read_cloud(path: Path) -> PointCloud:
         InputError: missing/unreadable file, unknown suffix, no points, wrong shape, or
             non-finite coordinates.
     """
-    path = _require_file(path)
+    path = require_file(path)
     suffix = path.suffix.lower()
     if suffix not in CLOUD_SUFFIXES:
         raise InputError(f"{path}: unknown cloud format '{suffix}' (use .ply, .pcd or .npy)")
@@ -160,15 +165,20 @@ def contacts_from_json(document: Any, path: Path) -> RecordedGrasps:
     return RecordedGrasps(tuple(contacts), tuple(plans))
 
 
-def read_contacts(path: Path) -> RecordedGrasps:
-    """Read a contacts JSON file (one entry per grasp, in order)."""
-    path = _require_file(path)
+def read_json(path: Path) -> Any:
+    """Parse a JSON file; a file that cannot be read or parsed is an :class:`InputError`."""
     try:
-        document = json.loads(path.read_text())
+        return json.loads(Path(path).read_text())
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read: {exc}") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON: {exc}") from None
+
+
+def read_contacts(path: Path) -> RecordedGrasps:
+    """Read a contacts JSON file (one entry per grasp, in order)."""
+    path = require_file(path)
+    document = read_json(path)
     return contacts_from_json(document, path)
 
 
@@ -307,3 +317,84 @@ def write_completed_clouds(out_dir: Path, result: EstimateResult) -> list[Path]:
         write_cloud(Path(out_dir) / f"completed_stage{stage.stage}.ply", stage.completed)
         for stage in result.stages
     ]
+
+
+@dataclass(frozen=True)
+class CameraFile:
+    """What a ``camera.json`` holds: intrinsics, the camera pose in the robot frame (None
+    when the recording has no robot frame) and the table height in that frame, if known."""
+
+    intrinsics: CameraIntrinsics
+    T_robot_camera: np.ndarray | None
+    table_height_m: float | None
+
+
+def camera_to_json(observation: DepthObservation) -> dict[str, Any]:
+    """Intrinsics (px) and the believed camera pose ``T_robot_camera`` (OpenCV frame)."""
+    k = observation.intrinsics
+    return {
+        "intrinsics": {
+            "width": k.width,
+            "height": k.height,
+            "fx": k.fx,
+            "fy": k.fy,
+            "cx": k.cx,
+            "cy": k.cy,
+        },
+        "T_robot_camera": np.asarray(observation.T_robot_camera).tolist(),
+        "frame": "opencv optical frame (x right, y down, z forward), metres",
+        "table_height_m": observation.table_height_m,
+    }
+
+
+def _positive(value: Any, where: str, path: Path) -> float:
+    if not isinstance(value, int | float) or isinstance(value, bool) or not value > 0:
+        raise InputError(f"{path}: {where} must be a positive number, got {value!r}")
+    return float(value)
+
+
+def read_camera(path: Path) -> CameraFile:
+    """Read a ``camera.json`` as :func:`camera_to_json` writes it.
+
+    ``T_robot_camera`` and ``table_height_m`` may be missing or null (a camera with
+    intrinsics only); ``cx``, ``cy`` may be any finite number.
+    """
+    path = require_file(path)
+    document = read_json(path)
+    k = document.get("intrinsics") if isinstance(document, dict) else None
+    if not isinstance(k, dict):
+        raise InputError(f"{path}: 'intrinsics' must be an object with width, height, fx, ...")
+    size = []
+    for key in ("width", "height"):
+        if not isinstance(k.get(key), int) or isinstance(k.get(key), bool) or k[key] < 1:
+            raise InputError(f"{path}: intrinsics.{key} must be a positive integer")
+        size.append(k[key])
+    focal = [_positive(k.get(key), f"intrinsics.{key}", path) for key in ("fx", "fy")]
+    centre = []
+    for key in ("cx", "cy"):
+        value = k.get(key)
+        if (
+            not isinstance(value, int | float)
+            or isinstance(value, bool)
+            or not math.isfinite(value)
+        ):
+            raise InputError(f"{path}: intrinsics.{key} must be a finite number")
+        centre.append(float(value))
+    intrinsics = CameraIntrinsics(*size, *focal, *centre)
+    transform = document.get("T_robot_camera")
+    if transform is not None:
+        try:
+            transform = np.array(transform, dtype=np.float64)
+        except (TypeError, ValueError):
+            transform = np.zeros(0)
+        if transform.shape != (4, 4) or not np.isfinite(transform).all():
+            raise InputError(f"{path}: T_robot_camera must be a finite 4x4 matrix")
+        rotation = transform[:3, :3]
+        if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
+            raise InputError(f"{path}: T_robot_camera's rotation is not orthonormal")
+    height = document.get("table_height_m")
+    if height is not None and (
+        not isinstance(height, int | float) or isinstance(height, bool) or not math.isfinite(height)
+    ):
+        raise InputError(f"{path}: table_height_m must be a number or null")
+    return CameraFile(intrinsics, transform, None if height is None else float(height))

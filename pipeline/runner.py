@@ -1,4 +1,5 @@
-"""Running the stages in order: fusion on recorded data (:func:`fuse`).
+"""Running the stages in order: fusion on recorded data (:func:`fuse`), and the Stage 0
+model of an object without contacts (:func:`initial_estimate`).
 
 The runner talks to stages only through their contracts (``pipeline.stages``) and the
 registry; which implementation runs is the config's business.
@@ -7,6 +8,7 @@ registry; which implementation runs is the config's business.
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Sequence
 
 import numpy as np
@@ -14,6 +16,7 @@ from threadpoolctl import threadpool_limits
 
 from .config import Config
 from .errors import ConfigError, StageFailure
+from .estimation.problem import initial_state, stage_estimate
 from .registry import StageRegistry
 from .stages import Estimator
 from .types import (
@@ -81,6 +84,25 @@ def estimate(
     estimator = config.create(registry, "estimator")
     problem = EstimationProblem(cloud=cloud, init=init, grasps=tuple(grasps))
     return run_estimator(estimator, problem)
+
+
+def initial_estimate(cloud: PointCloud, init: SymmetryInit) -> EstimateResult:
+    """Stage 0 alone, when there are no contacts to fuse: the cloud and its mirror image
+    under ``init`` (the model an estimator starts from; the bias is re-expressed about the
+    cloud's centroid as the estimators do). No estimator ran, so the covariance is NaN.
+
+    Raises:
+        StageFailure: the initialiser rejected every hypothesis.
+    """
+    if init.status != "ok":
+        raise StageFailure(f"initialiser gave no usable symmetry plane: {init.reason}")
+    started = time.perf_counter()
+    pivot = np.mean(cloud.points, axis=0)
+    g = initial_state(EstimationProblem(cloud=cloud, init=init, grasps=()), pivot)
+    covariance = np.full((6, 6), np.nan)
+    seconds = time.perf_counter() - started
+    stage = stage_estimate(0, g, covariance, cloud.points, pivot, 0, "initial", seconds, 0)
+    return EstimateResult(stages=(stage,))
 
 
 def run_estimator(estimator: Estimator, problem: EstimationProblem) -> EstimateResult:

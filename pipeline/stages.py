@@ -103,6 +103,15 @@ class Segmenter(StageImplementation):
             StageFailure: nothing is left after segmentation.
         """
 
+    def segment_objects(self, observation: DepthObservation) -> tuple[PointCloud, ...]:
+        """Every object on the table, the one :meth:`segment` returns first (``symfuse
+        complete`` uses this); by default just that one.
+
+        Raises:
+            StageFailure: no object is left after segmentation.
+        """
+        return (self.segment(observation),)
+
 
 class SymmetryInitialiser(StageImplementation):
     """Guesses the symmetry plane (and, with contacts, the bias): the Stage 0 state."""

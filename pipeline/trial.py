@@ -25,6 +25,7 @@ from .errors import StageFailure
 from .evaluation import GroundTruth, evaluate_stage
 from .formats import (
     bias_to_json,
+    camera_to_json,
     contacts_to_json,
     estimate_to_json,
     plan_to_json,
@@ -35,7 +36,7 @@ from .formats import (
 )
 from .registry import StageRegistry
 from .runner import estimate
-from .types import DepthObservation, EstimateResult, ObjectPose, SymmetryInit, SymmetryPlane
+from .types import EstimateResult, ObjectPose, SymmetryInit, SymmetryPlane
 
 #: The pictures a trial draws unless ``trial.pictures = false`` (VC adds ``vc_scores.png``).
 PICTURE_FILES = ("rgb.png", "depth.png", "topdown.png", "deviation.png")
@@ -84,24 +85,6 @@ def pose_to_json(pose: ObjectPose) -> dict[str, Any]:
     return {
         "position": [float(v) for v in pose.position_m],
         "quaternion_xyzw": [float(v) for v in pose.quaternion_xyzw],
-    }
-
-
-def camera_to_json(observation: DepthObservation) -> dict[str, Any]:
-    """Intrinsics (px) and the believed camera pose ``T_robot_camera`` (OpenCV frame)."""
-    k = observation.intrinsics
-    return {
-        "intrinsics": {
-            "width": k.width,
-            "height": k.height,
-            "fx": k.fx,
-            "fy": k.fy,
-            "cx": k.cx,
-            "cy": k.cy,
-        },
-        "T_robot_camera": np.asarray(observation.T_robot_camera).tolist(),
-        "frame": "opencv optical frame (x right, y down, z forward), metres",
-        "table_height_m": observation.table_height_m,
     }
 
 

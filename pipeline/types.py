@@ -76,6 +76,9 @@ class DepthObservation:
             error relative to the truth, which the estimator's bias absorbs).
         table_height_m: z of the table top in frame ``R`` when the source knows it, else None.
         object_mask: ``(H, W) bool`` ground-truth object pixels (simulation only), else None.
+        frame_from_support: True when the source had no robot frame and built one on the
+            support plane (:mod:`pipeline.perception.support`): its origin is then a
+            convention that ``symfuse complete`` moves below the segmented object.
     """
 
     depth_m: np.ndarray
@@ -84,6 +87,7 @@ class DepthObservation:
     T_robot_camera: np.ndarray
     table_height_m: float | None = None
     object_mask: np.ndarray | None = None
+    frame_from_support: bool = False
 
     def __post_init__(self) -> None:
         shape = (self.intrinsics.height, self.intrinsics.width)

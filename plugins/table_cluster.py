@@ -22,7 +22,9 @@ class TableCluster(Segmenter):
 
     The paper's segmentation (section 6.2.1): every point less than ``min_height_m`` above
     the table is removed, the rest is clustered (DBSCAN, or Euclidean clustering) and the
-    largest cluster is the object. Output points are in the robot frame with their pixels.
+    largest cluster is the object (``segment_objects`` also keeps every other cluster of at
+    least ``min_object_points`` points and ``min_object_area_m2`` of visible surface).
+    Output points are in the robot frame with their pixels.
     """
 
     name = "table-cluster"
@@ -43,11 +45,22 @@ class TableCluster(Segmenter):
         min_points: int = param(10, "DBSCAN: neighbours (self included) of a core point")
         voxel_m: float = param(0.0, "voxel side for subsampling before clustering (m; 0 = off)")
         min_object_points: int = param(50, "fail when the largest cluster is smaller than this")
+        min_object_area_m2: float = param(
+            0.002,
+            "segment_objects: drop clusters that show the camera less surface than this (m^2; "
+            "each pixel counts its footprint at its depth; 0.002 = a 4.5 cm square): debris, "
+            "cable ends, fragments of objects cut by the image edge",
+            at_least=0.0,
+        )
         ransac_inlier_m: float = param(0.005, "RANSAC: distance from the plane of an inlier (m)")
         ransac_iterations: int = param(200, "RANSAC: random point triples tried")
         ransac_seed: int = param(0, "RANSAC: seed of its random generator")
 
     def segment(self, observation: DepthObservation) -> PointCloud:
+        return self.segment_objects(observation)[0]
+
+    def segment_objects(self, observation: DepthObservation) -> tuple[PointCloud, ...]:
+        """Every cluster of at least ``min_object_points`` points, the largest first."""
         p = self.params
         points, pixels = backproject_depth(
             observation.depth_m, observation.intrinsics, observation.T_robot_camera
@@ -81,7 +94,15 @@ class TableCluster(Segmenter):
                 f"were {p.min_height_m * 1000:.0f}-{p.max_height_m * 1000:.0f} mm above the "
                 f"table, in {result.clusters} clusters"
             )
-        return PointCloud(points[result.indices], "robot", pixels[result.indices])
+        depth = observation.depth_m[pixels[:, 0], pixels[:, 1]].astype(np.float64)
+        k = observation.intrinsics
+        pixel_area_m2 = depth**2 / (k.fx * k.fy)
+        return tuple(
+            PointCloud(points[indices], "robot", pixels[indices])
+            for rank, indices in enumerate(result.objects)
+            if len(indices) >= p.min_object_points
+            and (rank == 0 or pixel_area_m2[indices].sum() >= p.min_object_area_m2)
+        )
 
 
 @hookimpl

@@ -1,4 +1,5 @@
-"""Figures of the perception stage: the cloud from above with a plane, and VC scores.
+"""Figures of the perception stage: the cloud from above with a plane, VC scores, and a
+scene with every segmented object.
 
 matplotlib with the non-interactive Agg backend; every function writes one PNG and
 returns its path.
@@ -7,6 +8,7 @@ returns its path.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -90,5 +92,86 @@ def plot_vc_scores(
     axes.set_title(f"VC: {len(hypotheses)} hypotheses, best violates {score[0]:.1%}")
     path = Path(path)
     figure.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(figure)
+    return path
+
+
+@dataclass(frozen=True)
+class SceneObjectView:
+    """What the scene picture shows of one object: its number, its pixels (rows, cols),
+    its visible points and, once completed, the completed model and symmetry plane (frame R).
+    """
+
+    index: int
+    pixels: np.ndarray
+    points_robot: np.ndarray
+    completed_robot: np.ndarray | None = None
+    plane: SymmetryPlane | None = None
+
+
+def plot_scene(
+    image: np.ndarray,
+    objects: Sequence[SceneObjectView],
+    path: Path,
+    *,
+    title: str = "",
+) -> Path:
+    """Left: the ``(H, W, 3)`` image with each object outlined and numbered. Right: the
+    robot frame from above (mm) with each object's visible points, its completed footprint
+    and the trace of its symmetry plane."""
+    plt = _figure()
+    mm = 1000.0
+    height, width = image.shape[:2]
+    figure, (left, right) = plt.subplots(1, 2, figsize=(14, 6))
+    left.imshow(image, interpolation="nearest")
+    colours = plt.get_cmap("tab10")
+    for view in objects:
+        colour = colours(view.index % 10)
+        mask = np.zeros((height, width), dtype=float)
+        mask[view.pixels[:, 0], view.pixels[:, 1]] = 1.0
+        left.contour(mask, levels=[0.5], colors=[colour], linewidths=1.5)
+        row, col = view.pixels.mean(axis=0)
+        left.text(
+            col,
+            row,
+            str(view.index),
+            color="white",
+            fontsize=14,
+            weight="bold",
+            ha="center",
+            va="center",
+            bbox={"facecolor": colour, "alpha": 0.8},
+        )
+        shown = view.completed_robot if view.completed_robot is not None else view.points_robot
+        right.scatter(shown[:, 0] * mm, shown[:, 1] * mm, s=0.5, color=colour, alpha=0.25)
+        right.scatter(
+            view.points_robot[:, 0] * mm, view.points_robot[:, 1] * mm, s=0.5, color=colour
+        )
+        centre = shown[:, :2].mean(axis=0)
+        right.text(
+            centre[0] * mm,
+            centre[1] * mm,
+            str(view.index),
+            fontsize=12,
+            weight="bold",
+            ha="center",
+            va="center",
+        )
+        if view.plane is not None:
+            normal = view.plane.normal[:2]
+            foot = centre - (centre @ normal - view.plane.offset_m) * normal
+            half = 0.6 * float(np.ptp(shown[:, :2], axis=0).max())
+            ends = foot + np.outer([-half, half], [-normal[1], normal[0]])
+            right.plot(ends[:, 0] * mm, ends[:, 1] * mm, "-", color="red", linewidth=1.5)
+    left.set_title("segmented objects")
+    left.set_axis_off()
+    right.set_aspect("equal")
+    right.set_xlabel("x (mm)")
+    right.set_ylabel("y (mm)")
+    right.set_title("from above: visible points, completed footprint (faint), symmetry plane")
+    if title:
+        figure.suptitle(title)
+    path = Path(path)
+    figure.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(figure)
     return path

@@ -1,8 +1,8 @@
-"""Cutting one object out of a scene cloud (paper section 6.2.1).
+"""Cutting objects out of a scene cloud (paper section 6.2.1).
 
 Drop everything lower than ``min_height_m`` above the table (the table itself and what lies
-on it flat), optionally thin the rest on a voxel grid, cluster it and keep the largest
-cluster.
+on it flat), optionally thin the rest on a voxel grid and cluster it: every cluster is an
+object, the largest one is *the* object of the paper.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .clustering import dbscan_labels, largest_cluster_indices, voxel_subsample_indices
+from .clustering import dbscan_labels, voxel_subsample_indices
 from .table import TablePlane
 
 
@@ -20,14 +20,20 @@ class SegmentationResult:
     """Which scene points were kept, and why.
 
     Attributes:
-        indices: ``(K,)`` indices of the object's points in the input cloud.
+        objects: indices into the input cloud of each cluster's points, the most populous
+            first (ties: the cluster found first).
         above_table: how many points survived the height filter (before subsampling).
         clusters: how many clusters the clustering found.
     """
 
-    indices: np.ndarray
+    objects: tuple[np.ndarray, ...]
     above_table: int
     clusters: int
+
+    @property
+    def indices(self) -> np.ndarray:
+        """``(K,)`` indices of the largest cluster's points (empty when there is none)."""
+        return self.objects[0] if self.objects else np.zeros(0, dtype=np.int64)
 
 
 def segment_points(
@@ -40,7 +46,7 @@ def segment_points(
     min_points: int = 10,
     voxel_m: float = 0.0,
 ) -> SegmentationResult:
-    """Segment the largest object standing on ``table``.
+    """Segment the objects standing on ``table``.
 
     Args:
         points_robot: ``(N, 3)`` scene points in the robot frame, metres.
@@ -52,13 +58,45 @@ def segment_points(
         voxel_m: voxel side for subsampling before clustering (0: keep every point).
 
     Returns:
-        The kept indices (empty when nothing is left) and counts for error messages.
+        Every cluster's indices, largest first, and counts for error messages.
     """
     height = table.height_m(points_robot)
     above = np.flatnonzero((height >= min_height_m) & (height <= max_height_m))
     kept = above[voxel_subsample_indices(points_robot[above], voxel_m)]
     labels = dbscan_labels(points_robot[kept], eps_m, min_points)
     clusters = int(labels.max()) + 1 if len(labels) else 0
+    sizes = np.bincount(labels[labels >= 0], minlength=clusters)
+    order = np.argsort(-sizes, kind="stable")
     return SegmentationResult(
-        indices=kept[largest_cluster_indices(labels)], above_table=len(above), clusters=clusters
+        objects=tuple(kept[labels == label] for label in order),
+        above_table=len(above),
+        clusters=clusters,
     )
+
+
+def outside_view(valid: np.ndarray) -> np.ndarray:
+    """``(H, W) bool``: the pixels outside the view, i.e. without depth and connected
+    (4-neighbours) to the image border, like the band a Kinect returns nothing in along
+    its edges. Shadows and dark spots inside the view are not part of it."""
+    from scipy import ndimage
+
+    labels, _ = ndimage.label(~np.asarray(valid, dtype=bool))
+    border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    outside = np.isin(labels, border[border > 0])
+    outside[[0, -1], :] = True
+    outside[:, [0, -1]] = True
+    return outside
+
+
+def touches_view_edge(pixels: np.ndarray, outside: np.ndarray, margin_px: int) -> bool:
+    """Whether an object's pixels ``(K, 2)`` (row, col) come within ``margin_px`` (the
+    Chebyshev distance) of a pixel outside the view (:func:`outside_view`). Such an object
+    may continue out of sight, and its mirror image would be wrong."""
+    height, width = outside.shape
+    rows, cols = pixels[:, 0], pixels[:, 1]
+    for dr in range(-margin_px, margin_px + 1):
+        for dc in range(-margin_px, margin_px + 1):
+            r, c = np.clip(rows + dr, 0, height - 1), np.clip(cols + dc, 0, width - 1)
+            if outside[r, c].any():
+                return True
+    return False

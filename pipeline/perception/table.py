@@ -28,7 +28,7 @@ def table_from_height(table_height_m: float) -> TablePlane:
     return TablePlane(normal=np.array([0.0, 0.0, 1.0]), offset_m=float(table_height_m))
 
 
-def _plane_through(points: np.ndarray) -> tuple[np.ndarray, float] | None:
+def plane_through(points: np.ndarray) -> tuple[np.ndarray, float] | None:
     """Least-squares plane through ``(N, 3)`` points (N >= 3), normal pointing up."""
     centroid = points.mean(axis=0)
     _, _, vt = np.linalg.svd(points - centroid, full_matrices=False)
@@ -90,7 +90,7 @@ def fit_table_ransac(
         inliers = np.abs(points @ normal - offset) < inlier_distance_m
         if inliers.sum() < 3:
             break
-        normal, offset = _plane_through(points[inliers])
+        normal, offset = plane_through(points[inliers])
     inliers = np.abs(points @ normal - offset) < inlier_distance_m
     return TablePlane(normal=normal, offset_m=offset), inliers
 

@@ -1,0 +1,272 @@
+"""Recorded depth data: organised PCD clouds, depth images with ``camera.json``, ROS bags.
+
+Every reader returns a :class:`Capture`: a metric depth image in the camera's OpenCV
+optical frame (x right, y down, z forward; metres, NaN = no return), its pinhole
+intrinsics, a colour image when the recording has one, and the camera pose in a robot
+frame when the recording knows it.
+
+* **Organised PCD** (``x y z`` and optionally ``rgb``/``rgba``; ASCII, binary or
+  binary_compressed; NaN = no return), points in the camera frame. The depth image is the
+  points' z; the intrinsics are fitted to the points (``u = fx x / z + cx``, ``v = fy y / z
+  + cy`` over every valid pixel) and the fit must be sub-pixel, else the points are not a
+  pinhole image in their frame.
+* **Depth image**: a 16-bit PNG in millimetres (0 = no return) or a ``.npy`` float array in
+  metres (NaN = no return), with a ``camera.json`` (:func:`pipeline.formats.read_camera`)
+  and optionally a colour PNG of the same size (by default ``rgb.png`` beside it).
+* **ROS bags**: see :mod:`pipeline.bags`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .formats import read_camera, require_file
+from .types import CameraIntrinsics
+
+#: A median depth above this many metres means the values are millimetres (a depth
+#: camera's range ends well before 20 m; 20 mm is closer than any of them sees).
+MILLIMETRE_MEDIAN_M = 20.0
+#: Largest RMS error (px) of the pinhole fit to an organised cloud.
+MAX_PINHOLE_RMS_PX = 0.5
+PCD_SUFFIXES = (".pcd",)
+DEPTH_IMAGE_SUFFIXES = (".png", ".npy")
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One recorded depth view.
+
+    Attributes:
+        depth_m: ``(H, W) float32`` depth along the optical axis (m), NaN = no return.
+        rgb: ``(H, W, 3) uint8`` registered colour image, or None.
+        intrinsics: pinhole intrinsics of the depth image.
+        T_robot_camera: ``(4, 4)`` camera pose in the recording's robot frame, or None.
+        table_height_m: z of the support plane in that frame when recorded, else None.
+        source: one line saying what was read (file, format, topic).
+    """
+
+    depth_m: np.ndarray
+    rgb: np.ndarray | None
+    intrinsics: CameraIntrinsics
+    T_robot_camera: np.ndarray | None
+    table_height_m: float | None
+    source: str
+
+
+def checked_depth(depth_m: np.ndarray, where: str) -> np.ndarray:
+    """``depth_m`` as float32 with non-positive values turned into NaN; rejects an image
+    without a single valid pixel and one whose values look like millimetres."""
+    depth = np.array(depth_m, dtype=np.float32)
+    depth[~(depth > 0.0)] = np.nan  # also NaN where depth is NaN
+    valid = np.isfinite(depth)
+    if not valid.any():
+        raise InputError(f"{where}: the capture is empty (no pixel has a depth)")
+    median = float(np.median(depth[valid]))
+    if median > MILLIMETRE_MEDIAN_M:
+        raise InputError(
+            f"{where}: the depth looks like millimetres (median {median:.0f}); "
+            "symfuse reads metres (a 16-bit PNG is read as millimetres)"
+        )
+    return depth
+
+
+def depth_from_organised(points: np.ndarray, where: str) -> tuple[np.ndarray, CameraIntrinsics]:
+    """Depth image and fitted pinhole intrinsics of an organised ``(H, W, 3)`` cloud in the
+    camera's optical frame (NaN = no return).
+
+    Raises:
+        InputError: no valid point, millimetres, points behind the camera, or the points
+            are not a pinhole image (fit worse than :data:`MAX_PINHOLE_RMS_PX`).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    height, width = points.shape[:2]
+    depth = checked_depth(np.where(np.isfinite(points).all(axis=2), points[..., 2], np.nan), where)
+    rows, cols = np.nonzero(np.isfinite(depth))
+    if len(rows) < 3:
+        raise InputError(f"{where}: fewer than 3 valid points; cannot fit the camera")
+    behind = np.isfinite(points[..., 2]) & (points[..., 2] <= 0.0)
+    if behind.any():
+        raise InputError(
+            f"{where}: {int(behind.sum())} points have z <= 0; the cloud must be in the "
+            "camera's optical frame (x right, y down, z forward)"
+        )
+    z = depth[rows, cols].astype(np.float64)
+    fitted, squared = [], 0.0
+    for pixel, coordinate in ((cols, points[rows, cols, 0]), (rows, points[rows, cols, 1])):
+        design = np.column_stack([coordinate / z, np.ones_like(z)])
+        (focal, centre), *_ = np.linalg.lstsq(design, pixel.astype(np.float64), rcond=None)
+        fitted.append((float(focal), float(centre)))
+        squared += float(np.mean((design @ np.array([focal, centre]) - pixel) ** 2))
+    rms = float(np.sqrt(squared))
+    (fx, cx), (fy, cy) = fitted
+    if not rms <= MAX_PINHOLE_RMS_PX or fx <= 0.0 or fy <= 0.0:
+        raise InputError(
+            f"{where}: the organised points are not a pinhole image in their frame "
+            f"(fit RMS {rms:.2f} px); give the cloud in the camera's optical frame"
+        )
+    return depth, CameraIntrinsics(width, height, fx, fy, cx, cy)
+
+
+def check_organised(width: int, height: int, where: str) -> None:
+    """Reject an empty or unorganised (one-row) cloud of ``width x height`` points."""
+    if width * height == 0:
+        raise InputError(f"{where}: the capture is empty ({width}x{height} points)")
+    if height == 1:
+        raise InputError(
+            f"{where}: the cloud is not organised (height 1, {width} points); completion "
+            "needs a depth image: an organised cloud (width x height pixels), a depth image "
+            "with camera.json, or a bag's Image or organised PointCloud2"
+        )
+
+
+def _pcd_header(path: Path) -> dict[str, list[str]]:
+    """The header lines of a PCD file, keyed by their first word (up to ``DATA``)."""
+    header: dict[str, list[str]] = {}
+    try:
+        with path.open("rb") as stream:
+            for _ in range(64):
+                line = stream.readline().decode("ascii", errors="replace").strip()
+                if not line or line.startswith("#"):
+                    continue
+                key, *values = line.split()
+                header[key.upper()] = values
+                if key.upper() == "DATA":
+                    return header
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror}") from None
+    raise InputError(f"{path}: not a PCD file (no DATA line in its header)")
+
+
+def read_organised_pcd(path: Path) -> Capture:
+    """An organised PCD cloud (camera frame, metres) as a capture; open3d reads the data
+    (every point in order, NaN kept), the header gives the organisation."""
+    from .open3d_loader import open3d
+
+    header = _pcd_header(path)
+    fields = header.get("FIELDS", [])
+    if not {"x", "y", "z"} <= set(fields):
+        raise InputError(f"{path}: the PCD has no x y z fields (FIELDS {' '.join(fields)})")
+    try:
+        width, height = int(header["WIDTH"][0]), int(header["HEIGHT"][0])
+    except (KeyError, IndexError, ValueError):
+        raise InputError(f"{path}: the PCD header has no valid WIDTH/HEIGHT") from None
+    check_organised(width, height, str(path))
+    o3d = open3d()
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        cloud = o3d.io.read_point_cloud(
+            str(path), format="pcd", remove_nan_points=False, remove_infinite_points=False
+        )
+    points = np.asarray(cloud.points)
+    if len(points) != width * height:
+        raise InputError(
+            f"{path}: cannot read the PCD data ({len(points)} points read, the header says "
+            f"{width} x {height})"
+        )
+    depth, intrinsics = depth_from_organised(points.reshape(height, width, 3), str(path))
+    rgb = None
+    if cloud.has_colors():
+        colours = np.asarray(cloud.colors).reshape(height, width, 3)
+        rgb = np.clip(np.rint(colours * 255.0), 0, 255).astype(np.uint8)
+    encoding = header.get("DATA", ["?"])[0]
+    return Capture(
+        depth, rgb, intrinsics, None, None, f"{path}: organised PCD {width}x{height}, {encoding}"
+    )
+
+
+def read_png(path: Path) -> np.ndarray:
+    """A PNG as an array (``(H, W)`` for grey, ``(H, W, 3|4)`` for colour), dtype kept."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as image:
+            return np.array(image)
+    except (OSError, UnidentifiedImageError) as exc:
+        raise InputError(f"{path}: cannot read as an image: {exc}") from None
+
+
+def read_depth_image(path: Path, camera_path: Path | None, colour_path: Path | None) -> Capture:
+    """A depth image (16-bit PNG in mm, or ``.npy`` in m) with its ``camera.json``.
+
+    Args:
+        camera_path: the camera file; None = ``camera.json`` beside the image.
+        colour_path: a colour PNG of the same size; None = ``rgb.png`` beside the image
+            when there is one.
+    """
+    if path.suffix.lower() == ".npy":
+        try:
+            depth = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{path}: cannot read as .npy: {exc}") from None
+        if depth.ndim != 2 or depth.dtype.kind != "f":
+            raise InputError(
+                f"{path}: expected an (H, W) float depth image in metres, got shape "
+                f"{depth.shape} {depth.dtype}"
+            )
+    else:
+        raw = read_png(path)
+        if raw.ndim != 2 or raw.dtype != np.uint16:
+            raise InputError(
+                f"{path}: expected a 16-bit single-channel depth PNG in millimetres, got "
+                f"shape {raw.shape} {raw.dtype}"
+            )
+        depth = raw.astype(np.float32) / 1000.0
+    depth = checked_depth(depth, str(path))
+    camera_path = Path(camera_path) if camera_path else path.with_name("camera.json")
+    if not camera_path.exists():
+        raise InputError(f"{path}: a depth image needs its camera: {camera_path} does not exist")
+    camera = read_camera(camera_path)
+    shape = (camera.intrinsics.height, camera.intrinsics.width)
+    if depth.shape != shape:
+        raise InputError(f"{path}: the image is {depth.shape}, {camera_path} says {shape}")
+    colour = Path(colour_path) if colour_path else path.with_name("rgb.png")
+    rgb = None
+    if colour_path or colour.exists():
+        rgb = read_png(require_file(colour))
+        if rgb.ndim != 3 or rgb.shape[:2] != shape or rgb.dtype != np.uint8:
+            raise InputError(f"{colour}: expected an 8-bit colour image of {shape} pixels")
+        rgb = rgb[..., :3].copy()
+    return Capture(
+        depth,
+        rgb,
+        camera.intrinsics,
+        camera.T_robot_camera,
+        camera.table_height_m,
+        f"{path}: depth image {shape[1]}x{shape[0]}, camera {camera_path}",
+    )
+
+
+def read_capture(
+    path: Path,
+    *,
+    camera: Path | None = None,
+    colour: Path | None = None,
+    topic: str = "",
+    robot_frame: str = "",
+) -> Capture:
+    """Read any supported recording (see the module docstring), chosen by suffix; a
+    folder or a ``.bag``/``.db3``/``.mcap`` file is a ROS bag.
+
+    Raises:
+        InputError: a missing, unreadable, empty or unsupported recording, one in
+            millimetres, or an unorganised cloud.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if path.is_dir() or suffix in (".bag", ".db3", ".mcap"):
+        from .bags import read_bag
+
+        return read_bag(path, topic=topic, robot_frame=robot_frame)
+    if suffix in PCD_SUFFIXES:
+        return read_organised_pcd(path)
+    if suffix in DEPTH_IMAGE_SUFFIXES:
+        return read_depth_image(path, camera, colour)
+    raise InputError(
+        f"{path}: unknown capture format '{suffix}' (use an organised .pcd, a depth .png or "
+        ".npy with camera.json, or a ROS bag: .bag, or a ROS 2 bag folder)"
+    )

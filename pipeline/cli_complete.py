@@ -1,0 +1,195 @@
+"""``symfuse complete``: segment, initialise and complete every object of a recorded view
+(and fuse one with contacts)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from . import __version__
+from .completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
+
+#: The initialiser ``complete`` uses unless ``--init`` names another.
+DEFAULT_INIT = "vc"
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add the ``complete`` verb to the CLI's subparsers and return its parser."""
+    from .cli import _add_config_options
+
+    parser = subparsers.add_parser(
+        "complete",
+        help="complete every object of a recorded depth view (PCD, depth image, ROS bag)",
+        description=(
+            "Read a recorded depth view (an organised PCD in the camera frame, a depth PNG "
+            "in mm or NPY in m with camera.json, or a ROS 1/2 bag), find the support plane "
+            "and every object standing on it, initialise each one's symmetry plane and "
+            "complete it; with --contacts, fuse them with one object. Writes objects.json, "
+            "object_K/ (cloud.ply, completed_stage*.ply, result.json) and scene.png."
+        ),
+    )
+    parser.add_argument("scan", type=Path, metavar="SCAN", help="the capture file or bag")
+    parser.add_argument(
+        "--camera",
+        type=Path,
+        metavar="FILE",
+        help="camera.json of a depth image (default: beside it)",
+    )
+    parser.add_argument("--topic", metavar="NAME", help="bag topic (default: the first that fits)")
+    parser.add_argument(
+        "--contacts",
+        type=Path,
+        metavar="FILE",
+        help="contacts JSON in the capture's robot frame (README): fuse them with one object",
+    )
+    parser.add_argument(
+        "--object",
+        metavar="WHICH",
+        help=f"{'|'.join(OBJECT_CHOICES)}|K: objects to complete (default: all, or largest "
+        "with --contacts); K numbers objects largest first from 0",
+    )
+    parser.add_argument(
+        "--init", metavar="NAME", help=f"symmetry initialiser (default: {DEFAULT_INIT})"
+    )
+    _add_config_options(parser)
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    return parser
+
+
+def overrides(args: argparse.Namespace) -> list[str]:
+    """The config overrides ``complete``'s options stand for (after the user's ``--set``)."""
+    settings = {
+        "sensor.use": "recorded",
+        "sensor.recorded.path": str(args.scan),
+        "initialiser.use": args.init or DEFAULT_INIT,
+    }
+    if args.camera:
+        settings["sensor.recorded.camera"] = str(args.camera)
+    if args.topic:
+        settings["sensor.recorded.topic"] = args.topic
+    return [f"{key}={json.dumps(value)}" for key, value in settings.items()]
+
+
+def run(args: argparse.Namespace) -> int:
+    """Complete the capture's objects, write the results, print a table."""
+    from .cli import EXIT_ESTIMATE_FAILED, FAILED_STATUSES, _load
+    from .completion import complete_scene
+    from .formats import read_contacts
+
+    registry, config = _load(args, overrides(args))
+    recorded = read_contacts(args.contacts) if args.contacts else None
+    which = args.object or ("largest" if recorded else "all")
+    started = time.perf_counter()
+    scene = complete_scene(
+        config,
+        registry,
+        which,
+        recorded.contacts if recorded else (),
+        recorded.plans if recorded else (),
+    )
+    inputs = {"scan": str(args.scan), "contacts": str(args.contacts) if args.contacts else None}
+    write_outputs(args.out, scene, config, inputs, time.perf_counter() - started)
+    print(scene_table(scene))
+    print(f"wrote {args.out}/ (objects.json, object_K/, scene.png, config.toml)")
+    problems = failed(scene.objects, FAILED_STATUSES)
+    if problems:
+        print(f"symfuse: error: {'; '.join(problems)} (see {args.out}/)", file=sys.stderr)
+        return EXIT_ESTIMATE_FAILED
+    return 0
+
+
+def scene_table(scene: SceneCompletion) -> str:
+    """One row per object: number, points, footprint, plane, status."""
+    import numpy as np
+
+    from .tables import format_table
+
+    rows = []
+    for completion in scene.objects:
+        entry = object_summary(completion)
+        plane = completion.result.final.plane if completion.result else None
+        rows.append(
+            [
+                completion.index,
+                len(completion.cloud),
+                " x ".join(f"{v * 1e3:.0f}" for v in entry["footprint_extents_m"]),
+                f"{entry['height_m'] * 1e3:.0f}",
+                "-" if plane is None else f"{np.degrees(plane.theta_rad):.1f}",
+                "-" if plane is None else f"{plane.offset_m * 1e3:.1f}",
+                completion.status,
+            ]
+        )
+    header = ["object", "points", "footprint mm", "height mm", "plane θ°", "offset mm", "status"]
+    return format_table(header, rows)
+
+
+def write_outputs(
+    out: Path, scene: SceneCompletion, config, inputs: dict[str, Any], seconds: float
+) -> None:
+    """Every file ``complete`` writes, into ``out`` (created if needed)."""
+    import numpy as np
+
+    from .formats import (
+        bias_to_json,
+        estimate_to_json,
+        plane_to_json,
+        write_cloud,
+        write_completed_clouds,
+        write_json,
+    )
+    from .perception.plots import SceneObjectView, plot_scene
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    config.write(out / "config.toml")
+    observation = scene.observation
+    views = []
+    for completion in scene.objects:
+        folder = out / f"object_{completion.index}"
+        folder.mkdir(exist_ok=True)
+        write_cloud(folder / "cloud.ply", completion.cloud.points)
+        document: dict[str, Any] = {
+            "symfuse": __version__,
+            "command": "complete",
+            "inputs": inputs,
+            **object_summary(completion),
+        }
+        if completion.init is not None:
+            document["init"] = {
+                "source": config.choices["initialiser"],
+                "plane": plane_to_json(completion.init.plane),
+                "bias": bias_to_json(completion.init.bias),
+                "status": completion.init.status,
+            }
+        if completion.result is not None:
+            write_completed_clouds(folder, completion.result)
+            document["stages"] = estimate_to_json(completion.result)
+        write_json(folder / "result.json", {**document, "config": config.to_dict()})
+        final = completion.result.final if completion.result else None
+        views.append(
+            SceneObjectView(
+                completion.index,
+                completion.cloud.pixels,
+                completion.cloud.points,
+                None if final is None else final.completed,
+                None if final is None else final.plane,
+            )
+        )
+    write_json(
+        out / "objects.json",
+        {
+            "symfuse": __version__,
+            "inputs": inputs,
+            "frame": "support plane" if observation.frame_from_support else "recorded",
+            "T_robot_camera": np.asarray(observation.T_robot_camera).tolist(),
+            "intrinsics": vars(observation.intrinsics),
+            "objects": [object_summary(c) for c in scene.objects],
+            "set_aside_at_view_edge": [{"points": n} for n in scene.set_aside],
+            "seconds": seconds,
+        },
+    )
+    plot_scene(observation.rgb, views, out / "scene.png", title=str(inputs["scan"]))
