@@ -227,6 +227,9 @@ def trial_summary(record) -> str:
                 measure,
                 "-" if angle is None else f"{angle:.1f}",
                 f"{metrics['plane_offset_error_mm']:.1f}",
+                f"{metrics['chamfer_mm']:.1f}",
+                f"{metrics['fscore_5mm']:.2f}",
+                f"{metrics['iou']:.2f}",
             ]
         )
     header = [
@@ -238,6 +241,9 @@ def trial_summary(record) -> str:
         "measure mm",
         "plane err °",
         "offset err mm",
+        "chamfer mm",
+        "F@5mm",
+        "IoU",
     ]
     return format_table(header, rows)
 
