@@ -293,6 +293,16 @@ def stage_to_json(stage: StageEstimate) -> dict[str, Any]:
         "iterations": int(stage.iterations),
         "seconds": float(stage.seconds),
         "active_points": int(stage.active_points),
+        "trace": [
+            {
+                "grasp": state.grasp,
+                "plane": plane_to_json(state.plane),
+                "bias": bias_to_json(state.bias),
+                "active_taxels": state.active_taxels,
+                "active_points": state.active_points,
+            }
+            for state in stage.trace
+        ],
     }
 
 
