@@ -105,25 +105,69 @@ def write_recording(run_dir: Path, out_path: Path | None = None) -> Path:
     ``out_path`` (default ``run_dir/recording.rrd``); returns the path written."""
     rr = rerun_module()
     run_dir = Path(run_dir)
-    folders = run_folders(run_dir)
+    runs = [(_RunFiles.load(folder), entity) for folder, entity in run_folders(run_dir)]
+    camera_path = run_dir / "camera.json"
+    camera = json.loads(camera_path.read_text()) if camera_path.is_file() else None
     out_path = Path(out_path) if out_path is not None else run_dir / RECORDING_NAME
     recording = rr.RecordingStream("symfuse", recording_id=str(uuid.uuid4()))
-    recording.save(out_path, default_blueprint=_blueprint())
+    plots = {entity: _plots_path(entity) for _, entity in runs}
+    recording.save(out_path, default_blueprint=_blueprint(runs, camera, list(plots.values())))
     timeline = _Timeline(rr, recording)
     recording.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    if (run_dir / "camera.json").is_file():
+    if camera is not None:
         timeline.next("camera: depth and colour image, intrinsics and pose")
-        _log_camera(rr, recording, run_dir)
-    for folder, entity in folders:
-        plots = "plots" if entity == "world" else f"plots/{entity.removeprefix('world/')}"
-        _RunRecorder(rr, recording, timeline, _RunFiles.load(folder), entity, plots).log()
+        _log_camera(rr, recording, run_dir, camera)
+    for files, entity in runs:
+        _RunRecorder(rr, recording, timeline, files, entity, plots[entity]).log()
     recording.flush()
     recording.disconnect()
     return out_path
 
 
-def _blueprint():
+def _plots_path(entity: str) -> str:
+    return "plots" if entity == "world" else f"plots/{entity.removeprefix('world/')}"
+
+
+#: How far the 3-D view's eye starts from the objects (m), its angle (rad) beside the
+#: camera's line of sight (so the completed back shows), and how much lower than the camera
+#: it looks (the ratio of its elevation's sine to the camera's).
+EYE_DISTANCE_M = 0.4
+EYE_TURN_RAD = 0.9
+EYE_LOWER = 0.6
+
+
+def eye_position(target: np.ndarray, toward: np.ndarray) -> np.ndarray:
+    """Where the 3-D view's eye starts: :data:`EYE_DISTANCE_M` from ``target``, turned
+    :data:`EYE_TURN_RAD` about +z from the direction ``toward`` (the camera), with the sine
+    of its elevation scaled by :data:`EYE_LOWER`."""
+    toward = np.asarray(toward, dtype=float) / np.linalg.norm(toward)
+    azimuth = np.arctan2(toward[1], toward[0]) + EYE_TURN_RAD
+    sin_elevation = EYE_LOWER * toward[2]
+    cos_elevation = np.sqrt(1.0 - sin_elevation**2)
+    direction = [cos_elevation * np.cos(azimuth), cos_elevation * np.sin(azimuth), sin_elevation]
+    return np.asarray(target, dtype=float) + EYE_DISTANCE_M * np.array(direction)
+
+
+def _blueprint(runs, camera: dict[str, Any] | None, plots: list[str]):
+    """The viewer layout: the 3-D scene (eye on the objects, from beside the camera), the
+    camera images, the IEKF state per iteration (plane, bias, gates) and the step log."""
     import rerun.blueprint as rrb
+
+    references = [files.reference for files, _ in runs if files.reference is not None]
+    eye = None
+    if references:
+        target = np.vstack(references).mean(axis=0)
+        if camera is not None:
+            toward = np.asarray(camera["T_robot_camera"], dtype=float)[:3, 3] - target
+        else:
+            toward = np.array([-1.0, -1.0, 1.0])
+        position = eye_position(target, toward)
+        eye = rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
+
+    def series(name: str, part: str):
+        return rrb.TimeSeriesView(
+            origin="/", contents=[f"+ /{root}/{part}/**" for root in plots], name=name
+        )
 
     return rrb.Blueprint(
         rrb.Horizontal(
@@ -131,13 +175,28 @@ def _blueprint():
                 origin="world",
                 name="robot frame",
                 contents=["+ /**", "- /world/camera/image/depth"],
+                eye_controls=eye,
             ),
             rrb.Vertical(
-                rrb.Spatial2DView(origin="world/camera/image", name="camera"),
-                rrb.TimeSeriesView(origin="plots", name="IEKF iterations"),
+                rrb.Tabs(
+                    rrb.Spatial2DView(
+                        origin="world/camera/image",
+                        contents=["+ $origin/rgb"],
+                        name="colour",
+                    ),
+                    rrb.Spatial2DView(
+                        origin="world/camera/image",
+                        contents=["+ $origin/depth"],
+                        name="depth",
+                    ),
+                ),
+                series("bias (deg, mm)", "bias"),
+                series("plane (deg, mm)", "plane"),
+                series("gates", "gates"),
                 rrb.TextLogView(origin="log", name="steps"),
+                row_shares=[2.2, 1.2, 1.2, 1.2, 1.6],
             ),
-            column_shares=[3, 1],
+            column_shares=[2.4, 1],
         ),
         collapse_panels=True,
     )
@@ -155,8 +214,7 @@ class _Timeline:
         self.recording.log("log", self.rr.TextLog(text))
 
 
-def _log_camera(rr: ModuleType, recording, run_dir: Path) -> None:
-    camera = json.loads((run_dir / "camera.json").read_text())
+def _log_camera(rr: ModuleType, recording, run_dir: Path, camera: dict[str, Any]) -> None:
     k = camera["intrinsics"]
     T = np.asarray(camera["T_robot_camera"], dtype=np.float64)
     recording.log("world/camera", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]))
@@ -191,6 +249,12 @@ class _RunFiles:
     truth: Any
     grasps: tuple[Contacts, ...]
     plans: tuple[Any, ...]
+
+    @property
+    def reference(self) -> np.ndarray | None:
+        """The points the plane quads are sized on: Stage 0's model, else the cloud."""
+        points = self.models.get(0, self.cloud)
+        return points if points is not None and len(points) else None
 
     @classmethod
     def load(cls, folder: Path) -> _RunFiles:
@@ -259,8 +323,7 @@ class _RunRecorder:
         self.files, self.entity, self.plots = files, entity, plots
         stages = files.document.get("stages", [])
         self.stages = {stage["stage"]: stage for stage in stages}
-        reference = files.models.get(0, files.cloud)
-        self.extent = reference if reference is not None and len(reference) else None
+        self.extent = files.reference
         self.taxels = (
             np.vstack([grasp.positions for grasp in files.grasps]) if files.grasps else None
         )
