@@ -160,16 +160,20 @@ def contacts_from_json(document: Any, path: Path) -> RecordedGrasps:
     return RecordedGrasps(tuple(contacts), tuple(plans))
 
 
-def read_contacts(path: Path) -> RecordedGrasps:
-    """Read a contacts JSON file (one entry per grasp, in order)."""
+def read_json(path: Path) -> Any:
+    """A parsed JSON file; :class:`InputError` naming it when missing or not JSON."""
     path = _require_file(path)
     try:
-        document = json.loads(path.read_text())
+        return json.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read: {exc}") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON: {exc}") from None
-    return contacts_from_json(document, path)
+
+
+def read_contacts(path: Path) -> RecordedGrasps:
+    """Read a contacts JSON file (one entry per grasp, in order)."""
+    return contacts_from_json(read_json(path), path)
 
 
 def contacts_to_json(

@@ -44,7 +44,6 @@ last finished stage (the iterations record the state, not the points).
 from __future__ import annotations
 
 import importlib
-import json
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, MissingExtraError
-from ..formats import read_cloud, read_contacts
+from ..formats import read_cloud, read_contacts, read_json
 from ..metrics import nearest_distances, plane_after_bias, point_to_mesh_distances
 from ..plots import DEVIATION_CMAP, DEVIATION_MAX_M
 from ..types import Bias, Contacts, SymmetryPlane
@@ -70,6 +69,13 @@ CLOUD_RGB = (90, 150, 230)
 MODEL_RGB = (240, 140, 40)
 TRUTH_RGBA = (200, 200, 200, 110)
 HAND_RGBA = (120, 120, 130, 255)
+
+#: How far the 3-D view's eye starts from the objects (m), its angle (rad) beside the
+#: camera's line of sight (so the completed back shows), and how much lower than the camera
+#: it looks (the ratio of its elevation's sine to the camera's).
+EYE_DISTANCE_M = 0.4
+EYE_TURN_RAD = 0.9
+EYE_LOWER = 0.6
 
 
 def rerun_module() -> ModuleType:
@@ -107,7 +113,7 @@ def write_recording(run_dir: Path, out_path: Path | None = None) -> Path:
     run_dir = Path(run_dir)
     runs = [(_RunFiles.load(folder), entity) for folder, entity in run_folders(run_dir)]
     camera_path = run_dir / "camera.json"
-    camera = json.loads(camera_path.read_text()) if camera_path.is_file() else None
+    camera = read_run_json(camera_path) if camera_path.is_file() else None
     out_path = Path(out_path) if out_path is not None else run_dir / RECORDING_NAME
     recording = rr.RecordingStream("symfuse", recording_id=str(uuid.uuid4()))
     plots = {entity: _plots_path(entity) for _, entity in runs}
@@ -124,16 +130,16 @@ def write_recording(run_dir: Path, out_path: Path | None = None) -> Path:
     return out_path
 
 
+def read_run_json(path: Path) -> dict[str, Any]:
+    """A run's JSON object (``result.json``, ``camera.json``)."""
+    document = read_json(path)
+    if not isinstance(document, dict):
+        raise InputError(f"{path}: the top level must be a JSON object")
+    return document
+
+
 def _plots_path(entity: str) -> str:
     return "plots" if entity == "world" else f"plots/{entity.removeprefix('world/')}"
-
-
-#: How far the 3-D view's eye starts from the objects (m), its angle (rad) beside the
-#: camera's line of sight (so the completed back shows), and how much lower than the camera
-#: it looks (the ratio of its elevation's sine to the camera's).
-EYE_DISTANCE_M = 0.4
-EYE_TURN_RAD = 0.9
-EYE_LOWER = 0.6
 
 
 def eye_position(target: np.ndarray, toward: np.ndarray) -> np.ndarray:
@@ -260,7 +266,7 @@ class _RunFiles:
     def load(cls, folder: Path) -> _RunFiles:
         import trimesh
 
-        document = json.loads((folder / "result.json").read_text())
+        document = read_run_json(folder / "result.json")
         inputs = document.get("inputs", {})
         cloud_path = _existing(folder / "cloud.ply", inputs.get("cloud"))
         contacts_path = _existing(folder / "contacts.json", inputs.get("contacts"))
