@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .cli_view import add_rerun_option, check_rerun, record_if_asked
 from .errors import ConfigError, SymfuseError
 from .stages import STAGES
 from .tables import format_table
@@ -140,6 +141,7 @@ def _cmd_fuse(args: argparse.Namespace) -> int:
     )
     from .runner import fuse
 
+    check_rerun(args)
     overrides = [f"initialiser.use={args.init}"] if args.init else []
     registry, config = _load(args, overrides)
     cloud = read_cloud(args.cloud)
@@ -173,6 +175,7 @@ def _cmd_fuse(args: argparse.Namespace) -> int:
     )
     print(stage_summary(run.result))
     print(f"wrote {out}/result.json, config.toml, completed_stage{{0,1,2}}.ply")
+    record_if_asked(args, out)
     if final_status in FAILED_STATUSES:
         print(f"symfuse: error: estimate {final_status} (see {out}/result.json)", file=sys.stderr)
         return EXIT_ESTIMATE_FAILED
@@ -227,6 +230,9 @@ def trial_summary(record) -> str:
                 measure,
                 "-" if angle is None else f"{angle:.1f}",
                 f"{metrics['plane_offset_error_mm']:.1f}",
+                f"{metrics['chamfer_mm']:.1f}",
+                f"{metrics['fscore_5mm']:.2f}",
+                f"{metrics['iou']:.2f}",
             ]
         )
     header = [
@@ -238,6 +244,9 @@ def trial_summary(record) -> str:
         "measure mm",
         "plane err °",
         "offset err mm",
+        "chamfer mm",
+        "F@5mm",
+        "IoU",
     ]
     return format_table(header, rows)
 
@@ -245,6 +254,7 @@ def trial_summary(record) -> str:
 def _cmd_trial(args: argparse.Namespace) -> int:
     from .trial import run_trial
 
+    check_rerun(args)
     registry, config = _load(args, trial_overrides(args))
     settings = config.trial
     out = args.out or Path("runs") / f"trial-{Path(settings.object).stem}-seed{settings.seed}"
@@ -254,6 +264,7 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())
     print(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s")
     print(f"wrote {out}/ (result.json, clouds, contacts.json, pictures)")
+    record_if_asked(args, out)
     if record.result.final.status in FAILED_STATUSES:
         print(f"symfuse: error: estimate {record.result.final.status}", file=sys.stderr)
         return EXIT_ESTIMATE_FAILED
@@ -407,6 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     start.add_argument("--init", metavar="NAME", help="initialiser to guess the plane with")
     _add_config_options(fuse)
     fuse.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    add_rerun_option(fuse)
     fuse.set_defaults(run=_cmd_fuse)
 
     trial = verbs.add_parser(
@@ -433,14 +445,16 @@ def build_parser() -> argparse.ArgumentParser:
     trial.add_argument(
         "--out", type=Path, metavar="DIR", help="output folder (default runs/trial-OBJECT-seedN)"
     )
+    add_rerun_option(trial)
     trial.set_defaults(run=_cmd_trial)
 
     _add_sweep_parser(verbs)
 
-    from . import cli_complete, cli_objects
+    from . import cli_complete, cli_objects, cli_view
 
     cli_complete.add_parser(verbs).set_defaults(run=cli_complete.run)
     cli_objects.add_parser(verbs).set_defaults(run=cli_objects.run)
+    cli_view.add_parser(verbs).set_defaults(run=cli_view.run)
     return parser
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
+from .cli_view import add_rerun_option, check_rerun, record_if_asked
 from .completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
 
 #: The initialiser ``complete`` uses unless ``--init`` names another.
@@ -57,6 +58,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     _add_config_options(parser)
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    add_rerun_option(parser)
     return parser
 
 
@@ -80,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from .completion import complete_scene
     from .formats import read_contacts
 
+    check_rerun(args)
     registry, config = _load(args, overrides(args))
     recorded = read_contacts(args.contacts) if args.contacts else None
     which = args.object or ("largest" if recorded else "all")
@@ -95,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     write_outputs(args.out, scene, config, inputs, time.perf_counter() - started)
     print(scene_table(scene))
     print(f"wrote {args.out}/ (objects.json, object_K/, scene.png, config.toml)")
+    record_if_asked(args, args.out)
     problems = failed(scene.objects, FAILED_STATUSES)
     if problems:
         print(f"symfuse: error: {'; '.join(problems)} (see {args.out}/)", file=sys.stderr)

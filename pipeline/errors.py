@@ -27,6 +27,10 @@ class PluginError(SymfuseError):
     """A plugin could not be found, loaded or registered, or raised while running."""
 
 
+class MissingExtraError(SymfuseError):
+    """An optional feature's dependencies are not installed; the message names the extra."""
+
+
 class StageFailure(SymfuseError):
     """A stage ran correctly but could not produce a usable result (e.g. empty segmentation).
 

@@ -166,9 +166,10 @@ def contacts_from_json(document: Any, path: Path) -> RecordedGrasps:
 
 
 def read_json(path: Path) -> Any:
-    """Parse a JSON file; a file that cannot be read or parsed is an :class:`InputError`."""
+    """A parsed JSON file; :class:`InputError` naming it when missing or not JSON."""
+    path = require_file(path)
     try:
-        return json.loads(Path(path).read_text())
+        return json.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read: {exc}") from None
     except json.JSONDecodeError as exc:
@@ -178,8 +179,7 @@ def read_json(path: Path) -> Any:
 def read_contacts(path: Path) -> RecordedGrasps:
     """Read a contacts JSON file (one entry per grasp, in order)."""
     path = require_file(path)
-    document = read_json(path)
-    return contacts_from_json(document, path)
+    return contacts_from_json(read_json(path), path)
 
 
 def contacts_to_json(
@@ -303,6 +303,16 @@ def stage_to_json(stage: StageEstimate) -> dict[str, Any]:
         "iterations": int(stage.iterations),
         "seconds": float(stage.seconds),
         "active_points": int(stage.active_points),
+        "trace": [
+            {
+                "grasp": state.grasp,
+                "plane": plane_to_json(state.plane),
+                "bias": bias_to_json(state.bias),
+                "active_taxels": state.active_taxels,
+                "active_points": state.active_points,
+            }
+            for state in stage.trace
+        ],
     }
 
 

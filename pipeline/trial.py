@@ -235,6 +235,7 @@ def run_trial(
             "executed": outcome.executed,
             "aperture_m": outcome.aperture_m,
             "joint_positions": outcome.joint_positions,
+            "T_robot_hand": np.asarray(outcome.T_robot_hand).tolist(),
             "reason": outcome.reason,
         }
         if not outcome.executed:

@@ -304,6 +304,25 @@ class SymmetryInit:
 
 
 @dataclass(frozen=True)
+class IterationState:
+    """The estimate after one iteration of an iterative estimator, kept for inspection
+    (``result.json``'s ``trace``, the Rerun recording's iteration timeline).
+
+    Attributes:
+        grasp: index of the grasp being fused (0-based, in the order the grasps happened).
+        plane, bias: the state after the iteration.
+        active_taxels: taxels with some correspondence weight in the iteration.
+        active_points: points inside some taxel's gate in the iteration.
+    """
+
+    grasp: int
+    plane: SymmetryPlane
+    bias: Bias
+    active_taxels: int
+    active_points: int
+
+
+@dataclass(frozen=True)
 class StageEstimate:
     """The estimate after one stage: 0 (initial), 1 (bias + plane), 2 (+ points).
 
@@ -317,6 +336,8 @@ class StageEstimate:
         status: see :data:`EstimateStatus`.
         seconds: wall time spent on this stage.
         active_points: number of points inside some taxel's gate at the end.
+        trace: the state after every iteration, in order (empty for Stage 0 and estimators
+            that do not iterate).
     """
 
     stage: int
@@ -329,6 +350,7 @@ class StageEstimate:
     status: EstimateStatus
     seconds: float
     active_points: int = 0
+    trace: tuple[IterationState, ...] = ()
 
 
 @dataclass(frozen=True)

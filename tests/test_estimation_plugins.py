@@ -84,3 +84,23 @@ def test_bad_parameters_and_inputs_are_reported(scene):
         IekfEstimator(IekfEstimator.Params(max_iterations=0))
     with pytest.raises(StageFailure, match="empty"):
         IekfEstimator().estimate(_problem(scene, points=np.zeros((0, 3))))
+
+
+def test_iekf_traces_every_iteration_and_ends_at_the_stage_estimate(scene):
+    """One trace entry per iteration; each stage's last entry is that stage's state; the
+    taxel counts are bounded by the grasp's taxels; the trace reaches result.json."""
+    from pipeline.formats import estimate_to_json
+
+    result = IekfEstimator().estimate(_problem(scene))
+    assert result.stage(0).trace == ()
+    for stage in result.stages[1:]:
+        assert len(stage.trace) == stage.iterations
+        last = stage.trace[-1]
+        assert last.plane == stage.plane
+        assert last.bias.yaw_rad == stage.bias.yaw_rad
+        np.testing.assert_array_equal(last.bias.translation_m, stage.bias.translation_m)
+        assert all(0 < s.active_taxels <= len(scene.taxels_m) for s in stage.trace)
+        assert all(s.active_points > 0 and s.grasp == 0 for s in stage.trace)
+    stage_one = estimate_to_json(result)[1]
+    assert len(stage_one["trace"]) == result.stage(1).iterations
+    assert stage_one["trace"][-1]["plane"] == stage_one["plane"]

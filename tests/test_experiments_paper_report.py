@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import cKDTree
 
 from pipeline.experiments import ExperimentOptions, table1
 from pipeline.experiments.paper_objects import (
@@ -64,6 +65,31 @@ def test_a_finished_trial_row_matches_its_files(sweep):
     assert row["seconds"] > 0.0
 
 
+def test_shape_scores_match_independent_oracles(sweep):
+    """Chamfer distance and F-score from trimesh's closest points and an independently seeded
+    surface sample; IoU from an exact mesh boolean of the model's hull with the true mesh."""
+    row = sweep[1][0]
+    trial_dir = row["params"]["trial_dir"]
+    mesh = trimesh.load(f"{trial_dir}/object_final.ply", force="mesh")
+    bottom = mesh.face_normals[:, 2] < -0.95
+    top = mesh.copy()
+    top.update_faces(~bottom)
+    truth = np.asarray(trimesh.sample.sample_surface(top, 20_000, seed=11)[0])
+    for k in (0, 2):
+        completed = np.asarray(trimesh.load(f"{trial_dir}/completed_stage{k}.ply").vertices)
+        _, to_truth, _ = trimesh.proximity.closest_point(mesh, completed[::5])
+        to_model, _ = cKDTree(completed).query(truth)
+        chamfer_mm = 0.5e3 * (to_truth.mean() + to_model.mean())
+        assert row[f"stage{k}_chamfer_mm"] == pytest.approx(chamfer_mm, abs=0.1)
+        precision, recall = np.mean(to_truth < 0.005), np.mean(to_model < 0.005)
+        fscore = 2 * precision * recall / (precision + recall)
+        assert row[f"stage{k}_fscore_5mm"] == pytest.approx(fscore, abs=0.02)
+        hull = trimesh.convex.convex_hull(completed)
+        common = trimesh.boolean.intersection([hull, mesh], engine="manifold").volume
+        iou = common / (hull.volume + mesh.volume - common)
+        assert row[f"stage{k}_iou"] == pytest.approx(iou, abs=0.01)
+
+
 def test_a_refused_grasp_becomes_a_failed_row(sweep):
     _, rows = sweep
     row = rows[1]
@@ -90,6 +116,11 @@ def test_measure_report_lists_each_trial_and_the_papers_numbers(sweep, tmp_path)
         assert f"{row[f'stage{k}_thickness_mm']:.2f}" in text
     error_pct = abs(row["stage2_thickness_mm"] - 42.0) / 42.0 * 100.0
     assert f"| {error_pct:.1f} (1.9) |" in text
+    chamfers = " / ".join(f"{row[f'stage{k}_chamfer_mm']:.1f}" for k in (0, 1, 2))
+    ious = " / ".join(f"{row[f'stage{k}_iou']:.2f}" for k in (0, 1, 2))
+    assert "## Shape scores" in text
+    assert f"| PS | 1/2 finished, 1 failed, 0 diverged, 0 raised | {chamfers} |" in text
+    assert f"| {ious} | converged" in text or f"| {ious} | max_iterations" in text
     assert "1/2 finished, 1 failed, 0 diverged, 0 raised" in text
     assert "coffee/ps/view+0/rep0: failed:" in text
     with open(tmp_path / "results.csv", newline="") as handle:
@@ -118,3 +149,6 @@ def test_deviation_report_averages_the_finished_trials(sweep, tmp_path):
     assert f"| all | 1/2 finished, 1 failed, 0 diverged, 0 raised | {medians} |" in text
     improves = row["stage2_deviation_median_mm"] < row["stage0_deviation_median_mm"]
     assert ("| yes |" if improves else "| NO |") in text
+    fscores = " / ".join(f"{row[f'stage{k}_fscore_2mm']:.2f}" for k in (0, 1, 2))
+    assert "## Shape scores" in text
+    assert f" | {fscores} | " in text.split("## Per trial")[1]

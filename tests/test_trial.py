@@ -34,7 +34,9 @@ def test_result_records_stages_metrics_poses_and_config(trial_dir):
     assert set(document["object_pose_before"]) == {"position", "quaternion_xyzw"}
     assert document["taxels_in_contact"] > 20
     for stage in document["stages"]:
-        assert {"deviation_m", "thickness_mm", "plane_angle_error_deg"} <= set(stage["metrics"])
+        assert {"deviation_m", "thickness_mm", "plane_angle_error_deg", "chamfer_mm", "iou"} <= set(
+            stage["metrics"]
+        )
     assert set(document["timings"]) >= {"sensor", "segmenter", "grasp", "estimator"}
 
 

@@ -185,6 +185,16 @@ class FusionProblem:
 
 
 @dataclass(frozen=True)
+class IterationRecord:
+    """``g`` after one iteration, the taxels with support and the points inside some gate."""
+
+    g: np.ndarray
+    active_taxels: int
+    active_points: int
+    grasp: int = 0
+
+
+@dataclass(frozen=True)
 class StageOutcome:
     """Result of one stage.
 
@@ -197,6 +207,7 @@ class StageOutcome:
         active_points: points inside some gate at the last iteration of the last grasp.
         seconds: wall time of the stage.
         grasp_g, grasp_covariance: ``g`` and its covariance after each grasp.
+        trace: every iteration's record, over the grasps in order.
     """
 
     g: np.ndarray
@@ -208,6 +219,7 @@ class StageOutcome:
     seconds: float
     grasp_g: tuple[np.ndarray, ...]
     grasp_covariance: tuple[np.ndarray, ...]
+    trace: tuple[IterationRecord, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -219,6 +231,7 @@ class _GraspResult:
     active_points: int
     #: The last iteration's gain, to commit; None when the prior is kept (see the status).
     gain: Gain | None = None
+    trace: tuple[IterationRecord, ...] = ()
 
 
 def _correspondences(
@@ -277,6 +290,7 @@ def update_grasp(
     use_alternative = settings.schedule != "standard"
     gain, status = None, "max_iterations"
     iterations = 0
+    trace: list[IterationRecord] = []
     correspond = partial(
         _correspondences,
         index,
@@ -331,14 +345,18 @@ def update_grasp(
             moved = touched
             index.note_moved(moved)
         sane = sane_points and np.all(np.abs(g_next - sane_centre) <= sane_halfwidth)
+        active_taxels = int(np.count_nonzero(corr.supported_taxels()))
+        trace.append(IterationRecord(g_next.copy(), active_taxels, corr.active_points().size))
         if not (np.all(np.isfinite(g_next)) and np.isfinite(model_step_m) and sane):
-            return _GraspResult(g_prior, points_prior, "diverged", iterations, 0)
+            return _GraspResult(
+                g_prior, points_prior, "diverged", iterations, 0, None, tuple(trace)
+            )
         g_i = g_next
         if model_step_m < settings.tolerance_m:
             status = "converged"
             break
     active = int(corr.active_points().size)
-    return _GraspResult(g_i, points_i, status, iterations, active, gain)
+    return _GraspResult(g_i, points_i, status, iterations, active, gain, tuple(trace))
 
 
 def worst_status(statuses: list[GraspStatus]) -> GraspStatus:
@@ -364,6 +382,7 @@ def run_stage(
     g, points = np.array(problem.g_init, dtype=float), problem.points_m
     statuses, iterations, active = [], 0, 0
     grasp_g, grasp_covariance = [], []
+    trace: list[IterationRecord] = []
     for k, contacts in enumerate(problem.grasps):
         if k > 0:
             covariance.add_bias_plane_noise(problem.regrasp_noise)
@@ -393,7 +412,11 @@ def run_stage(
             posterior = result.gain.bias_plane_posterior()
             refined = update(settings=settings, g_start=result.g, gate_covariance=posterior)
             if refined.gain is not None:
-                result = replace(refined, iterations=result.iterations + refined.iterations)
+                result = replace(
+                    refined,
+                    iterations=result.iterations + refined.iterations,
+                    trace=result.trace + refined.trace,
+                )
         if result.gain is not None:
             keep_points = stage == 2 and k < len(problem.grasps) - 1
             covariance.commit(result.gain, with_points=keep_points)
@@ -403,6 +426,7 @@ def run_stage(
         active = result.active_points
         grasp_g.append(g.copy())
         grasp_covariance.append(covariance.bias_plane())
+        trace += [replace(record, grasp=k) for record in result.trace]
     return StageOutcome(
         g=g,
         covariance=covariance.bias_plane(),
@@ -413,6 +437,7 @@ def run_stage(
         seconds=time.perf_counter() - started,
         grasp_g=tuple(grasp_g),
         grasp_covariance=tuple(grasp_covariance),
+        trace=tuple(trace),
     )
 
 
@@ -453,6 +478,7 @@ def fuse(
             iterations=stage_two.iterations,
             seconds=stage_two.seconds,
             active_points=stage_two.active_points,
+            trace=stage_two.trace,
         )
     return stage_one, stage_two
 

@@ -14,12 +14,13 @@ from ..types import (
     EstimateResult,
     EstimateStatus,
     EstimationProblem,
+    IterationState,
     StageEstimate,
     SymmetryPlane,
 )
 from .covariances import normal_ellipsoids
 from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
-from .iekf import FusionProblem, GraspContacts, StageOutcome
+from .iekf import FusionProblem, GraspContacts, IterationRecord, StageOutcome
 
 
 def checked_points(problem: EstimationProblem, estimator: str) -> np.ndarray:
@@ -65,13 +66,14 @@ def stage_estimate(
     status: EstimateStatus,
     seconds: float,
     active_points: int,
+    trace: Sequence[IterationRecord] = (),
 ) -> StageEstimate:
     """A :class:`StageEstimate` with the completed model ``{f_b(p)} u {f_mb(p)}``."""
     completed = np.vstack([apply_bias(points, g, pivot_m), apply_mirror_bias(points, g, pivot_m)])
     return StageEstimate(
         stage=stage,
-        plane=SymmetryPlane(theta_rad=float(g[5]), offset_m=float(g[4])),
-        bias=Bias(yaw_rad=float(g[0]), translation_m=g[1:4].copy(), pivot_m=pivot_m.copy()),
+        plane=_plane(g),
+        bias=_bias(g, pivot_m),
         covariance=np.array(covariance, dtype=float),
         points=points,
         completed=completed,
@@ -79,7 +81,21 @@ def stage_estimate(
         status=status,
         seconds=seconds,
         active_points=active_points,
+        trace=tuple(
+            IterationState(
+                r.grasp, _plane(r.g), _bias(r.g, pivot_m), r.active_taxels, r.active_points
+            )
+            for r in trace
+        ),
     )
+
+
+def _plane(g: np.ndarray) -> SymmetryPlane:
+    return SymmetryPlane(theta_rad=float(g[5]), offset_m=float(g[4]))
+
+
+def _bias(g: np.ndarray, pivot_m: np.ndarray) -> Bias:
+    return Bias(yaw_rad=float(g[0]), translation_m=g[1:4].copy(), pivot_m=pivot_m.copy())
 
 
 def estimate_result(
@@ -109,6 +125,7 @@ def estimate_result(
             o.status,
             o.seconds,
             o.active_points,
+            o.trace,
         )
         for stage, o in enumerate(outcomes, start=1)
     ]

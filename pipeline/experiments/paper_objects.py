@@ -30,7 +30,11 @@ final stage's, or ``"failed"``), ``diverged``, ``points``, ``taxels_in_contact``
 ``seconds``, ``timings``, and per stage ``stage{k}_status``, ``stage{k}_iterations``,
 ``stage{k}_deviation_{min,q1,median,q3,max,mean}_mm`` and every scalar metric of
 :func:`pipeline.evaluation.evaluate_stage` as ``stage{k}_<metric>`` (thickness, side angle,
-diameter, plane errors).
+diameter, plane errors, and the shape scores: ``chamfer_mm``, ``precision_2mm``,
+``recall_2mm``, ``fscore_2mm``, the same at 5 mm, ``iou``).
+
+Every report has a "Shape scores" table (Chamfer distance, F-score at 2 and 5 mm, IoU per
+stage and group) and those scores per trial, beside the paper's measures.
 """
 
 from __future__ import annotations
@@ -74,6 +78,14 @@ FIVE_NUMBERS = ("min", "q1", "median", "q3", "max")
 STAGES = (0, 1, 2)
 #: Display names of the initialisers.
 INIT_LABELS = {"ps": "PS", "vc": "VC", "pca": "PCA"}
+#: The shape scores the reports show per stage: (row field after ``stage{k}_``, column
+#: label, decimals). See :func:`pipeline.evaluation.shape_scores`.
+SHAPE_SCORES = (
+    ("chamfer_mm", "Chamfer (mm)", 1),
+    ("fscore_2mm", "F@2mm", 2),
+    ("fscore_5mm", "F@5mm", 2),
+    ("iou", "IoU", 2),
+)
 
 
 # ------------------------------------------------------------------------- tasks
@@ -375,6 +387,12 @@ def group_rows(
     return groups
 
 
+def mean_value(rows: Sequence[Mapping[str, Any]], name: str) -> float:
+    """The mean of a numeric field over ``rows``, ignoring missing values; NaN if none."""
+    values = np.array([value(row, name) for row in rows])
+    return float(np.nanmean(values)) if np.isfinite(values).any() else math.nan
+
+
 def mean_five_numbers(rows: Sequence[Mapping[str, Any]], stage: int) -> np.ndarray:
     """The deviation box (min, q1, median, q3, max; mm) of ``stage`` averaged over ``rows``:
     the paper's Fig. 23 averages the box-and-whisker data of an object's poses."""
@@ -419,6 +437,43 @@ def deviation_box_figure(
         ylim=(0.0, 40.0),
         title=title,
     )
+
+
+# ------------------------------------------------------------------------- shape scores
+
+#: Per-trial table columns of the shape scores.
+SHAPE_HEADER = [f"{label} S0 / S1 / S2" for _, label, _ in SHAPE_SCORES]
+
+
+def shape_cells(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """One ``S0 / S1 / S2`` cell per shape score, each stage's mean over ``rows`` (one row:
+    that trial's scores)."""
+    return [
+        " / ".join(fmt(mean_value(rows, f"stage{k}_{field}"), digits) for k in STAGES)
+        for field, _, digits in SHAPE_SCORES
+    ]
+
+
+def shape_score_section(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:
+    """The "Shape scores" table: per group, the shape scores averaged over its finished
+    trials, per stage."""
+    lines = [
+        "## Shape scores",
+        "",
+        "Symmetric Chamfer distance between the completed model and the true surface (mm, "
+        "lower is better), F-score at 2 and 5 mm (share of the model within the distance of "
+        "the true surface and of the true surface within it of the model, combined; 1 is "
+        "perfect) and the volumetric IoU of the model's convex hull with the true solid. "
+        "The true surface leaves out the face the object stands on. Averaged over a group's "
+        "finished trials.",
+        "",
+        "| group | trials | " + " | ".join(SHAPE_HEADER) + " |",
+        "|---|---|" + "---|" * len(SHAPE_HEADER),
+    ]
+    for label, group in groups.items():
+        cells = shape_cells(finished_rows(group))
+        lines.append(f"| {label} | {count_rows(group).text()} | " + " | ".join(cells) + " |")
+    return lines
 
 
 # ------------------------------------------------------------------------- measure tables
@@ -471,7 +526,7 @@ def _measure_table(rows: Sequence[Mapping[str, Any]], study: MeasureStudy, init:
     header = ["trial", "view (deg)", f"{unit} S0", "S1", "S2"]
     if with_angle:
         header += ["Angle (deg) S0", "S1", "S2"]
-    header += ["final status"]
+    header += [*SHAPE_HEADER, "final status"]
     lines = [
         f"### {INIT_LABELS.get(init, init)}-initialisation",
         "",
@@ -484,18 +539,21 @@ def _measure_table(rows: Sequence[Mapping[str, Any]], study: MeasureStudy, init:
         cells += [fmt(value(row, f"stage{k}_{study.measure}_mm"), 2) for k in STAGES]
         if with_angle:
             cells += [fmt(value(row, f"stage{k}_side_angle_deg"), 2) for k in STAGES]
+        cells += shape_cells([row])
         cells.append(str(row.get("status")) + (" (diverged)" if row.get("diverged") else ""))
         lines.append("| " + " | ".join(cells) + " |")
     statistics = [measure_statistics(finished, study.measure, study.true_mm, k) for k in STAGES]
     angles = [
         np.array([value(row, f"stage{k}_side_angle_deg") for row in finished]) for k in STAGES
     ]
-    blank = [""] * (4 if with_angle else 1)
+    no_shape = [""] * len(SHAPE_HEADER)
+    blank = [""] * (3 if with_angle else 0) + no_shape + [""]
     for label, field in (("mean", "mean"), ("std. dev.", "std")):
         cells = [label, ""] + [fmt(s[field], 2) for s in statistics]
         if with_angle:
             reduce = np.nanmean if field == "mean" else _nanstd
             cells += [fmt(float(reduce(a)), 2) if np.isfinite(a).any() else "-" for a in angles]
+        cells += shape_cells(finished) if field == "mean" else no_shape
         lines.append("| " + " | ".join([*cells, ""]) + " |")
     for label, field in (
         ("error % (of the mean)", "error_pct"),
@@ -563,6 +621,10 @@ def report_measure(
         f"({ps_diverged} diverged). A trial diverges when the estimator says so or its median "
         f"deviation grows by more than {DIVERGED_GROWTH_MM:g} mm over Stage 0.",
         "",
+        *shape_score_section(
+            {INIT_LABELS.get(init, init): group for init, group in by_init.items()}
+        ),
+        "",
         "## Per trial",
         *tables,
     ]
@@ -628,11 +690,8 @@ def deviation_verdict(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     summary: dict[str, Any] = {}
     for stage in STAGES:
         for field in ("median", "mean"):
-            values = np.array(
-                [value(row, f"stage{stage}_deviation_{field}_mm") for row in finished]
-            )
-            summary[f"stage{stage}_{field}"] = (
-                float(np.nanmean(values)) if np.isfinite(values).any() else math.nan
+            summary[f"stage{stage}_{field}"] = mean_value(
+                finished, f"stage{stage}_deviation_{field}_mm"
             )
     summary["improves"] = bool(summary["stage2_median"] < summary["stage0_median"])
     return summary
@@ -694,6 +753,7 @@ def report_deviation(
         f"- Trials: {counts.text()} (diverged: the estimator says so or the median deviation "
         f"grows by more than {DIVERGED_GROWTH_MM:g} mm over Stage 0).",
     ]
+    lines += ["", *shape_score_section(groups)]
     lines += ["", "## Per trial", "", *_deviation_trial_table(rows)]
     paths = []
     for stem, categories, xlabel in figures:
@@ -713,16 +773,22 @@ def report_deviation(
 
 
 def _deviation_trial_table(rows: Sequence[Mapping[str, Any]]) -> list[str]:
-    """One line per finished trial: median deviation and plane errors per stage."""
-    lines = [
-        "| trial | median dev. S0 / S1 / S2 (mm) | plane angle err. S0 / S2 (deg) "
-        "| plane offset err. S0 / S2 (mm) | final status |",
-        "|---|---|---|---|---|",
+    """One line per finished trial: median deviation, plane errors and shape scores per
+    stage."""
+    header = [
+        "trial",
+        "median dev. S0 / S1 / S2 (mm)",
+        "plane angle err. S0 / S2 (deg)",
+        "plane offset err. S0 / S2 (mm)",
+        *SHAPE_HEADER,
+        "final status",
     ]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for row in finished_rows(rows):
         medians = " / ".join(fmt(value(row, f"stage{k}_deviation_median_mm")) for k in STAGES)
         angles = " / ".join(fmt(value(row, f"stage{k}_plane_angle_error_deg")) for k in (0, 2))
         offsets = " / ".join(fmt(value(row, f"stage{k}_plane_offset_error_mm")) for k in (0, 2))
         status = str(row.get("status")) + (" (diverged)" if row.get("diverged") else "")
-        lines.append(f"| {row.get('key', '?')} | {medians} | {angles} | {offsets} | {status} |")
+        cells = [str(row.get("key", "?")), medians, angles, offsets, *shape_cells([row]), status]
+        lines.append("| " + " | ".join(cells) + " |")
     return lines

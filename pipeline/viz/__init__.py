@@ -1,0 +1,1 @@
+"""Visualisation of finished runs in external viewers (the optional ``viz`` extra)."""

@@ -1,0 +1,505 @@
+"""A Rerun recording (``.rrd``) of a finished run, built from the files the run wrote.
+
+:func:`write_recording` reads a run folder (``symfuse trial``, ``fuse``, or a folder of
+per-object runs with an ``objects.json``) and never re-runs anything, so ``--rerun`` and
+``symfuse view`` give the same recording. What is missing from a folder (no camera for
+``fuse``, no true mesh outside simulation) is left out.
+
+Entities, all in the robot frame ``R`` (metres, z up); ``OBJ`` is ``world`` for a single run
+and ``world/<folder>`` for each object of a multi-object run (its plots under
+``plots/<folder>``):
+
+=============================  ======================================================
+``world/camera``               the believed camera pose ``T_robot_camera`` (Transform3D)
+``world/camera/image``         pinhole intrinsics (OpenCV optical frame)
+``world/camera/image/rgb``     colour image (``rgb.png``)
+``world/camera/image/depth``   metric depth (``depth.npy``, millimetres, 0 = no return)
+``OBJ/cloud``                  the segmented cloud
+``OBJ/model``                  the completed model of the current stage, coloured by
+                               distance to the true surface (0 mm blue, 30 mm red) when
+                               the truth is known
+``OBJ/plane``                  the symmetry plane of the current stage or iteration (moved
+                               by the bias, so the model is symmetric about it), a
+                               translucent quad
+``OBJ/truth``                  the object's true mesh after the grasp (simulation)
+``OBJ/hand/<link>``            the hand's link shapes at the grasp (URDF, joint positions
+                               after closing)
+``OBJ/taxels``                 the taxels in contact, coloured by their distance to the
+                               current model (0 mm green, 10 mm red)
+``plots/plane/theta_deg``,     the IEKF state after every iteration
+``plots/plane/offset_mm``,
+``plots/bias/yaw_deg``,
+``plots/bias/{x,y,z}_mm``
+``plots/gates/taxels``,        taxels with some correspondence weight, points inside
+``plots/gates/points``         some gate, per iteration
+``log``                        one line per step saying what it shows
+=============================  ======================================================
+
+One timeline, ``step``, runs over the pipeline (camera, segmentation, Stage 0, grasp), each
+IEKF iteration of Stage 1, Stage 1's result, each iteration of Stage 2 and its result.
+Scrubbing it shows the plane and the bias converging; between results the model stays at the
+last finished stage (the iterations record the state, not the points).
+"""
+
+from __future__ import annotations
+
+import importlib
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, MissingExtraError
+from ..formats import read_cloud, read_contacts, read_json
+from ..metrics import nearest_distances, plane_after_bias, point_to_mesh_distances
+from ..plots import DEVIATION_CMAP, DEVIATION_MAX_M
+from ..types import Bias, Contacts, SymmetryPlane
+
+#: File name of the recording inside a run folder.
+RECORDING_NAME = "recording.rrd"
+#: Taxel colours span 0 to this distance from the model (m).
+TAXEL_RESIDUAL_MAX_M = 0.010
+#: The plane quad reaches this far beyond the model on each side (m).
+PLANE_MARGIN_M = 0.015
+PLANE_RGBA = (255, 190, 0, 90)
+CLOUD_RGB = (90, 150, 230)
+MODEL_RGB = (240, 140, 40)
+TRUTH_RGBA = (200, 200, 200, 110)
+HAND_RGBA = (120, 120, 130, 255)
+
+#: How far the 3-D view's eye starts from the objects (m), its angle (rad) beside the
+#: camera's line of sight (so the completed back shows), and how much lower than the camera
+#: it looks (the ratio of its elevation's sine to the camera's).
+EYE_DISTANCE_M = 0.4
+EYE_TURN_RAD = 0.9
+EYE_LOWER = 0.6
+
+
+def rerun_module() -> ModuleType:
+    """The ``rerun`` module; :class:`MissingExtraError` naming the extra when absent."""
+    try:
+        return importlib.import_module("rerun")
+    except ImportError:
+        raise MissingExtraError(
+            "the Rerun recording needs the viz extra: pip install 'symfuse[viz]'"
+        ) from None
+
+
+def run_folders(run_dir: Path) -> list[tuple[Path, str]]:
+    """The run folders under ``run_dir`` with the entity name of each: ``run_dir`` itself
+    (``"world"``), or each sub-folder holding a ``result.json`` (``"world/<name>"``).
+
+    Raises:
+        InputError: ``run_dir`` holds no run.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise InputError(f"{run_dir}: no such folder")
+    if (run_dir / "result.json").is_file():
+        return [(run_dir, "world")]
+    objects = sorted(p.parent for p in run_dir.glob("*/result.json"))
+    if not objects:
+        raise InputError(f"{run_dir}: no result.json here or in its sub-folders (not a run)")
+    return [(folder, f"world/{folder.name}") for folder in objects]
+
+
+def write_recording(run_dir: Path, out_path: Path | None = None) -> Path:
+    """Build the recording of the run in ``run_dir`` (module doc) and write it to
+    ``out_path`` (default ``run_dir/recording.rrd``); returns the path written."""
+    rr = rerun_module()
+    run_dir = Path(run_dir)
+    runs = [(_RunFiles.load(folder), entity) for folder, entity in run_folders(run_dir)]
+    camera_path = run_dir / "camera.json"
+    camera = read_run_json(camera_path) if camera_path.is_file() else None
+    out_path = Path(out_path) if out_path is not None else run_dir / RECORDING_NAME
+    recording = rr.RecordingStream("symfuse", recording_id=str(uuid.uuid4()))
+    plots = {entity: _plots_path(entity) for _, entity in runs}
+    recording.save(out_path, default_blueprint=_blueprint(runs, camera, list(plots.values())))
+    timeline = _Timeline(rr, recording)
+    recording.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    if camera is not None:
+        timeline.next("camera: depth and colour image, intrinsics and pose")
+        _log_camera(rr, recording, run_dir, camera)
+    for files, entity in runs:
+        _RunRecorder(rr, recording, timeline, files, entity, plots[entity]).log()
+    recording.flush()
+    recording.disconnect()
+    return out_path
+
+
+def read_run_json(path: Path) -> dict[str, Any]:
+    """A run's JSON object (``result.json``, ``camera.json``)."""
+    document = read_json(path)
+    if not isinstance(document, dict):
+        raise InputError(f"{path}: the top level must be a JSON object")
+    return document
+
+
+def _plots_path(entity: str) -> str:
+    return "plots" if entity == "world" else f"plots/{entity.removeprefix('world/')}"
+
+
+def eye_position(target: np.ndarray, toward: np.ndarray) -> np.ndarray:
+    """Where the 3-D view's eye starts: :data:`EYE_DISTANCE_M` from ``target``, turned
+    :data:`EYE_TURN_RAD` about +z from the direction ``toward`` (the camera), with the sine
+    of its elevation scaled by :data:`EYE_LOWER`."""
+    toward = np.asarray(toward, dtype=float) / np.linalg.norm(toward)
+    azimuth = np.arctan2(toward[1], toward[0]) + EYE_TURN_RAD
+    sin_elevation = EYE_LOWER * toward[2]
+    cos_elevation = np.sqrt(1.0 - sin_elevation**2)
+    direction = [cos_elevation * np.cos(azimuth), cos_elevation * np.sin(azimuth), sin_elevation]
+    return np.asarray(target, dtype=float) + EYE_DISTANCE_M * np.array(direction)
+
+
+def _blueprint(runs, camera: dict[str, Any] | None, plots: list[str]):
+    """The viewer layout: the 3-D scene (eye on the objects, from beside the camera), the
+    camera images, the IEKF state per iteration (plane, bias, gates) and the step log."""
+    import rerun.blueprint as rrb
+
+    references = [files.reference for files, _ in runs if files.reference is not None]
+    eye = None
+    if references:
+        target = np.vstack(references).mean(axis=0)
+        if camera is not None:
+            toward = np.asarray(camera["T_robot_camera"], dtype=float)[:3, 3] - target
+        else:
+            toward = np.array([-1.0, -1.0, 1.0])
+        position = eye_position(target, toward)
+        eye = rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
+
+    def series(name: str, part: str):
+        return rrb.TimeSeriesView(
+            origin="/", contents=[f"+ /{root}/{part}/**" for root in plots], name=name
+        )
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(
+                origin="world",
+                name="robot frame",
+                contents=["+ /**", "- /world/camera/image/depth"],
+                eye_controls=eye,
+            ),
+            rrb.Vertical(
+                rrb.Tabs(
+                    rrb.Spatial2DView(
+                        origin="world/camera/image",
+                        contents=["+ $origin/rgb"],
+                        name="colour",
+                    ),
+                    rrb.Spatial2DView(
+                        origin="world/camera/image",
+                        contents=["+ $origin/depth"],
+                        name="depth",
+                    ),
+                ),
+                series("bias (deg, mm)", "bias"),
+                series("plane (deg, mm)", "plane"),
+                series("gates", "gates"),
+                rrb.TextLogView(origin="log", name="steps"),
+                row_shares=[2.2, 1.2, 1.2, 1.2, 1.6],
+            ),
+            column_shares=[2.4, 1],
+        ),
+        collapse_panels=True,
+    )
+
+
+class _Timeline:
+    """The ``step`` timeline: each step logs one line to ``log``."""
+
+    def __init__(self, rr: ModuleType, recording) -> None:
+        self.rr, self.recording, self.step = rr, recording, -1
+
+    def next(self, text: str) -> None:
+        self.step += 1
+        self.recording.set_time("step", sequence=self.step)
+        self.recording.log("log", self.rr.TextLog(text))
+
+
+def _log_camera(rr: ModuleType, recording, run_dir: Path, camera: dict[str, Any]) -> None:
+    k = camera["intrinsics"]
+    T = np.asarray(camera["T_robot_camera"], dtype=np.float64)
+    recording.log("world/camera", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]))
+    recording.log(
+        "world/camera/image",
+        rr.Pinhole(
+            image_from_camera=[[k["fx"], 0, k["cx"]], [0, k["fy"], k["cy"]], [0, 0, 1]],
+            width=k["width"],
+            height=k["height"],
+            camera_xyz=rr.ViewCoordinates.RDF,
+            image_plane_distance=0.1,
+        ),
+    )
+    if (run_dir / "rgb.png").is_file():
+        recording.log("world/camera/image/rgb", rr.EncodedImage(path=run_dir / "rgb.png"))
+    if (run_dir / "depth.npy").is_file():
+        depth_m = np.load(run_dir / "depth.npy", allow_pickle=False)
+        depth_mm = np.where(np.isfinite(depth_m), np.round(depth_m * 1e3), 0.0)
+        recording.log(
+            "world/camera/image/depth", rr.DepthImage(depth_mm.astype(np.uint16), meter=1000.0)
+        )
+
+
+@dataclass(frozen=True)
+class _RunFiles:
+    """What one run folder holds; None (or empty) where a file is missing."""
+
+    folder: Path
+    document: dict[str, Any]
+    cloud: np.ndarray | None
+    models: dict[int, np.ndarray]
+    truth: Any
+    grasps: tuple[Contacts, ...]
+    plans: tuple[Any, ...]
+
+    @property
+    def reference(self) -> np.ndarray | None:
+        """The points the plane quads are sized on: Stage 0's model, else the cloud."""
+        points = self.models.get(0, self.cloud)
+        return points if points is not None and len(points) else None
+
+    @classmethod
+    def load(cls, folder: Path) -> _RunFiles:
+        import trimesh
+
+        document = read_run_json(folder / "result.json")
+        inputs = document.get("inputs", {})
+        cloud_path = _existing(folder / "cloud.ply", inputs.get("cloud"))
+        contacts_path = _existing(folder / "contacts.json", inputs.get("contacts"))
+        recorded = read_contacts(contacts_path) if contacts_path else None
+        truth_path = folder / "object_final.ply"
+        models = {
+            stage["stage"]: read_cloud(path).points
+            for stage in document.get("stages", [])
+            if (path := folder / f"completed_stage{stage['stage']}.ply").is_file()
+        }
+        return cls(
+            folder=folder,
+            document=document,
+            cloud=read_cloud(cloud_path).points if cloud_path else None,
+            models=models,
+            truth=trimesh.load(truth_path, force="mesh") if truth_path.is_file() else None,
+            grasps=recorded.contacts if recorded else (),
+            plans=recorded.plans if recorded else (),
+        )
+
+
+def _existing(local: Path, recorded: str | None) -> Path | None:
+    """``local`` if present, else the input path the run recorded if that still exists."""
+    if local.is_file():
+        return local
+    if recorded and Path(recorded).is_file():
+        return Path(recorded)
+    return None
+
+
+def _colours(values: np.ndarray, cmap: str, top: float) -> np.ndarray:
+    import matplotlib
+
+    rgba = matplotlib.colormaps[cmap](np.clip(values / top, 0.0, 1.0))
+    return (rgba[:, :3] * 255).astype(np.uint8)
+
+
+def plane_quad(plane: SymmetryPlane, points: np.ndarray) -> np.ndarray:
+    """``(4, 3)`` corners of the part of a vertical plane that spans ``points``: along the
+    plane as far as the points reach plus :data:`PLANE_MARGIN_M`, from their lowest to their
+    highest point, centred on their centroid's projection."""
+    normal = plane.normal
+    along = np.array([-normal[1], normal[0], 0.0])
+    centre = points.mean(axis=0)
+    centre = centre - (centre @ normal - plane.offset_m) * normal
+    reach = np.abs((points - centre) @ along).max() + PLANE_MARGIN_M
+    low, high = points[:, 2].min(), points[:, 2].max()
+    corners = []
+    for side, z in ((-1, low), (1, low), (1, high), (-1, high)):
+        corner = centre + side * reach * along
+        corners.append([corner[0], corner[1], z])
+    return np.array(corners)
+
+
+class _RunRecorder:
+    """Logs one run folder's steps (module doc) under ``entity`` and ``plots``."""
+
+    def __init__(self, rr, recording, timeline, files: _RunFiles, entity: str, plots: str):
+        self.rr, self.recording, self.timeline = rr, recording, timeline
+        self.files, self.entity, self.plots = files, entity, plots
+        stages = files.document.get("stages", [])
+        self.stages = {stage["stage"]: stage for stage in stages}
+        self.extent = files.reference
+        self.taxels = (
+            np.vstack([grasp.positions for grasp in files.grasps]) if files.grasps else None
+        )
+
+    def log(self) -> None:
+        files, name = self.files, self.files.folder.name
+        if files.cloud is not None:
+            self.timeline.next(f"{name}: segmented cloud, {len(files.cloud)} points")
+            self.recording.log(
+                f"{self.entity}/cloud",
+                self.rr.Points3D(files.cloud, colors=CLOUD_RGB, radii=0.0008),
+            )
+        for k in sorted(self.stages):
+            if k > 0:
+                self._log_iterations(k)
+            self.timeline.next(f"{name}: Stage {k} ({self.stages[k].get('status', '?')})")
+            self._log_stage(k)
+            if k == 0:
+                self._log_grasp()
+
+    def _log_stage(self, k: int) -> None:
+        stage = self.stages[k]
+        plane, bias = _plane(stage["plane"]), _bias(stage["bias"])
+        self._log_plane(plane_after_bias(plane, bias))
+        model = self.files.models.get(k)
+        if model is None:
+            return
+        truth = self.files.truth
+        if truth is not None:
+            distances = point_to_mesh_distances(model, truth.vertices, truth.faces)
+            colours = _colours(distances, DEVIATION_CMAP, DEVIATION_MAX_M)
+        else:
+            colours = np.tile(np.array(MODEL_RGB, dtype=np.uint8), (len(model), 1))
+        self.recording.log(
+            f"{self.entity}/model", self.rr.Points3D(model, colors=colours, radii=0.001)
+        )
+        if k > 0:
+            self._log_taxels(model)
+
+    def _log_taxels(self, model: np.ndarray) -> None:
+        if self.taxels is None:
+            return
+        residual = nearest_distances(self.taxels, model)
+        self.recording.log(
+            f"{self.entity}/taxels",
+            self.rr.Points3D(
+                self.taxels,
+                colors=_colours(residual, "RdYlGn_r", TAXEL_RESIDUAL_MAX_M),
+                radii=0.0015,
+            ),
+        )
+
+    def _log_plane(self, plane: SymmetryPlane) -> None:
+        if self.extent is None:
+            return
+        corners = plane_quad(plane, self.extent)
+        self.recording.log(
+            f"{self.entity}/plane",
+            self.rr.Mesh3D(
+                vertex_positions=corners,
+                # Both windings, so the quad shows from either side.
+                triangle_indices=[[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]],
+                albedo_factor=PLANE_RGBA,
+            ),
+        )
+
+    def _log_iterations(self, k: int) -> None:
+        trace = self.stages[k].get("trace", [])
+        for number, state in enumerate(trace, start=1):
+            self.timeline.next(
+                f"{self.files.folder.name}: Stage {k} iteration {number} of {len(trace)} "
+                f"(grasp {state['grasp'] + 1}), {state['active_taxels']} taxels, "
+                f"{state['active_points']} points in gates"
+            )
+            plane, bias = _plane(state["plane"]), _bias(state["bias"])
+            self._log_plane(plane_after_bias(plane, bias))
+            values = {
+                "plane/theta_deg": plane.theta_rad * 180.0 / np.pi,
+                "plane/offset_mm": plane.offset_m * 1e3,
+                "bias/yaw_deg": bias.yaw_rad * 180.0 / np.pi,
+                "bias/x_mm": bias.translation_m[0] * 1e3,
+                "bias/y_mm": bias.translation_m[1] * 1e3,
+                "bias/z_mm": bias.translation_m[2] * 1e3,
+                "gates/taxels": state["active_taxels"],
+                "gates/points": state["active_points"],
+            }
+            for path, value in values.items():
+                self.recording.log(f"{self.plots}/{path}", self.rr.Scalars(float(value)))
+
+    def _log_grasp(self) -> None:
+        files, name = self.files, self.files.folder.name
+        if not files.grasps and files.truth is None:
+            return
+        text = "the true object" if not files.grasps else f"grasp, {len(self.taxels)} taxels"
+        self.timeline.next(f"{name}: {text} (taxel colour: distance to the Stage 0 model)")
+        if files.truth is not None:
+            self.recording.log(
+                f"{self.entity}/truth",
+                self.rr.Mesh3D(
+                    vertex_positions=files.truth.vertices,
+                    triangle_indices=files.truth.faces,
+                    vertex_normals=files.truth.vertex_normals,
+                    albedo_factor=TRUTH_RGBA,
+                ),
+            )
+        if 0 in files.models:
+            self._log_taxels(files.models[0])
+        for link, (vertices, faces, normals) in self._hand_links().items():
+            self.recording.log(
+                f"{self.entity}/hand/{link}",
+                self.rr.Mesh3D(
+                    vertex_positions=vertices,
+                    triangle_indices=faces,
+                    vertex_normals=normals,
+                    albedo_factor=HAND_RGBA,
+                ),
+            )
+
+    def _hand_links(self) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Each hand link's shapes in frame R at the last grasp, from the URDF's forward
+        kinematics; empty when the hand or its pose is unknown."""
+        plan = self.files.plans[-1] if self.files.plans else None
+        grasp = self.files.document.get("grasp", {})
+        if plan is None:
+            return {}
+        T_robot_hand = np.asarray(grasp.get("T_robot_hand", plan.T_robot_hand), dtype=float)
+        return hand_link_meshes(plan.gripper, grasp.get("joint_positions"), T_robot_hand, plan)
+
+
+def hand_link_meshes(
+    gripper: str, joint_positions: dict[str, float] | None, T_robot_hand: np.ndarray, plan
+) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """``link -> (vertices, faces, normals)`` of a shipped hand in frame R.
+
+    The joints are at ``joint_positions`` (after the grasp closed) or, when the run did not
+    record them, at the plan's opening. Each face gets its own vertices, so the boxes and
+    cylinders of the URDF shade flat.
+    """
+    import trimesh
+    import yourdfpy
+
+    from robots import ROOT
+
+    from ..sim.hands import HAND_MODELS
+
+    model = HAND_MODELS.get(gripper)
+    if model is None:
+        return {}
+    urdf = yourdfpy.URDF.load(str(ROOT / model.urdf))
+    if joint_positions is None:
+        joint_positions = model.open_configuration(plan.opening_m, plan.spread_rad)
+    urdf.update_cfg({k: v for k, v in joint_positions.items() if k in urdf.actuated_joint_names})
+    scene = urdf.scene
+    shapes: dict[str, list[trimesh.Trimesh]] = {}
+    for node in scene.graph.nodes_geometry:
+        T_hand_shape, geometry = scene.graph[node]
+        link = scene.graph.transforms.parents[node]
+        shape = trimesh.Trimesh(scene.geometry[geometry].vertices, scene.geometry[geometry].faces)
+        shapes.setdefault(link, []).append(shape.apply_transform(T_robot_hand @ T_hand_shape))
+    meshes = {}
+    for link, parts in shapes.items():
+        mesh = trimesh.util.concatenate(parts)
+        mesh.unmerge_vertices()
+        meshes[link] = (np.asarray(mesh.vertices), np.asarray(mesh.faces), mesh.vertex_normals)
+    return meshes
+
+
+def _plane(document: dict[str, Any]) -> SymmetryPlane:
+    return SymmetryPlane.from_normal(np.asarray(document["normal"]), document["offset"])
+
+
+def _bias(document: dict[str, Any]) -> Bias:
+    return Bias(document["yaw"], document["translation"], document["pivot"])

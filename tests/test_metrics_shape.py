@@ -1,0 +1,153 @@
+"""Chamfer distance, F-score and volumetric IoU against hand-computed cases."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipeline.metrics import (
+    hull_iou,
+    mesh_occupancy,
+    nearest_distances,
+    point_to_mesh_distances,
+    sample_surface,
+    solid_grid,
+    support_faces,
+    surface_scores,
+)
+
+
+def _fibonacci_sphere(count: int, radius: float) -> np.ndarray:
+    """``count`` nearly evenly spread points on a sphere about the origin."""
+    k = np.arange(count) + 0.5
+    z = 1.0 - 2.0 * k / count
+    azimuth = math.pi * (1.0 + math.sqrt(5.0)) * k
+    ring = np.sqrt(1.0 - z * z)
+    return radius * np.column_stack([ring * np.cos(azimuth), ring * np.sin(azimuth), z])
+
+
+def test_scores_of_three_points_by_hand():
+    """Model {0}, truth {0, 4 mm}: the model is all right (precision 1) but covers half of
+    the truth within 2 mm; Chamfer = (0 + (0 + 4) / 2) / 2 = 1 mm."""
+    model = np.zeros((1, 3))
+    truth = np.array([[0.0, 0.0, 0.0], [0.004, 0.0, 0.0]])
+    scores = surface_scores(nearest_distances(model, truth), nearest_distances(truth, model))
+    assert scores["chamfer_mm"] == pytest.approx(1.0)
+    assert scores["precision_2mm"] == 1.0
+    assert scores["recall_2mm"] == 0.5
+    assert scores["fscore_2mm"] == pytest.approx(2.0 / 3.0)
+    assert scores["fscore_5mm"] == 1.0
+
+
+def test_two_concentric_spheres_are_their_radius_difference_apart():
+    """Both spheres carry points along the same directions, so every point's nearest
+    neighbour on the other sphere is the radial one, 3 mm away: Chamfer 3 mm, nothing within
+    2 mm (F 0), everything within 5 mm (F 1)."""
+    inner, outer = _fibonacci_sphere(4000, 0.050), _fibonacci_sphere(4000, 0.053)
+    scores = surface_scores(nearest_distances(inner, outer), nearest_distances(outer, inner))
+    assert scores["chamfer_mm"] == pytest.approx(3.0, abs=1e-9)
+    assert scores["precision_2mm"] == scores["recall_2mm"] == scores["fscore_2mm"] == 0.0
+    assert scores["fscore_5mm"] == 1.0
+
+
+def test_no_correct_point_gives_f_zero_not_nan():
+    scores = surface_scores(np.full(3, 0.1), np.full(4, 0.1))
+    assert scores["fscore_2mm"] == 0.0
+
+
+# A cube of side A shifted by D along x: the hand-computed shares below are exact for the
+# exact point-to-surface distances of points spread uniformly over the shifted surface.
+A, D = 0.1, 0.01
+
+
+def _cube_share_within(tau: float) -> float:
+    """Share of the shifted cube's surface within ``tau`` (< D) of the cube: the four side
+    faces up to the cube's edge (4 A (A - D)), their strip beyond it up to ``tau`` (4 A tau),
+    and the face moved inside where it is within ``tau`` of a side face; the face moved
+    outside is D away."""
+    inside_face = A * A - (A - 2.0 * tau) ** 2
+    return (4.0 * A * (A - D) + 4.0 * A * tau + inside_face) / (6.0 * A * A)
+
+
+def _cube_mean_distance() -> float:
+    """Mean distance of the shifted cube's surface to the cube: the side strips (mean D/2),
+    the face outside (D), and the face inside, where a point u from the nearest edge is
+    min(D, u) away: its mean is (A^3 - (A - 2D)^3) / (6 A^2)."""
+    strips = 4.0 * A * D * D / 2.0
+    outside = A * A * D
+    inside = (A**3 - (A - 2.0 * D) ** 3) / 6.0
+    return (strips + outside + inside) / (6.0 * A * A)
+
+
+def test_a_shifted_cube_by_hand():
+    cube = trimesh.creation.box(extents=(A, A, A))
+    shift = np.array([D, 0.0, 0.0])
+    samples = np.asarray(trimesh.sample.sample_surface(cube, 200_000, seed=3)[0])
+    model = samples + shift  # uniform on the shifted cube's surface
+    truth = np.asarray(trimesh.sample.sample_surface(cube, 200_000, seed=4)[0])
+    to_truth = point_to_mesh_distances(model, cube.vertices, cube.faces)
+    to_model = point_to_mesh_distances(truth, cube.vertices + shift, cube.faces)
+    scores = surface_scores(to_truth, to_model)
+    assert scores["chamfer_mm"] == pytest.approx(_cube_mean_distance() * 1e3, rel=0.01)
+    for tau, label in ((0.002, "2mm"), (0.005, "5mm")):
+        expected = _cube_share_within(tau)
+        # The configuration is its own mirror image: precision and recall are equal.
+        assert scores[f"precision_{label}"] == pytest.approx(expected, abs=0.005)
+        assert scores[f"recall_{label}"] == pytest.approx(expected, abs=0.005)
+        assert scores[f"fscore_{label}"] == pytest.approx(expected, abs=0.005)
+
+
+def test_iou_of_a_shifted_cube_is_overlap_over_union():
+    """Two cubes of side A, D apart: IoU = (A - D) / (A + D)."""
+    cube = trimesh.creation.box(extents=(A, A, A))
+    solid = solid_grid(cube.vertices, cube.faces)
+    assert solid.volume_m3 == pytest.approx(A**3, rel=0.01)
+    shift = 0.0123
+    corners = cube.vertices + np.array([shift, 0.0, 0.0])
+    assert hull_iou(corners, solid) == pytest.approx((A - shift) / (A + shift), abs=0.01)
+    assert hull_iou(cube.vertices, solid) == pytest.approx(1.0, abs=0.01)
+
+
+def test_iou_of_two_overlapping_spheres_is_the_lens_over_the_union():
+    """Spheres of radius R with centres d apart overlap in a lens of volume
+    pi (4R + d) (2R - d)^2 / 12."""
+    radius, distance = 0.05, 0.03
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=radius)
+    solid = solid_grid(sphere.vertices, sphere.faces)
+    lens = math.pi * (4 * radius + distance) * (2 * radius - distance) ** 2 / 12.0
+    ball = 4.0 / 3.0 * math.pi * radius**3
+    moved = sphere.vertices + np.array([0.0, 0.0, distance])
+    assert hull_iou(moved, solid) == pytest.approx(lens / (2 * ball - lens), abs=0.01)
+    apart = sphere.vertices + np.array([3 * radius, 0.0, 0.0])
+    assert hull_iou(apart, solid) == 0.0
+
+
+def test_flat_points_have_no_volume():
+    cube = trimesh.creation.box(extents=(A, A, A))
+    flat = np.random.default_rng(0).uniform(-0.05, 0.05, (100, 3)) * [1.0, 1.0, 0.0]
+    assert hull_iou(flat, solid_grid(cube.vertices, cube.faces)) == 0.0
+
+
+def test_occupancy_inside_and_outside_a_box():
+    box = trimesh.creation.box(extents=(0.1, 0.2, 0.3))
+    offset = np.array([0.7, -0.3, 0.2])  # away from the origin: float32 handling matters
+    points = np.random.default_rng(2).uniform(-0.2, 0.2, (5000, 3))
+    inside = np.all(np.abs(points) < [0.05, 0.1, 0.15], axis=1)
+    occupied = mesh_occupancy(points + offset, box.vertices + offset, box.faces)
+    np.testing.assert_array_equal(occupied, inside)
+
+
+def test_surface_samples_leave_out_the_face_the_object_stands_on():
+    box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    box.apply_translation([0.4, 0.0, 0.05])  # standing on z = 0
+    support = support_faces(box.vertices, box.faces)
+    assert support.sum() == 2  # the bottom square's two triangles
+    assert np.allclose(box.triangles_center[support][:, 2], 0.0)
+    points = sample_surface(box.vertices, box.faces, 5000, seed=7)
+    assert np.all(points[:, 2] > 1e-9)  # nothing on the bottom face
+    assert np.mean(points[:, 2] > 0.1 - 1e-9) == pytest.approx(1.0 / 5.0, abs=0.02)
+    again = sample_surface(box.vertices, box.faces, 5000, seed=7)
+    np.testing.assert_array_equal(points, again)
