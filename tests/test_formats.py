@@ -95,7 +95,10 @@ def test_minimal_contacts_document(tmp_path):
 @pytest.mark.parametrize(
     ("document", "message"),
     [
-        ({"frame": "robot", "units": "mm", "grasps": []}, r"units must be \"m\""),
+        (
+            {"frame": "robot", "units": "inch", "grasps": []},
+            r"units must be \"m\" \(metres\) or \"mm\"",
+        ),
         ({"frame": "camera", "units": "m", "grasps": []}, r"frame must be \"robot\""),
         ({"frame": "robot", "units": "m", "grasps": []}, "'grasps' must be a non-empty list"),
         ({"frame": "robot", "units": "m", "grasps": [{"taxels": []}]}, r"grasps\[0\]\.taxels"),
