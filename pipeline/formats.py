@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from .cloud_headers import check_cloud_file
 from .errors import InputError
 from .types import (
     Bias,
@@ -77,6 +78,7 @@ def read_cloud(path: Path, units: str = "m") -> PointCloud:
     else:
         from .open3d_loader import open3d
 
+        check_cloud_file(path)  # open3d fills what a malformed file lacks with garbage
         o3d = open3d()
         with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
             cloud = o3d.io.read_point_cloud(str(path))
