@@ -59,6 +59,8 @@ def check_cloud_file(path: Path) -> None:
 def _header(data: bytes, path: Path, end: bytes, first_line: bytes | None) -> tuple[list, int]:
     """The header's lines (split into words) up to the line starting with ``end``, and the
     byte offset where the body starts."""
+    if first_line is not None and data.split(b"\n", 1)[0].rstrip(b"\r") != first_line:
+        raise InputError(f"{path}: not a {path.suffix[1:].upper()} file (bad first line)")
     lines, position = [], 0
     while True:
         stop = data.find(b"\n", position)
@@ -70,8 +72,6 @@ def _header(data: bytes, path: Path, end: bytes, first_line: bytes | None) -> tu
             words = raw.decode("ascii").split()
         except UnicodeDecodeError:
             raise InputError(f"{path}: the header is not ASCII text") from None
-        if first_line is not None and not lines and raw != first_line:
-            raise InputError(f"{path}: not a {path.suffix[1:].upper()} file (bad first line)")
         lines.append(words)
         if words and words[0].encode() == end:
             return lines, position
