@@ -39,6 +39,15 @@ def fuse_args(recording, out, *extra):
             "--out", out]  # fmt: skip
 
 
+def writing(verb: str, recording, out: Path) -> list:
+    """A command line of ``verb`` writing to ``out`` (``--out`` and its value last)."""
+    return {
+        "fuse": fuse_args(recording, out),
+        "trial": ["trial", "--out", out],
+        "sweep": ["sweep", "fig10", "--quick", "--out", out],
+    }[verb]
+
+
 def leftovers(parent: Path) -> list[str]:
     """Staging folders a run left in ``parent``."""
     return sorted(p.name for p in parent.iterdir() if ".partial-" in p.name or ".old-" in p.name)
@@ -162,11 +171,7 @@ def test_overwrite_replaces_the_folder_whole(recording, tmp_path, run):
 def test_out_naming_a_file_is_one_line(recording, tmp_path, run, verb):
     target = tmp_path / "notes.txt"
     target.write_text("keep me")
-    argv = {
-        "fuse": fuse_args(recording, target),
-        "trial": ["trial", "--out", target],
-        "sweep": ["sweep", "fig10", "--quick", "--out", target],
-    }[verb]
+    argv = writing(verb, recording, target)
     code, _, err = run(*argv)
     assert code == EXIT_BAD_INPUT
     assert one_error_line(err) == f"symfuse: error: --out {target}: exists and is not a folder"
@@ -180,12 +185,7 @@ def test_out_naming_a_file_is_one_line(recording, tmp_path, run, verb):
 def test_out_in_a_read_only_folder_is_one_line(recording, tmp_path, run, verb):
     with read_only(tmp_path / "locked") as locked:
         out = locked / "run"
-        argv = {
-            "fuse": fuse_args(recording, out),
-            "trial": ["trial", "--out", out],
-            "sweep": ["sweep", "fig10", "--quick", "--out", out],
-        }[verb]
-        code, _, err = run(*argv)
+        code, _, err = run(*writing(verb, recording, out))
         assert code == EXIT_BAD_INPUT
         line = one_error_line(err)
         assert line.startswith(f"symfuse: error: --out {out}: cannot ")

@@ -118,8 +118,7 @@ def ply_ascii(points: np.ndarray, declared: int | None = None, props: str = "xyz
         *(f"property float {p}" for p in props),
         "end_header",
     ]
-    rows = [" ".join(f"{v:.6f}" for v in row) for row in points]
-    return "\n".join(header + rows) + "\n"
+    return _with_rows(header, points)
 
 
 def pcd_ascii(points: np.ndarray, declared: int | None = None, fields: str = "x y z") -> str:
@@ -137,6 +136,10 @@ def pcd_ascii(points: np.ndarray, declared: int | None = None, fields: str = "x 
         f"POINTS {n}",
         "DATA ascii",
     ]
+    return _with_rows(header, points)
+
+
+def _with_rows(header: list[str], points: np.ndarray) -> str:
     rows = [" ".join(f"{v:.6f}" for v in row) for row in points]
     return "\n".join(header + rows) + "\n"
 
