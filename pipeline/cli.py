@@ -175,7 +175,8 @@ def _cmd_fuse(args: argparse.Namespace) -> int:
     overrides = [f"initialiser.use={args.init}"] if args.init else []
     registry, config = _load(args, overrides)
     plane = parse_plane(args.plane) if args.plane else None
-    with staged_output(args.out, overwrite=args.overwrite) as staging:
+    inputs = [args.cloud, args.contacts, *args.config]
+    with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
         cloud = read_cloud(args.cloud, units=args.units or "m")
         recorded = read_contacts(args.contacts, units=args.units)
         status = _fuse_into(staging, args, config, registry, cloud, recorded, plane)
@@ -311,7 +312,8 @@ def _cmd_trial(args: argparse.Namespace) -> int:
         Path("runs") / f"trial-{Path(settings.object).stem}-seed{settings.seed}"
     )
     started = time.perf_counter()
-    with staged_output(out, overwrite=args.overwrite) as staging:
+    inputs = [*args.config, *([args.mesh] if args.mesh else [])]
+    with staged_output(out, overwrite=args.overwrite, inputs=inputs) as staging:
         record = run_trial(
             config, registry, staging, report=lambda m: print(f"... {m}", flush=True)
         )
@@ -364,7 +366,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     tasks = experiment.tasks(options)
     read = {section: resolved[section] for section in sections}
     fingerprint = json.dumps(read, sort_keys=True)
-    with prepare_sweep_folder(out, [task.key for task in tasks], overwrite=args.overwrite):
+    keys = [task.key for task in tasks]
+    with prepare_sweep_folder(out, keys, overwrite=args.overwrite, inputs=args.config):
         config.write(out / "config.toml")
         try:
             rows = run_sweep(

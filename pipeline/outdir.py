@@ -20,7 +20,7 @@ import contextlib
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from .errors import ConfigError
@@ -39,11 +39,13 @@ def fresh_folder(base: Path) -> Path:
     return candidate
 
 
-def check_target(target: Path, *, overwrite: bool) -> None:
-    """Refuse ``target`` unless it is absent, an empty folder, or ``overwrite`` is given.
+def check_target(target: Path, *, overwrite: bool, inputs: Sequence[Path] = ()) -> None:
+    """Refuse ``target`` unless it is absent, an empty folder, or ``overwrite`` is given and
+    it holds none of the run's ``inputs`` (replacing it would delete them).
 
     Raises:
-        ConfigError: ``target`` is a file, or a non-empty folder without ``overwrite``.
+        ConfigError: ``target`` is a file, a non-empty folder without ``overwrite``, or
+            holds an input.
     """
     target = Path(target)
     if target.is_symlink() or (target.exists() and not target.is_dir()):
@@ -53,6 +55,15 @@ def check_target(target: Path, *, overwrite: bool) -> None:
             f"--out {target}: the folder exists and is not empty; pass --overwrite to replace "
             "it, or choose another --out"
         )
+    if target.is_dir():
+        if Path.cwd().resolve().is_relative_to(target.resolve()):
+            raise ConfigError(f"--out {target}: holds the current folder; choose another --out")
+        inside = [path for path in inputs if Path(path).resolve().is_relative_to(target.resolve())]
+        if inside:
+            raise ConfigError(
+                f"--out {target}: holds the input {inside[0]}, which replacing it would "
+                "delete; choose another --out"
+            )
 
 
 def has_result(folder: Path) -> bool:
@@ -111,10 +122,13 @@ def _move_into_place(staging: Path, target: Path, *, overwrite: bool) -> None:
 
 
 @contextlib.contextmanager
-def staged_output(target: Path, *, overwrite: bool = False) -> Iterator[Path]:
+def staged_output(
+    target: Path, *, overwrite: bool = False, inputs: Sequence[Path] = ()
+) -> Iterator[Path]:
     """Stage a run's files beside ``target`` and move them into place when the run ends.
 
-    Checks ``target`` first (:func:`check_target`), so a refused target costs nothing.
+    Checks ``target`` first (:func:`check_target`, with the run's ``inputs``), so a refused
+    target costs nothing.
     Yields the staging folder to write into. On normal exit it becomes ``target``; on an
     exception it becomes ``target`` only when it holds ``result.json`` (the run recorded
     how far it got), else it is deleted; the exception propagates either way.
@@ -123,7 +137,7 @@ def staged_output(target: Path, *, overwrite: bool = False) -> Iterator[Path]:
         ConfigError: ``target`` is refused, or its parent cannot be written.
     """
     target = Path(target)
-    check_target(target, overwrite=overwrite)
+    check_target(target, overwrite=overwrite, inputs=inputs)
     staging = _staging_folder(target)
     try:
         yield staging

@@ -40,7 +40,7 @@ from tqdm import tqdm
 
 from .errors import ConfigError, InputError
 from .experiments import LOCATION_PARAMS, SweepTask
-from .outdir import create_folder
+from .outdir import check_target, create_folder
 
 _log = logging.getLogger(__name__)
 
@@ -152,7 +152,9 @@ def run_sweep(
 
 
 @contextlib.contextmanager
-def prepare_sweep_folder(out: Path, keys: Sequence[str], *, overwrite: bool) -> Iterator[Path]:
+def prepare_sweep_folder(
+    out: Path, keys: Sequence[str], *, overwrite: bool, inputs: Sequence[Path] = ()
+) -> Iterator[Path]:
     """The sweep's output folder, under the output-folder policy (:mod:`pipeline.outdir`)
     adapted to a resumable journal: rows are appended in place.
 
@@ -161,12 +163,14 @@ def prepare_sweep_folder(out: Path, keys: Sequence[str], *, overwrite: bool) -> 
     this call created or emptied is removed again when the block raises before any row.
 
     Raises:
-        ConfigError: ``out`` is a file, or a non-empty folder of another sweep (or none)
-            without ``overwrite``, or cannot be created.
+        ConfigError: ``out`` is a file, holds ``inputs`` or the current folder, is a
+            non-empty folder of another sweep (or none) without ``overwrite``, or cannot be
+            created.
     """
     out = Path(out)
     results = out / "results.jsonl"
     fresh = not out.exists()
+    check_target(out, overwrite=True, inputs=inputs)
     if out.is_dir() and any(out.iterdir()):
         known = set(keys)
         foreign = [row["key"] for row in read_rows(results) if row["key"] not in known]
@@ -180,8 +184,6 @@ def prepare_sweep_folder(out: Path, keys: Sequence[str], *, overwrite: bool) -> 
                 raise ConfigError(f"--out {out}: {what}; pass --overwrite to replace it")
             shutil.rmtree(out)
             fresh = True
-    elif out.exists() and not out.is_dir():
-        raise ConfigError(f"--out {out}: exists and is not a folder")
     create_folder(out, out)
     try:
         yield out

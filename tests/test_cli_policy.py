@@ -167,6 +167,24 @@ def test_overwrite_replaces_the_folder_whole(recording, tmp_path, run):
     assert leftovers(tmp_path) == []
 
 
+def test_overwrite_never_deletes_the_runs_own_inputs(recording, tmp_path, run):
+    """`fuse --out RUN --overwrite` on RUN's own cloud would delete it with the folder."""
+    folder, _, plane = recording
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    for name in ("cloud.ply", "contacts.json"):
+        (run_dir / name).write_bytes((folder / name).read_bytes())
+    code, _, err = run("fuse", "--cloud", run_dir / "cloud.ply", "--contacts",
+                       run_dir / "contacts.json", f"--plane={plane}", "--overwrite",
+                       "--out", run_dir)  # fmt: skip
+    assert code == EXIT_BAD_INPUT
+    assert one_error_line(err) == (
+        f"symfuse: error: --out {run_dir}: holds the input {run_dir / 'cloud.ply'}, which "
+        "replacing it would delete; choose another --out"
+    )
+    assert {p.name for p in run_dir.iterdir()} == {"cloud.ply", "contacts.json"}
+
+
 @pytest.mark.parametrize("verb", ["fuse", "trial", "sweep"])
 def test_out_naming_a_file_is_one_line(recording, tmp_path, run, verb):
     target = tmp_path / "notes.txt"
