@@ -499,7 +499,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NX,NY,D",
         help="initial symmetry plane {p : NX x + NY y = D}",
     )
-    start.add_argument("--init", metavar="NAME", help="initialiser to guess the plane with")
+    start.add_argument(
+        "--init",
+        metavar="NAME",
+        help="initialiser to guess the plane with (the default, vc, needs a depth image that "
+        "recorded data lacks: use ps or pca)",
+    )
     _add_units_option(fuse, "the cloud and the contacts (overrides the contacts' own)")
     _add_config_options(fuse)
     _add_output_options(fuse, default=None)
