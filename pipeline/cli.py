@@ -14,6 +14,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,6 +31,12 @@ from .errors import (
 from .outdir import fresh_folder, staged_output
 from .stages import STAGES
 from .tables import format_table
+
+if TYPE_CHECKING:  # the CLI imports heavy modules only in the verbs that need them
+    from .config import Config
+    from .formats import RecordedGrasps
+    from .registry import StageRegistry
+    from .types import PointCloud, SymmetryPlane
 
 
 def _add_config_options(parser: argparse.ArgumentParser) -> None:
@@ -187,7 +194,15 @@ def _cmd_fuse(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _fuse_into(out: Path, args, config, registry, cloud, recorded, plane) -> str:
+def _fuse_into(
+    out: Path,
+    args: argparse.Namespace,
+    config: Config,
+    registry: StageRegistry,
+    cloud: PointCloud,
+    recorded: RecordedGrasps,
+    plane: SymmetryPlane | None,
+) -> str:
     """Run the estimator and write its results into ``out``; return the final status.
 
     A :class:`StageFailure` is recorded in ``result.json`` (status ``failed``) and re-raised.
