@@ -56,7 +56,7 @@ from objects import ROOT as OBJECTS_ROOT
 
 from .errors import ConfigError, InputError
 from .types import SymmetryPlane
-from .units import check_extent, scale_of
+from .units import MILLIMETRES_HINT, check_extent, scale_of
 
 _log = logging.getLogger(__name__)
 
@@ -244,13 +244,15 @@ def load_object(
     raise InputError(f"unknown object '{text}'; catalogue objects: {', '.join(catalogue)}")
 
 
-def _checked_mesh(mesh: Any, path: Path, what: str) -> trimesh.Trimesh:
+def _checked_mesh(
+    mesh: Any, path: Path, what: str, hint: str = MILLIMETRES_HINT
+) -> trimesh.Trimesh:
     """``mesh`` if it has triangles, finite vertices and a graspable size."""
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(f"{path}: {what}")
     if not np.isfinite(mesh.vertices).all():
         raise InputError(f"{path}: the mesh has NaN or infinite vertices")
-    check_extent(mesh.extents, str(path))
+    check_extent(mesh.extents, str(path), hint)
     return mesh
 
 
@@ -301,7 +303,12 @@ def _load_urdf(path: Path) -> CatalogueObject:
     except Exception as exc:  # yourdfpy/lxml/trimesh raise many types for malformed files
         detail = (str(exc).splitlines() or [""])[0]
         raise InputError(f"{path}: cannot read URDF ({type(exc).__name__}: {detail})") from exc
-    mesh = _checked_mesh(mesh, path, "the URDF has no visual mesh")
+    mesh = _checked_mesh(
+        mesh,
+        path,
+        "the URDF has no visual mesh",
+        hint='looks like millimetres: give its meshes scale="0.001 0.001 0.001"',
+    )
     inertial = urdf.link_map[urdf.base_link].inertial
     mass = inertial.mass if inertial is not None and inertial.mass else DEFAULT_MASS_KG
     return CatalogueObject(

@@ -56,8 +56,11 @@ def check_distance(points_m: np.ndarray, source: str) -> None:
         )
 
 
-def check_extent(extents_m: np.ndarray, source: str) -> None:
+def check_extent(extents_m: np.ndarray, source: str, hint: str = MILLIMETRES_HINT) -> None:
     """Refuse an object whose largest bounding-box extent exceeds :data:`LARGEST_OBJECT_M`.
+
+    Args:
+        hint: what to do about it (a URDF states its scale itself, not by ``--units``).
 
     Raises:
         InputError: ``"<source>: the object is 120 m across: looks like millimetres: pass
@@ -65,4 +68,4 @@ def check_extent(extents_m: np.ndarray, source: str) -> None:
     """
     largest = float(np.max(extents_m))
     if largest > LARGEST_OBJECT_M:
-        raise InputError(f"{source}: the object is {largest:.3g} m across: {MILLIMETRES_HINT}")
+        raise InputError(f"{source}: the object is {largest:.3g} m across: {hint}")

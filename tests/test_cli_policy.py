@@ -379,6 +379,16 @@ def test_a_mesh_in_millimetres_is_refused_and_scaled_with_units(tmp_path, run):
     assert not (tmp_path / "a").exists()
     brick = load_object(tmp_path / "brick_mm.stl", units="mm")
     assert sorted(brick.mesh.extents) == pytest.approx([0.045, 0.100, 0.120])
+    # A URDF states its scale itself: the hint says where.
+    (tmp_path / "brick.urdf").write_text(
+        '<robot name="brick"><link name="base"><visual><geometry>'
+        '<mesh filename="brick_mm.stl"/></geometry></visual></link></robot>'
+    )
+    code, _, err = run("trial", "--mesh", tmp_path / "brick.urdf", "--out", tmp_path / "b")
+    assert code == EXIT_BAD_INPUT
+    assert one_error_line(err).endswith(
+        'looks like millimetres: give its meshes scale="0.001 0.001 0.001"'
+    )
 
 
 # ------------------------------------------------------------------ plugins --params
