@@ -56,6 +56,7 @@ from objects import ROOT as OBJECTS_ROOT
 
 from .errors import ConfigError, InputError
 from .types import SymmetryPlane
+from .units import MILLIMETRES_HINT, check_extent, scale_of
 
 _log = logging.getLogger(__name__)
 
@@ -196,17 +197,22 @@ def list_objects() -> list[CatalogueObjectInfo]:
 # ---------------------------------------------------------------- loading
 
 
-def load_object(name_or_path: str | os.PathLike[str], *, recentre: bool = True) -> CatalogueObject:
-    """A catalogue object by name, or a mesh file (OBJ, STL, PLY, ...) by path.
+def load_object(
+    name_or_path: str | os.PathLike[str], *, recentre: bool = True, units: str = "m"
+) -> CatalogueObject:
+    """A catalogue object by name, or a mesh file (OBJ, STL, PLY, ...) or URDF by path.
 
     Args:
-        name_or_path: a catalogue name (see :func:`list_objects`) or a mesh file in metres.
+        name_or_path: a catalogue name (see :func:`list_objects`) or a mesh file.
         recentre: for files, move the mesh so its base is on z = 0 and its bounding box is
             centred on x = y = 0 (catalogue meshes always are).
+        units: the length unit of a mesh file (``m`` or ``mm``; it is converted to metres).
+            A URDF states its own scale in its ``<mesh scale=...>`` elements.
 
     Raises:
-        InputError: unknown name (the message lists the catalogue), or a missing, unreadable
-            or empty mesh file (the message names the path).
+        InputError: unknown name (the message lists the catalogue); a missing, unreadable
+            or empty mesh file, non-finite vertices, or a size that says millimetres (the
+            message names the path).
     """
     text = os.fspath(name_or_path)
     catalogue = _specification()
@@ -227,13 +233,30 @@ def load_object(name_or_path: str | os.PathLike[str], *, recentre: bool = True) 
         )
     path = Path(text)
     if path.suffix.lower() == ".urdf":
+        if units != "m":
+            raise InputError(
+                f"{path}: a URDF gives its meshes' scale itself (<mesh scale=...>); "
+                "--units applies to mesh files"
+            )
         return _load_urdf(path)
     if path.suffix.lower() in MESH_SUFFIXES or path.exists() or os.sep in text:
-        return _load_mesh_file(path, recentre=recentre)
+        return _load_mesh_file(path, recentre=recentre, scale=scale_of(units, str(path)))
     raise InputError(f"unknown object '{text}'; catalogue objects: {', '.join(catalogue)}")
 
 
-def _load_mesh_file(path: Path, *, recentre: bool) -> CatalogueObject:
+def _checked_mesh(
+    mesh: Any, path: Path, what: str, hint: str = MILLIMETRES_HINT
+) -> trimesh.Trimesh:
+    """``mesh`` if it has triangles, finite vertices and a graspable size."""
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InputError(f"{path}: {what}")
+    if not np.isfinite(mesh.vertices).all():
+        raise InputError(f"{path}: the mesh has NaN or infinite vertices")
+    check_extent(mesh.extents, str(path), hint)
+    return mesh
+
+
+def _load_mesh_file(path: Path, *, recentre: bool, scale: float = 1.0) -> CatalogueObject:
     if not path.is_file():
         raise InputError(f"{path}: no such mesh file")
     if path.suffix.lower() not in MESH_SUFFIXES:
@@ -243,8 +266,9 @@ def _load_mesh_file(path: Path, *, recentre: bool) -> CatalogueObject:
     except Exception as exc:  # trimesh raises many types for malformed files
         detail = (str(exc).splitlines() or [""])[0]
         raise InputError(f"{path}: cannot read mesh ({type(exc).__name__}: {detail})") from exc
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise InputError(f"{path}: contains no triangles")
+    if isinstance(mesh, trimesh.Trimesh) and scale != 1.0:
+        mesh.apply_scale(scale)
+    mesh = _checked_mesh(mesh, path, "contains no triangles")
     if recentre:
         mesh = place_on_table(mesh)
     watertight = bool(mesh.is_watertight)
@@ -279,8 +303,12 @@ def _load_urdf(path: Path) -> CatalogueObject:
     except Exception as exc:  # yourdfpy/lxml/trimesh raise many types for malformed files
         detail = (str(exc).splitlines() or [""])[0]
         raise InputError(f"{path}: cannot read URDF ({type(exc).__name__}: {detail})") from exc
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise InputError(f"{path}: the URDF has no visual mesh")
+    mesh = _checked_mesh(
+        mesh,
+        path,
+        "the URDF has no visual mesh",
+        hint='looks like millimetres: give its meshes scale="0.001 0.001 0.001"',
+    )
     inertial = urdf.link_map[urdf.base_link].inertial
     mass = inertial.mass if inertial is not None and inertial.mass else DEFAULT_MASS_KG
     return CatalogueObject(

@@ -1,8 +1,9 @@
 """The ``symfuse`` command line.
 
 Every deliberate failure (:class:`~pipeline.errors.SymfuseError`) is printed as one line,
-``symfuse: error: ...``, with its exit code (2 for bad input or config, 3 for a run whose
-estimate failed); ``--debug`` shows the traceback instead.
+``symfuse: error: ...``, with its exit code (:mod:`pipeline.errors`: 2 bad input or config,
+3 a failed estimate, 4 a plugin raised, 130 interrupted); ``--debug`` shows the traceback
+instead. Every verb that writes follows the output-folder policy of :mod:`pipeline.outdir`.
 """
 
 from __future__ import annotations
@@ -13,17 +14,30 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import __version__
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
-from .errors import ConfigError, SymfuseError
+from .errors import (
+    EXIT_ESTIMATE_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    ConfigError,
+    StageFailure,
+    SymfuseError,
+    estimate_failed,
+)
+from .outdir import fresh_folder, staged_output
 from .stages import STAGES
 from .tables import format_table
 
-#: Exit code of a run that wrote its results but whose estimate failed.
-EXIT_ESTIMATE_FAILED = 3
+if TYPE_CHECKING:  # the CLI imports heavy modules only in the verbs that need them
+    from .config import Config
+    from .formats import RecordedGrasps
+    from .registry import StageRegistry
+    from .types import PointCloud, SymmetryPlane
 
 
 def _add_config_options(parser: argparse.ArgumentParser) -> None:
@@ -45,6 +59,31 @@ def _add_config_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_output_options(parser: argparse.ArgumentParser, default: str | None) -> None:
+    """``--out`` (required when ``default`` is None) and ``--overwrite``."""
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=default is None,
+        metavar="DIR",
+        help="output folder" + (f" (default: a fresh {default})" if default else ""),
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing, non-empty --out folder (whole, when the run ends)",
+    )
+
+
+def _add_units_option(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument(
+        "--units",
+        choices=["m", "mm"],
+        help=f"length unit of {what} (default: metres; data that looks like millimetres "
+        "is refused)",
+    )
+
+
 def _load(args: argparse.Namespace, extra_overrides: Sequence[str] = ()):
     from .config import load_config
     from .registry import load_registry
@@ -58,6 +97,7 @@ def _load(args: argparse.Namespace, extra_overrides: Sequence[str] = ()):
 
 
 def _cmd_plugins(args: argparse.Namespace) -> int:
+    from .config import load_config
     from .params import describe
     from .registry import load_registry
 
@@ -74,14 +114,17 @@ def _cmd_plugins(args: argparse.Namespace) -> int:
             )
     print(format_table(["stage", "name", "distribution", "version", "description"], rows))
     if args.params:
+        # The effective defaults: the shipped config's values where it sets any.
+        shipped = load_config(registry).params
         for registration in registry.registrations():
-            infos = describe(registration.cls.Params)
+            values = shipped[registration.stage].get(registration.name)
+            infos = describe(registration.cls.Params, values)
             print(f"\n[{registration.stage}.{registration.name}]")
             if not infos:
                 print("  (no parameters)")
             for info in infos:
                 print(f"  {info.name} = {info.default!r}  ({info.type_name}) {info.doc}")
-    return 0
+    return EXIT_OK
 
 
 # --- symfuse config --------------------------------------------------------------------
@@ -96,14 +139,22 @@ def _cmd_config(args: argparse.Namespace) -> int:
 # --- symfuse fuse ----------------------------------------------------------------------
 
 
-def _parse_plane(text: str):
+def parse_plane(text: str):
+    """``NX,NY,D`` as a :class:`~pipeline.types.SymmetryPlane` (``NX x + NY y = D``)."""
     from .types import SymmetryPlane
 
+    fields = [field.strip() for field in text.split(",")]
+    if len(fields) != 3:
+        raise ConfigError(f"--plane '{text}': expected three numbers NX,NY,D, got {len(fields)}")
     try:
-        nx, ny, d = (float(v) for v in text.split(","))
-        return SymmetryPlane.from_normal(np.array([nx, ny]), d)
-    except ValueError as exc:
-        raise ConfigError(f"--plane '{text}': expected NX,NY,D with a non-zero normal") from exc
+        nx, ny, d = (float(field) for field in fields)
+    except ValueError:
+        raise ConfigError(f"--plane '{text}': expected three numbers NX,NY,D") from None
+    if not np.isfinite([nx, ny, d]).all():
+        raise ConfigError(f"--plane '{text}': NX, NY and D must be finite")
+    if nx == 0.0 and ny == 0.0:
+        raise ConfigError(f"--plane '{text}': the normal (NX, NY) must be non-zero")
+    return SymmetryPlane.from_normal(np.array([nx, ny]), d)
 
 
 def stage_summary(result) -> str:
@@ -126,60 +177,78 @@ def stage_summary(result) -> str:
     return format_table(header, rows)
 
 
-FAILED_STATUSES = ("no_correspondence", "diverged")
-
-
 def _cmd_fuse(args: argparse.Namespace) -> int:
+    from .formats import read_cloud, read_contacts
+
+    check_rerun(args)
+    overrides = [f"initialiser.use={args.init}"] if args.init else []
+    registry, config = _load(args, overrides)
+    plane = parse_plane(args.plane) if args.plane else None
+    inputs = [args.cloud, args.contacts, *args.config]
+    with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
+        cloud = read_cloud(args.cloud, units=args.units or "m")
+        recorded = read_contacts(args.contacts, units=args.units)
+        status = _fuse_into(staging, args, config, registry, cloud, recorded, plane)
+    print(f"wrote {args.out}/ (result.json, config.toml, completed_stage{{0,1,2}}.ply)")
+    record_if_asked(args, args.out)
+    if estimate_failed(status):
+        print(f"symfuse: error: estimate {status} (see {args.out}/result.json)", file=sys.stderr)
+        return EXIT_ESTIMATE_FAILED
+    return EXIT_OK
+
+
+def _fuse_into(
+    out: Path,
+    args: argparse.Namespace,
+    config: Config,
+    registry: StageRegistry,
+    cloud: PointCloud,
+    recorded: RecordedGrasps,
+    plane: SymmetryPlane | None,
+) -> str:
+    """Run the estimator and write its results into ``out``; return the final status.
+
+    A :class:`StageFailure` is recorded in ``result.json`` (status ``failed``) and re-raised.
+    """
     from .formats import (
         bias_to_json,
         estimate_to_json,
         plane_to_json,
-        read_cloud,
-        read_contacts,
         write_completed_clouds,
         write_json,
     )
     from .runner import fuse
 
-    check_rerun(args)
-    overrides = [f"initialiser.use={args.init}"] if args.init else []
-    registry, config = _load(args, overrides)
-    cloud = read_cloud(args.cloud)
-    recorded = read_contacts(args.contacts)
-    plane = _parse_plane(args.plane) if args.plane else None
-    started = time.perf_counter()
-    run = fuse(config, registry, cloud, recorded.contacts, recorded.plans, plane)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_completed_clouds(out, run.result)
     config.write(out / "config.toml")
-    final_status = run.result.final.status
-    write_json(
-        out / "result.json",
-        {
-            "symfuse": __version__,
-            "command": "fuse",
-            "inputs": {"cloud": str(args.cloud), "contacts": str(args.contacts)},
-            "points": len(cloud),
-            "grasps": [len(c) for c in recorded.contacts],
-            "init": {
-                "source": "--plane" if plane is not None else config.choices["initialiser"],
-                "plane": plane_to_json(run.init.plane),
-                "bias": bias_to_json(run.init.bias),
-            },
-            "stages": estimate_to_json(run.result),
-            "status": final_status,
-            "seconds": time.perf_counter() - started,
-            "config": config.to_dict(),
+    started = time.perf_counter()
+    document = {
+        "symfuse": __version__,
+        "command": "fuse",
+        "inputs": {"cloud": str(args.cloud), "contacts": str(args.contacts)},
+        "points": len(cloud),
+        "grasps": [len(c) for c in recorded.contacts],
+        "config": config.to_dict(),
+    }
+    try:
+        run = fuse(config, registry, cloud, recorded.contacts, recorded.plans, plane)
+    except StageFailure as exc:
+        document.update(status="failed", reason=str(exc))
+        write_json(out / "result.json", document)
+        raise
+    write_completed_clouds(out, run.result)
+    document.update(
+        init={
+            "source": "--plane" if plane is not None else config.choices["initialiser"],
+            "plane": plane_to_json(run.init.plane),
+            "bias": bias_to_json(run.init.bias),
         },
+        stages=estimate_to_json(run.result),
+        status=run.result.final.status,
+        seconds=time.perf_counter() - started,
     )
+    write_json(out / "result.json", document)
     print(stage_summary(run.result))
-    print(f"wrote {out}/result.json, config.toml, completed_stage{{0,1,2}}.ply")
-    record_if_asked(args, out)
-    if final_status in FAILED_STATUSES:
-        print(f"symfuse: error: estimate {final_status} (see {out}/result.json)", file=sys.stderr)
-        return EXIT_ESTIMATE_FAILED
-    return 0
+    return run.result.final.status
 
 
 # --- symfuse trial ---------------------------------------------------------------------
@@ -251,24 +320,40 @@ def trial_summary(record) -> str:
     return format_table(header, rows)
 
 
+def _progress(message: str) -> None:
+    print(f"... {message}", flush=True)
+
+
 def _cmd_trial(args: argparse.Namespace) -> int:
     from .trial import run_trial
 
     check_rerun(args)
-    registry, config = _load(args, trial_overrides(args))
+    overrides = trial_overrides(args)
+    if args.units:
+        overrides.append(f"trial.units={args.units}")
+    registry, config = _load(args, overrides)
     settings = config.trial
-    out = args.out or Path("runs") / f"trial-{Path(settings.object).stem}-seed{settings.seed}"
+    out = args.out or fresh_folder(
+        Path("runs") / f"trial-{Path(settings.object).stem}-seed{settings.seed}"
+    )
     started = time.perf_counter()
-    record = run_trial(config, registry, out, report=lambda m: print(f"... {m}", flush=True))
+    inputs = [*args.config, *([args.mesh] if args.mesh else [])]
+    with staged_output(out, overwrite=args.overwrite, inputs=inputs) as staging:
+        record = run_trial(
+            config, registry, staging, report=lambda m: print(f"... {m}", flush=True)
+        )
     print(trial_summary(record))
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())
     print(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s")
     print(f"wrote {out}/ (result.json, clouds, contacts.json, pictures)")
     record_if_asked(args, out)
-    if record.result.final.status in FAILED_STATUSES:
-        print(f"symfuse: error: estimate {record.result.final.status}", file=sys.stderr)
+    if estimate_failed(record.result.final.status):
+        print(
+            f"symfuse: error: estimate {record.result.final.status} (see {out}/result.json)",
+            file=sys.stderr,
+        )
         return EXIT_ESTIMATE_FAILED
-    return 0
+    return EXIT_OK
 
 
 # --- symfuse sweep ---------------------------------------------------------------------
@@ -277,36 +362,55 @@ def _cmd_trial(args: argparse.Namespace) -> int:
 def _cmd_sweep(args: argparse.Namespace) -> int:
     import importlib
 
+    from .config import changed_settings, load_config
     from .experiments import EXPERIMENTS, ExperimentOptions
-    from .sweep import run_sweep
+    from .sweep import prepare_sweep_folder, run_sweep, settings_section
 
-    _, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
+    registry, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
     experiment = importlib.import_module(EXPERIMENTS[args.experiment])
     estimator = config.choices["estimator"]
+    resolved = config.to_dict()
+    user = changed_settings(resolved, load_config(registry).to_dict())
+    sections = getattr(experiment, "CONFIG_SECTIONS", tuple(resolved))
+    unread = sorted(set(user) - set(sections))
+    if unread:
+        raise ConfigError(
+            f"sweep {args.experiment}: its trials read only [{'], ['.join(sections)}] of the "
+            f"config, not [{'], ['.join(unread)}]; remove those from --config/--set"
+        )
+    # The default folder is fixed, not fresh: typing the command again resumes the sweep.
     out = args.out or Path("runs") / f"sweep-{args.experiment}-{estimator}"
-    out.mkdir(parents=True, exist_ok=True)
     options = ExperimentOptions(
         estimator=estimator,
-        estimator_params=config.to_dict()["estimator"][estimator],
+        estimator_params=resolved["estimator"][estimator],
+        config=user,
         quick=args.quick,
         seed=args.seed,
         repeats=args.repeats,
         out_dir=out.resolve(),
     )
     tasks = experiment.tasks(options)
-    config.write(out / "config.toml")
-    try:
-        rows = run_sweep(
-            tasks,
-            experiment.run_one,
-            out / "results.jsonl",
-            workers=args.workers,
-            executor=args.executor,
-            scheduler=args.scheduler,
-        )
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from exc
-    written = experiment.report(rows, out)
+    read = {section: resolved[section] for section in sections}
+    fingerprint = json.dumps(read, sort_keys=True)
+    keys = [task.key for task in tasks]
+    with prepare_sweep_folder(out, keys, overwrite=args.overwrite, inputs=args.config):
+        config.write(out / "config.toml")
+        try:
+            rows = run_sweep(
+                tasks,
+                experiment.run_one,
+                out / "results.jsonl",
+                workers=args.workers,
+                executor=args.executor,
+                scheduler=args.scheduler,
+                fingerprint=fingerprint,
+                rerun_stale=args.overwrite,
+            )
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from exc
+        written = experiment.report(rows, out)
+        with (out / "report.md").open("a", encoding="utf-8") as report:
+            report.write("\n" + settings_section(tasks, resolved, user, sections))
     for path in written:
         print(f"wrote {path}")
     failed = [row for row in rows if "error" in row]
@@ -317,7 +421,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_ESTIMATE_FAILED
-    return 0
+    return EXIT_OK
 
 
 def _add_sweep_parser(verbs) -> None:
@@ -347,13 +451,19 @@ def _add_sweep_parser(verbs) -> None:
     sweep.add_argument("--executor", choices=["local", "dask"], default="local")
     sweep.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (tcp://...)")
     _add_config_options(sweep)
+    sweep.add_argument("--out", type=Path, metavar="DIR", help=SWEEP_OUT_HELP)
     sweep.add_argument(
-        "--out",
-        type=Path,
-        metavar="DIR",
-        help="output folder (default runs/sweep-EXPERIMENT-ESTIMATOR)",
+        "--overwrite",
+        action="store_true",
+        help="re-run rows made with another config; replace a folder that is not this sweep's",
     )
     sweep.set_defaults(run=_cmd_sweep)
+
+
+SWEEP_OUT_HELP = (
+    "output folder (default runs/sweep-EXPERIMENT-ESTIMATOR); an existing folder of the same "
+    "sweep is resumed"
+)
 
 
 # --- the parser ------------------------------------------------------------------------
@@ -413,11 +523,17 @@ def build_parser() -> argparse.ArgumentParser:
     start.add_argument(
         "--plane",
         metavar="NX,NY,D",
-        help="initial symmetry plane {p : NX x + NY y = D}; write --plane=-1,0,0.2 when NX < 0",
+        help="initial symmetry plane {p : NX x + NY y = D}",
     )
-    start.add_argument("--init", metavar="NAME", help="initialiser to guess the plane with")
+    start.add_argument(
+        "--init",
+        metavar="NAME",
+        help="initialiser to guess the plane with (the default, vc, needs a depth image that "
+        "recorded data lacks: use ps or pca)",
+    )
+    _add_units_option(fuse, "the cloud and the contacts (overrides the contacts' own)")
     _add_config_options(fuse)
-    fuse.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    _add_output_options(fuse, default=None)
     add_rerun_option(fuse)
     fuse.set_defaults(run=_cmd_fuse)
 
@@ -441,10 +557,9 @@ def build_parser() -> argparse.ArgumentParser:
     trial.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
     trial.add_argument("--seed", type=int, help="random seed of the trial")
     trial.add_argument("--yaw", type=float, metavar="DEG", help="object yaw on the table")
+    _add_units_option(trial, "the --mesh file")
     _add_config_options(trial)
-    trial.add_argument(
-        "--out", type=Path, metavar="DIR", help="output folder (default runs/trial-OBJECT-seedN)"
-    )
+    _add_output_options(trial, default="runs/trial-OBJECT-seedN[-K]")
     add_rerun_option(trial)
     trial.set_defaults(run=_cmd_trial)
 
@@ -458,9 +573,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Options whose value may start with a minus sign (``--plane -1,0,0.2``).
+SIGNED_VALUE_OPTIONS = ("--plane",)
+
+
+def _join_signed_values(argv: Sequence[str]) -> list[str]:
+    """``--plane -1,0,0.2`` as ``--plane=-1,0,0.2``: argparse takes a value that starts with
+    ``-`` and is not a plain number for an option and reports "expected one argument"."""
+    joined: list[str] = []
+    for argument in argv:
+        if joined and joined[-1] in SIGNED_VALUE_OPTIONS and argument.startswith("-"):
+            joined[-1] = f"{joined[-1]}={argument}"
+        else:
+            joined.append(argument)
+    return joined
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_signed_values(sys.argv[1:] if argv is None else argv))
     try:
         return args.run(args)
     except SymfuseError as exc:
@@ -470,7 +601,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exc.exit_code
     except KeyboardInterrupt:
         print("symfuse: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

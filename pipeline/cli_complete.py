@@ -14,13 +14,10 @@ from . import __version__
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
 from .completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
 
-#: The initialiser ``complete`` uses unless ``--init`` names another.
-DEFAULT_INIT = "vc"
-
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``complete`` verb to the CLI's subparsers and return its parser."""
-    from .cli import _add_config_options
+    from .cli import _add_config_options, _add_output_options
 
     parser = subparsers.add_parser(
         "complete",
@@ -54,10 +51,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "with --contacts); K numbers objects largest first from 0",
     )
     parser.add_argument(
-        "--init", metavar="NAME", help=f"symmetry initialiser (default: {DEFAULT_INIT})"
+        "--init", metavar="NAME", help="symmetry initialiser (default: the config's, vc)"
     )
     _add_config_options(parser)
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    _add_output_options(parser, default=None)
     add_rerun_option(parser)
     return parser
 
@@ -67,8 +64,9 @@ def overrides(args: argparse.Namespace) -> list[str]:
     settings = {
         "sensor.use": "recorded",
         "sensor.recorded.path": str(args.scan),
-        "initialiser.use": args.init or DEFAULT_INIT,
     }
+    if args.init:
+        settings["initialiser.use"] = args.init
     if args.camera:
         settings["sensor.recorded.camera"] = str(args.camera)
     if args.topic:
@@ -78,24 +76,31 @@ def overrides(args: argparse.Namespace) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Complete the capture's objects, write the results, print a table."""
-    from .cli import EXIT_ESTIMATE_FAILED, FAILED_STATUSES, _load
+    from .cli import _load
     from .completion import complete_scene
+    from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, FAILED_STATUSES
     from .formats import read_contacts
+    from .outdir import staged_output
 
     check_rerun(args)
     registry, config = _load(args, overrides(args))
-    recorded = read_contacts(args.contacts) if args.contacts else None
-    which = args.object or ("largest" if recorded else "all")
-    started = time.perf_counter()
-    scene = complete_scene(
-        config,
-        registry,
-        which,
-        recorded.contacts if recorded else (),
-        recorded.plans if recorded else (),
-    )
-    inputs = {"scan": str(args.scan), "contacts": str(args.contacts) if args.contacts else None}
-    write_outputs(args.out, scene, config, inputs, time.perf_counter() - started)
+    inputs = [p for p in (args.scan, args.camera, args.contacts, *args.config) if p is not None]
+    with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
+        recorded = read_contacts(args.contacts) if args.contacts else None
+        which = args.object or ("largest" if recorded else "all")
+        started = time.perf_counter()
+        scene = complete_scene(
+            config,
+            registry,
+            which,
+            recorded.contacts if recorded else (),
+            recorded.plans if recorded else (),
+        )
+        sources = {
+            "scan": str(args.scan),
+            "contacts": str(args.contacts) if args.contacts else None,
+        }
+        write_outputs(staging, scene, config, sources, time.perf_counter() - started)
     print(scene_table(scene))
     print(f"wrote {args.out}/ (objects.json, object_K/, scene.png, config.toml)")
     record_if_asked(args, args.out)
@@ -103,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     if problems:
         print(f"symfuse: error: {'; '.join(problems)} (see {args.out}/)", file=sys.stderr)
         return EXIT_ESTIMATE_FAILED
-    return 0
+    return EXIT_OK
 
 
 def scene_table(scene: SceneCompletion) -> str:

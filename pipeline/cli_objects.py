@@ -30,6 +30,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="write every catalogue mesh to DIR as <name>.obj and <name>.stl",
     )
     parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing, non-empty --export folder",
+    )
+    parser.add_argument(
         "--format",
         choices=EXPORT_FORMATS,
         action="append",
@@ -41,8 +46,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 def run(args: argparse.Namespace) -> int:
     """Print the catalogue table, or export the meshes when ``--export`` is given."""
     if args.export is not None:
-        for path in export_meshes(args.export, tuple(args.format or EXPORT_FORMATS)):
-            print(path)
+        from .outdir import staged_output
+
+        with staged_output(args.export, overwrite=args.overwrite) as staging:
+            written = export_meshes(staging, tuple(args.format or EXPORT_FORMATS))
+        for path in written:
+            print(args.export / path.name)
         return 0
     print(catalogue_table())
     return 0

@@ -48,6 +48,9 @@ class TrialSettings:
     y_m: float = param(0.0, "object position on the table, robot frame y (m)")
     yaw_deg: float = param(0.0, "object rotation about the table normal (deg)")
     pictures: bool = param(True, "write the PNG pictures (sweeps of many trials may skip them)")
+    units: Literal["m", "mm"] = param(
+        "m", "length unit of a mesh file given as object (a URDF states its own scale)"
+    )
 
 
 #: Sections that are not stages, and the dataclass each one is validated against.
@@ -193,6 +196,31 @@ def _validate(raw: Mapping[str, Any], registry: StageRegistry) -> Config:
     return Config(settings=settings, choices=choices, params=params)
 
 
+def changed_settings(config: Mapping[str, Any], base: Mapping[str, Any]) -> dict[str, Any]:
+    """The values of the nested dict ``config`` that ``base`` lacks or holds otherwise
+    (both as :meth:`Config.to_dict` gives them): a sparse dict that, merged over ``base``,
+    gives ``config`` back."""
+    changed: dict[str, Any] = {}
+    for key, value in config.items():
+        if isinstance(value, Mapping) and isinstance(base.get(key), Mapping):
+            inner = changed_settings(value, base[key])
+            if inner:
+                changed[key] = inner
+        elif key not in base or base[key] != value:
+            changed[key] = copy.deepcopy(value)
+    return changed
+
+
+def dotted_value(config: Mapping[str, Any], key: str) -> Any:
+    """The value at ``section.key`` (dotted) in a nested config dict; None when absent."""
+    value: Any = config
+    for part in key.split("."):
+        if not isinstance(value, Mapping) or part not in value:
+            return None
+        value = value[part]
+    return value
+
+
 def _registration(registry: StageRegistry, stage: str, name: str, key: str):
     names = registry.names(stage)
     if name not in names:
@@ -205,8 +233,10 @@ def load_config(
     registry: StageRegistry,
     files: Iterable[Path] = (),
     overrides: Iterable[str] = (),
+    settings: Mapping[str, Any] | None = None,
 ) -> Config:
-    """Merge the defaults, ``files`` (in order) and ``--set`` ``overrides``; validate.
+    """Merge the defaults, ``files`` (in order), ``settings`` (a nested dict, e.g. what
+    :func:`changed_settings` returned) and ``--set`` ``overrides``; validate.
 
     Raises:
         ConfigError: naming the file or dotted key at fault.
@@ -214,6 +244,7 @@ def load_config(
     raw = tomllib.loads(default_config_text())
     for path in files:
         raw = _deep_merge(raw, read_toml(path))
+    raw = _deep_merge(raw, settings or {})
     for override in overrides:
         raw = _deep_merge(raw, parse_override(override))
     return _validate(raw, registry)

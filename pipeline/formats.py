@@ -1,22 +1,27 @@
 """Every file format symfuse reads or writes, in one place.
 
-* Point clouds: PLY and PCD (via open3d) or ``.npy`` (an ``(N, 3)`` array); frame R, metres.
+* Point clouds: PLY and PCD (via open3d) or ``.npy`` (an ``(N, 3)`` array); frame R, in
+  metres unless the reader is told ``units="mm"``.
 * Contacts: JSON, ``{"frame": "robot", "units": "m", "grasps": [{"taxels": [{"position":
   [x, y, z], "normal": [nx, ny, nz], "pad": "left", "index": 17}, ...], "plan": {...}},
   ...]}``, one entry per grasp in the order the grasps happened; ``index`` (the taxel's
   row-major index within its pad) is optional. Normals point out of the pad into the object
   and are normalised on reading. The optional ``plan`` records the grasp plan (see
   :func:`plan_to_json`); PS initialisation uses its predicted contacts for the initial bias.
+  ``units`` is ``"m"`` or ``"mm"`` (positions and the plan's lengths); a reader's ``units``
+  argument overrides it (``--units``).
 * Results: ``result.json`` (see :func:`estimate_to_json`) and ``completed_stage{0,1,2}.ply``.
 * Cameras: ``camera.json`` (see :func:`camera_to_json`): intrinsics in pixels, the believed
   ``T_robot_camera`` (OpenCV optical frame) and the table height when known.
 
 Readers validate what they read and raise :class:`~pipeline.errors.InputError` with a
-one-line message naming the file and, for JSON, the key path at fault.
+one-line message naming the file and, for JSON, the key path at fault. They convert to
+metres and refuse data whose scale says millimetres (:mod:`pipeline.units`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Sequence
@@ -26,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from .cloud_headers import check_cloud_file
 from .errors import InputError
 from .types import (
     Bias,
@@ -38,6 +44,7 @@ from .types import (
     StageEstimate,
     SymmetryPlane,
 )
+from .units import check_distance, scale_of
 
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy")
 
@@ -52,27 +59,31 @@ def require_file(path: Path) -> Path:
     return path
 
 
-def read_cloud(path: Path) -> PointCloud:
-    """Read an object cloud (frame R, metres) from PLY, PCD or NPY.
+def read_cloud(path: Path, units: str = "m") -> PointCloud:
+    """Read an object cloud (frame R) from PLY, PCD or NPY, in ``units`` (``m`` or ``mm``).
 
     Raises:
-        InputError: missing/unreadable file, unknown suffix, no points, wrong shape, or
-            non-finite coordinates.
+        InputError: missing/unreadable file, unknown suffix, no points, wrong shape or type,
+            non-finite coordinates, or a scale that says millimetres.
     """
     path = require_file(path)
+    scale = scale_of(units, str(path))
     suffix = path.suffix.lower()
     if suffix not in CLOUD_SUFFIXES:
         raise InputError(f"{path}: unknown cloud format '{suffix}' (use .ply, .pcd or .npy)")
     if suffix == ".npy":
         try:
             points = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise InputError(f"{path}: cannot read as .npy: {exc}") from None
+        except (OSError, ValueError, EOFError, UnicodeError) as exc:
+            raise InputError(f"{path}: cannot read as .npy: {_first_line(exc)}") from None
         if points.ndim != 2 or points.shape[1] != 3:
             raise InputError(f"{path}: expected an (N, 3) array, got shape {points.shape}")
+        if points.dtype.kind not in "iuf":  # signed, unsigned, floating
+            raise InputError(f"{path}: expected real numbers, got dtype {points.dtype}")
     else:
         from .open3d_loader import open3d
 
+        check_cloud_file(path)  # open3d fills what a malformed file lacks with garbage
         o3d = open3d()
         with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
             cloud = o3d.io.read_point_cloud(str(path))
@@ -86,7 +97,14 @@ def read_cloud(path: Path) -> PointCloud:
             f"{path}: {int(bad.sum())} point(s) have NaN or infinite coordinates "
             f"(first at row {int(np.flatnonzero(bad)[0])})"
         )
+    points = points * scale
+    check_distance(points, str(path))
     return PointCloud(points=points, frame="robot")
+
+
+def _first_line(exc: BaseException) -> str:
+    lines = str(exc).strip().splitlines()
+    return lines[0] if lines else type(exc).__name__
 
 
 def write_cloud(path: Path, points: np.ndarray) -> Path:
@@ -110,7 +128,10 @@ def _vector(value: Any, where: str, path: Path) -> np.ndarray:
         raise InputError(f"{path}: {where} must be a list of 3 numbers")
     if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
         raise InputError(f"{path}: {where} must be a list of 3 numbers")
-    vector = np.array(value, dtype=np.float64)
+    try:
+        vector = np.array(value, dtype=np.float64)
+    except OverflowError:
+        raise InputError(f"{path}: {where} has a number too large for a float") from None
     if not np.isfinite(vector).all():
         raise InputError(f"{path}: {where} has a NaN or infinite value")
     return vector
@@ -124,14 +145,21 @@ class RecordedGrasps:
     plans: tuple[GraspPlan | None, ...]
 
 
-def contacts_from_json(document: Any, path: Path) -> RecordedGrasps:
-    """Validate a parsed contacts document (see the module docstring)."""
+def contacts_from_json(document: Any, path: Path, units: str | None = None) -> RecordedGrasps:
+    """Validate a parsed contacts document (see the module docstring), in metres.
+
+    Args:
+        units: the units of the positions and plan lengths; None: the document's ``units``.
+    """
     if not isinstance(document, dict):
         raise InputError(f"{path}: the top level must be a JSON object")
     if document.get("frame", "robot") != "robot":
         raise InputError(f'{path}: frame must be "robot", got {document.get("frame")!r}')
-    if document.get("units") != "m":
-        raise InputError(f'{path}: units must be "m" (metres), got {document.get("units")!r}')
+    if document.get("units") not in ("m", "mm"):
+        raise InputError(
+            f'{path}: units must be "m" (metres) or "mm", got {document.get("units")!r}'
+        )
+    scale = scale_of(units or document["units"], str(path))
     grasps = document.get("grasps")
     if not isinstance(grasps, list) or not grasps:
         raise InputError(f"{path}: 'grasps' must be a non-empty list (one entry per grasp)")
@@ -159,9 +187,13 @@ def contacts_from_json(document: Any, path: Path) -> RecordedGrasps:
             if not isinstance(index, int) or isinstance(index, bool) or index < 0:
                 raise InputError(f"{path}: {where}.index must be a non-negative integer")
             indices.append(index)
-        contacts.append(Contacts(np.array(positions), np.array(normals), pads, indices))
+        positions_m = scale * np.array(positions)
+        check_distance(positions_m, f"{path}: grasps[{g}].taxels")
+        contacts.append(Contacts(positions_m, np.array(normals), pads, indices))
         plan = grasp.get("plan")
-        plans.append(None if plan is None else plan_from_json(plan, f"grasps[{g}].plan", path))
+        if plan is not None:
+            plan = _scaled_plan(plan_from_json(plan, f"grasps[{g}].plan", path), scale)
+        plans.append(plan)
     return RecordedGrasps(tuple(contacts), tuple(plans))
 
 
@@ -171,15 +203,36 @@ def read_json(path: Path) -> Any:
     try:
         return json.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read: {exc}") from None
+        raise InputError(f"{path}: cannot read: {_first_line(exc)}") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON: {exc}") from None
+    except RecursionError:
+        raise InputError(f"{path}: not valid JSON: nested too deeply") from None
 
 
-def read_contacts(path: Path) -> RecordedGrasps:
-    """Read a contacts JSON file (one entry per grasp, in order)."""
+def _scaled_plan(plan: GraspPlan, scale: float) -> GraspPlan:
+    """``plan`` with its lengths multiplied by ``scale`` (metres per unit)."""
+    if scale == 1.0:
+        return plan
+    transform = np.array(plan.T_robot_hand, dtype=np.float64)
+    transform[:3, 3] *= scale
+    return dataclasses.replace(
+        plan,
+        T_robot_hand=transform,
+        pregrasp_height_m=plan.pregrasp_height_m * scale,
+        opening_m=plan.opening_m * scale,
+        predicted_contacts=np.asarray(plan.predicted_contacts) * scale,
+    )
+
+
+def read_contacts(path: Path, units: str | None = None) -> RecordedGrasps:
+    """Read a contacts JSON file (one entry per grasp, in order), in metres.
+
+    Args:
+        units: ``m`` or ``mm``, overriding the file's ``units`` (None: the file's).
+    """
     path = require_file(path)
-    return contacts_from_json(read_json(path), path)
+    return contacts_from_json(read_json(path), path, units)
 
 
 def contacts_to_json(
@@ -231,24 +284,36 @@ def plan_to_json(plan: GraspPlan) -> dict[str, Any]:
 
 def plan_from_json(document: Any, where: str, path: Path) -> GraspPlan:
     """Read what :func:`plan_to_json` wrote; errors name ``where`` in ``path``."""
+    if not isinstance(document, dict):
+        raise InputError(f"{path}: {where} must be an object")
     try:
         transform = np.array(document["T_robot_hand"], dtype=np.float64)
         predicted = np.array(document.get("predicted_contacts", []), dtype=np.float64)
+        closing = np.array(document["closing_direction"], dtype=np.float64)
+        lengths = [
+            float(document["pregrasp_height_m"]),
+            float(document["opening_m"]),
+            float(document.get("spread_rad", 0.0)),
+        ]
         plan = GraspPlan(
             gripper=str(document["gripper"]),
-            status=document.get("status", "ok"),
+            status=str(document.get("status", "ok")),
             T_robot_hand=transform,
-            pregrasp_height_m=float(document["pregrasp_height_m"]),
-            opening_m=float(document["opening_m"]),
-            closing_direction=np.array(document["closing_direction"], dtype=np.float64),
+            pregrasp_height_m=lengths[0],
+            opening_m=lengths[1],
+            closing_direction=closing,
             predicted_contacts=predicted.reshape(-1, 3),
-            spread_rad=float(document.get("spread_rad", 0.0)),
+            spread_rad=lengths[2],
             reason=str(document.get("reason", "")),
         )
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{path}: {where} is not a valid grasp plan: {exc}") from None
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
+        raise InputError(f"{path}: {where} is not a valid grasp plan: {exc!r}") from None
     if transform.shape != (4, 4) or not np.isfinite(transform).all():
         raise InputError(f"{path}: {where}.T_robot_hand must be a finite 4x4 matrix")
+    if closing.shape != (3,) or not np.isfinite(closing).all():
+        raise InputError(f"{path}: {where}.closing_direction must be a list of 3 numbers")
+    if not (np.isfinite(predicted).all() and np.isfinite(lengths).all()):
+        raise InputError(f"{path}: {where} has a NaN or infinite value")
     return plan
 
 

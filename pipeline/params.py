@@ -77,12 +77,20 @@ def _type_name(annotation: Any) -> str:
     return getattr(annotation, "__name__", str(annotation))
 
 
-def describe(params_cls: type) -> list[ParamInfo]:
-    """List the declared parameters of a ``Params`` dataclass."""
+def describe(params_cls: type, values: Any = None) -> list[ParamInfo]:
+    """List the declared parameters of a ``Params`` dataclass.
+
+    Args:
+        values: a ``Params`` instance whose values to show as the defaults (e.g. the
+            shipped config's); None shows the declared defaults.
+    """
     hints = _field_types(params_cls)
     return [
         ParamInfo(
-            f.name, _type_name(hints[f.name]) + _bound(f), f.default, f.metadata.get("doc", "")
+            f.name,
+            _type_name(hints[f.name]) + _bound(f),
+            f.default if values is None else getattr(values, f.name),
+            f.metadata.get("doc", ""),
         )
         for f in dataclasses.fields(params_cls)
     ]

@@ -17,9 +17,14 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
-#: Colour scale of deviation pictures: 0 mm blue to 30 mm red (METHOD.md section 6).
+#: Colour map of deviation pictures (0 blue to the scale's top red) and the paper's fixed
+#: 0-30 mm scale, which the histograms keep; the heatmaps scale to their data instead
+#: (:func:`deviation_scale_m`), since a fixed 30 mm top shows sub-millimetre change as one
+#: shade of blue.
 DEVIATION_CMAP = "jet"
 DEVIATION_MAX_M = 0.030
+#: The share of every panel's points the heatmap colour scale spans.
+DEVIATION_SCALE_QUANTILE = 0.95
 
 
 @dataclass(frozen=True)
@@ -65,6 +70,21 @@ def view_projection(azimuth_rad: float, elevation_rad: float) -> np.ndarray:
     return np.vstack([right, up, toward])
 
 
+def deviation_scale_m(panels: Sequence[DeviationPanel]) -> float:
+    """The top of a heatmap's colour scale (m): the largest of the panels'
+    :data:`DEVIATION_SCALE_QUANTILE` deviations, rounded up to 1, 2 or 5 x 10^k mm, so that
+    the panel with the largest errors spans the colours and the others compare with it."""
+    largest_mm = max(
+        float(np.quantile(np.asarray(panel.distances_m), DEVIATION_SCALE_QUANTILE)) * 1e3
+        for panel in panels
+    )
+    if not np.isfinite(largest_mm) or largest_mm <= 0.0:
+        return 1e-3
+    decade = 10.0 ** np.floor(np.log10(largest_mm))
+    step = next(s for s in (1.0, 2.0, 5.0, 10.0) if s * decade >= largest_mm * (1 - 1e-9))
+    return float(step * decade) * 1e-3
+
+
 def deviation_heatmap(
     panels: Sequence[DeviationPanel],
     out_path: Path,
@@ -72,18 +92,24 @@ def deviation_heatmap(
     mesh: tuple[np.ndarray, np.ndarray] | None = None,
     azimuth_rad: float = np.radians(-60.0),
     elevation_rad: float = np.radians(90.0),
-    max_deviation_m: float = DEVIATION_MAX_M,
+    max_deviation_m: float | None = None,
     title: str = "",
 ) -> Path:
     """Completed clouds side by side, coloured by deviation (0 blue to ``max`` red).
 
     Each panel is an orthographic view (default top-down; e.g. elevation 35 deg for a
     3/4 view). The ground-truth mesh, when given as ``(vertices, faces)``, is drawn as its
-    grey silhouette behind the points; nearer points are drawn over farther ones.
+    grey silhouette behind the points; nearer points are drawn over farther ones. The
+    colour scale's top is ``max_deviation_m`` (default :func:`deviation_scale_m`, the same
+    for every panel) and the title says it.
 
     Returns:
         The path written.
     """
+    if max_deviation_m is None:
+        max_deviation_m = deviation_scale_m(panels)
+    scale = f"colours 0 to {max_deviation_m * 1e3:g} mm"
+    title = f"{title}; {scale}" if title else scale
     projection = view_projection(azimuth_rad, elevation_rad)
     figure = Figure(figsize=(4.2 * len(panels) + 1.0, 4.4), layout="constrained")
     axes = figure.subplots(1, len(panels), squeeze=False)[0]
@@ -116,9 +142,8 @@ def deviation_heatmap(
         ax.autoscale_view()
         ax.set_xlabel("mm")
     if scatter is not None:
-        figure.colorbar(scatter, ax=list(axes), label="deviation (mm)", shrink=0.85)
-    if title:
-        figure.suptitle(title)
+        figure.colorbar(scatter, ax=list(axes), label="deviation (mm)", shrink=0.85, extend="max")
+    figure.suptitle(title)
     return _save(figure, out_path)
 
 

@@ -21,7 +21,7 @@ from typing import Any
 import pluggy
 
 from . import hookspecs
-from .errors import PluginError, SymfuseError
+from .errors import PluginError, PluginRaised, SymfuseError
 from .params import build
 from .stages import CONTRACTS, STAGES, StageImplementation
 
@@ -147,15 +147,20 @@ def _attributed(registration: Registration, what: str, fn: Callable, *args, **kw
         raise
     except Exception as exc:
         stage, name = registration.stage, registration.name
-        raise PluginError(
-            f"{stage} '{name}' ({registration.origin}) failed in {what}: "
-            f"{type(exc).__name__}: {exc}"
+        raise PluginRaised(
+            f"{stage} '{name}' ({registration.origin}) failed in {what}: {_first_line(exc)}"
         ) from exc
+
+
+def _first_line(exc: BaseException) -> str:
+    """``Type: first line of the message`` (error messages are one line)."""
+    lines = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
 
 
 class _AttributedStage:
     """Proxy around a stage instance whose method calls re-raise foreign exceptions as
-    :class:`PluginError` naming the implementation, plugin and distribution."""
+    :class:`PluginRaised` naming the stage, implementation, plugin and distribution."""
 
     def __init__(self, instance: StageImplementation, registration: Registration) -> None:
         self._instance = instance
@@ -209,8 +214,8 @@ class PluginManager:
             try:
                 plugin = entry_point.load()
             except Exception as exc:
-                raise PluginError(
-                    f"cannot load {origin} ({entry_point.value}): {type(exc).__name__}: {exc}"
+                raise PluginRaised(
+                    f"cannot load {origin} ({entry_point.value}): {_first_line(exc)}"
                 ) from exc
             self.register(plugin, origin)
         self.check_hooks()
@@ -234,8 +239,8 @@ class PluginManager:
                 except SymfuseError:
                     raise
                 except Exception as exc:
-                    raise PluginError(
-                        f"{origin} failed in symfuse_register_stages: {type(exc).__name__}: {exc}"
+                    raise PluginRaised(
+                        f"{origin} failed in symfuse_register_stages: {_first_line(exc)}"
                     ) from exc
         return registry
 

@@ -2,14 +2,19 @@
 
 Every finished task is appended to the results file at once (written, flushed and fsynced),
 so an interrupted or crashed sweep loses nothing it finished, and a re-run skips every task
-whose key is already in the file. Rows are produced the same way by every executor, so
+whose row is already in the file and was made with the same params and config: each row
+stores ``config_hash``, a hash of the task's params (where a trial keeps its files aside,
+see :data:`~pipeline.experiments.LOCATION_PARAMS`) and of the sweep's ``fingerprint`` (the
+config its trials read). A row of the same key with another hash is *stale*: a re-run
+refuses, or with ``rerun_stale`` drops and re-runs it. Rows are produced the same way by
+every executor, so
 identical tasks give identical rows whether they ran in-process, in local worker processes
 or on a Dask cluster (``run_one`` must be deterministic in its params).
 
-A row is the JSON object ``{"key": ..., "params": ..., **result}`` where ``result`` is what
-``run_one`` returned (``key`` and ``params`` are set by the engine and win over the same
-names in ``result``); a task that raised becomes ``{"key", "params", "error": "<Type>:
-<message>"}`` and the sweep goes on. :func:`write_csv` turns rows into a flat CSV for
+A row is the JSON object ``{"key": ..., "params": ..., "config_hash": ..., **result}`` where
+``result`` is what ``run_one`` returned (the engine's fields win over the same names in
+``result``); a task that raised becomes ``{"key", "params", "config_hash", "error":
+"<Type>: <message>"}`` and the sweep goes on. :func:`write_csv` turns rows into a flat CSV for
 reports.
 """
 
@@ -19,10 +24,12 @@ import concurrent.futures
 import contextlib
 import csv
 import functools
+import hashlib
 import json
 import logging
 import multiprocessing
 import os
+import shutil
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures.process import BrokenProcessPool
@@ -32,7 +39,8 @@ from typing import Any, Literal
 from tqdm import tqdm
 
 from .errors import ConfigError, InputError
-from .experiments import SweepTask
+from .experiments import LOCATION_PARAMS, SweepTask
+from .outdir import check_target, create_folder
 
 _log = logging.getLogger(__name__)
 
@@ -49,6 +57,8 @@ def run_sweep(
     executor: Executor = "local",
     scheduler: str | None = None,
     progress: bool = True,
+    fingerprint: str = "",
+    rerun_stale: bool = False,
 ) -> list[dict]:
     """Run every task not yet in ``results_path`` and return the rows of all ``tasks``.
 
@@ -62,6 +72,8 @@ def run_sweep(
         executor: ``"local"`` (a process pool, started with ``spawn``) or ``"dask"``.
         scheduler: the Dask scheduler address (required for ``executor="dask"``).
         progress: show a tqdm progress bar on stderr.
+        fingerprint: what else the rows depend on (a hash of the config the trials read).
+        rerun_stale: drop and re-run stale rows (see the module doc) instead of refusing.
 
     Returns:
         One row per task, in the order of ``tasks`` (rows of tasks finished by an earlier
@@ -71,7 +83,8 @@ def run_sweep(
         ValueError: duplicate task keys, params that are not JSON, a bad executor or a
             missing scheduler address.
         InputError: the results file has a corrupt line other than the last.
-        ConfigError: the Dask scheduler cannot be reached.
+        ConfigError: the Dask scheduler cannot be reached, or stale rows without
+            ``rerun_stale``.
         KeyboardInterrupt: after cancelling pending tasks; finished rows are kept.
     """
     keys = [task.key for task in tasks]
@@ -85,8 +98,25 @@ def run_sweep(
 
     results_path = Path(results_path)
     results_path.parent.mkdir(parents=True, exist_ok=True)
+    hashes = {task.key: row_hash(task, fingerprint) for task in tasks}
     rows_by_key = {row["key"]: row for row in read_rows(results_path)}
-    pending = [(task.key, _json_params(task)) for task in tasks if task.key not in rows_by_key]
+    stale = [key for key, row in rows_by_key.items() if row.get("config_hash") != hashes.get(key)]
+    stale = [key for key in stale if key in hashes]
+    if stale and not rerun_stale:
+        raise ConfigError(
+            f"{results_path}: {len(stale)} of {len(rows_by_key)} finished rows were made with "
+            f"other params or config (first: {stale[0]}); pass --overwrite to re-run them"
+        )
+    if stale:
+        _log.warning("%s: re-running %d stale rows", results_path, len(stale))
+        for key in stale:
+            del rows_by_key[key]
+        _rewrite(results_path, rows_by_key.values())
+    pending = [
+        (task.key, _json_params(task), hashes[task.key])
+        for task in tasks
+        if task.key not in rows_by_key
+    ]
     finished_before = len(tasks) - len(pending)
 
     with (
@@ -116,6 +146,100 @@ def run_sweep(
                 bar.set_postfix(errors=errors)
             bar.update()
     return [rows_by_key[key] for key in keys]
+
+
+# ---------------------------------------------------------------- the sweep's folder
+
+
+@contextlib.contextmanager
+def prepare_sweep_folder(
+    out: Path, keys: Sequence[str], *, overwrite: bool, inputs: Sequence[Path] = ()
+) -> Iterator[Path]:
+    """The sweep's output folder, under the output-folder policy (:mod:`pipeline.outdir`)
+    adapted to a resumable journal: rows are appended in place.
+
+    A folder whose ``results.jsonl`` holds only rows of ``keys`` is resumed. Any other
+    non-empty folder is refused, or with ``overwrite`` emptied first (never mixed). A folder
+    this call created or emptied is removed again when the block raises before any row.
+
+    Raises:
+        ConfigError: ``out`` is a file, holds ``inputs`` or the current folder, is a
+            non-empty folder of another sweep (or none) without ``overwrite``, or cannot be
+            created.
+    """
+    out = Path(out)
+    results = out / "results.jsonl"
+    fresh = not out.exists()
+    check_target(out, overwrite=True, inputs=inputs)
+    if out.is_dir() and any(out.iterdir()):
+        known = set(keys)
+        foreign = [row["key"] for row in read_rows(results) if row["key"] not in known]
+        if foreign or not results.exists():
+            what = (
+                f"holds {len(foreign)} rows that are not tasks of this sweep (first: {foreign[0]})"
+                if foreign
+                else "exists, is not empty and holds no sweep (results.jsonl)"
+            )
+            if not overwrite:
+                raise ConfigError(f"--out {out}: {what}; pass --overwrite to replace it")
+            shutil.rmtree(out)
+            fresh = True
+    create_folder(out, out)
+    try:
+        yield out
+    except BaseException:
+        if fresh and not read_rows(results):
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
+def settings_section(
+    tasks: Sequence[SweepTask],
+    config: Mapping[str, Any],
+    changed: Mapping[str, Any],
+    sections: Sequence[str],
+) -> str:
+    """The ``## Configuration`` section of ``report.md``: what the trials started from
+    (``config``, the sweep's resolved config; ``changed``, where it differs from the
+    defaults), which sections they read, and the per-task settings of the experiment that
+    win over it, beside the config's own values."""
+    from .config import dotted_value, parse_override
+
+    lines = [
+        "## Configuration",
+        "",
+        "Every trial starts from `config.toml` (the defaults, `--config` files and `--set` "
+        "values of this sweep). Changed from the defaults: "
+        + (
+            ", ".join(f"`{k} = {json.dumps(v)}`" for k, v in flatten_row(changed).items())
+            or "nothing"
+        )
+        + ".",
+    ]
+    if set(sections) != set(config):
+        lines.append(f"The trials read only [{'], ['.join(sections)}].")
+    values: dict[str, list[str]] = {}
+    for task in tasks:
+        for text in task.settings:
+            ((key, value),) = flatten_row(parse_override(text)).items()
+            value = json.dumps(value)
+            if value not in values.setdefault(key, []):
+                values[key].append(value)
+    own = {key: json.dumps(dotted_value(config, key)) for key in values}
+    replaced = {key: seen for key, seen in values.items() if seen != [own[key]]}
+    if replaced:
+        lines += [
+            "",
+            "The experiment sets these per task where they differ from `config.toml` (its "
+            "values win):",
+            "",
+            "| key | the experiment's values | config.toml |",
+            "|---|---|---|",
+        ]
+        for key, seen in replaced.items():
+            shown = ", ".join(seen) if len(seen) <= 4 else f"{len(seen)} values"
+            lines.append(f"| `{key}` | {shown} | {own[key]} |")
+    return "\n".join(lines) + "\n"
 
 
 # ---------------------------------------------------------------- results file
@@ -162,6 +286,25 @@ def read_rows(results_path: Path) -> list[dict]:
     return rows
 
 
+def row_hash(task: SweepTask, fingerprint: str = "") -> str:
+    """The ``config_hash`` of ``task``'s row: SHA-256 (hex, first 16 digits) of its params
+    without the :data:`~pipeline.experiments.LOCATION_PARAMS`, and of ``fingerprint``."""
+    params = {k: v for k, v in _json_params(task).items() if k not in LOCATION_PARAMS}
+    text = json.dumps({"params": params, "fingerprint": fingerprint}, sort_keys=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
+def _rewrite(results_path: Path, rows: Iterable[dict]) -> None:
+    """Replace the results file by ``rows`` atomically (a crash keeps the old file)."""
+    partial = results_path.with_name(results_path.name + ".partial")
+    with partial.open("w", encoding="utf-8") as handle:
+        for row in rows:
+            handle.write(json.dumps(row) + "\n")
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(partial, results_path)
+
+
 def _parse_line(raw: bytes) -> dict | None:
     try:
         row = json.loads(raw)
@@ -196,42 +339,46 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
-def run_task(run_one: RunOne, key: str, params: dict) -> str:
+def run_task(run_one: RunOne, key: str, params: dict, config_hash: str = "") -> str:
     """Run one task and return its result row as one JSON line (no newline).
 
     Exceptions raised by ``run_one`` (or by encoding its result) become an error row; this
     is the function every executor ships to its workers.
     """
+    head = {"key": key, "params": params, "config_hash": config_hash}
     try:
         result = run_one(params)
         if not isinstance(result, Mapping):
             raise TypeError(f"run_one returned {type(result).__name__}, not a dict")
-        fields = {name: value for name, value in result.items() if name not in ("key", "params")}
-        return json.dumps({"key": key, "params": params, **fields}, default=_json_default)
+        fields = {name: value for name, value in result.items() if name not in head}
+        return json.dumps({**head, **fields}, default=_json_default)
     except Exception as exc:
-        return _error_line(key, params, exc)
+        return _error_line(head, exc)
 
 
-def _error_line(key: str, params: dict, exc: BaseException) -> str:
+def _error_line(head: dict, exc: BaseException) -> str:
     message = str(exc).splitlines()[0] if str(exc) else ""
     error = f"{type(exc).__name__}: {message}" if message else type(exc).__name__
-    return json.dumps({"key": key, "params": params, "error": error})
+    return json.dumps({**head, "error": error})
 
 
 # ---------------------------------------------------------------- executors
 
 
-def _run_local(pending: list[tuple[str, dict]], run_one: RunOne, workers: int) -> Iterator[str]:
+Pending = list[tuple[str, dict, str]]  # key, params, config hash
+
+
+def _run_local(pending: Pending, run_one: RunOne, workers: int) -> Iterator[str]:
     if workers <= 1 or len(pending) <= 1:
-        for key, params in pending:
-            yield run_task(run_one, key, params)
+        for task in pending:
+            yield run_task(run_one, *task)
         return
     pool = concurrent.futures.ProcessPoolExecutor(
         max_workers=min(workers, len(pending)), mp_context=multiprocessing.get_context("spawn")
     )
     broken: BrokenProcessPool | None = None
     try:
-        futures = [pool.submit(run_task, run_one, key, params) for key, params in pending]
+        futures = [pool.submit(run_task, run_one, *task) for task in pending]
         for future in concurrent.futures.as_completed(futures):
             if isinstance(future.exception(), BrokenProcessPool):
                 broken = broken or future.exception()  # keep yielding the finished ones
@@ -249,7 +396,7 @@ def _run_local(pending: list[tuple[str, dict]], run_one: RunOne, workers: int) -
         raise broken
 
 
-def _run_dask(pending: list[tuple[str, dict]], run_one: RunOne, scheduler: str) -> Iterator[str]:
+def _run_dask(pending: Pending, run_one: RunOne, scheduler: str) -> Iterator[str]:
     if not pending:
         return
     try:
@@ -263,8 +410,8 @@ def _run_dask(pending: list[tuple[str, dict]], run_one: RunOne, scheduler: str) 
     except OSError as exc:
         raise ConfigError(f"dask scheduler {scheduler}: cannot connect ({exc})") from exc
     with client:
-        keys, params = zip(*pending, strict=True)
-        futures = client.map(functools.partial(run_task, run_one), keys, params, pure=False)
+        keys, params, hashes = zip(*pending, strict=True)
+        futures = client.map(functools.partial(run_task, run_one), keys, params, hashes, pure=False)
         params_by_future = dict(zip(futures, pending, strict=True))
         try:
             for future in as_completed(futures):
@@ -274,7 +421,7 @@ def _run_dask(pending: list[tuple[str, dict]], run_one: RunOne, scheduler: str) 
             raise
 
 
-def _dask_line(future: Any, key: str, params: dict) -> str:
+def _dask_line(future: Any, key: str, params: dict, config_hash: str) -> str:
     """The row of a finished Dask future; a task that killed its workers becomes an error
     row (it is the task's fault), anything else about the cluster propagates."""
     from distributed.scheduler import KilledWorker
@@ -282,7 +429,7 @@ def _dask_line(future: Any, key: str, params: dict) -> str:
     try:
         return future.result()
     except KilledWorker as exc:
-        return _error_line(key, params, exc)
+        return _error_line({"key": key, "params": params, "config_hash": config_hash}, exc)
 
 
 # ---------------------------------------------------------------- CSV for reports

@@ -21,7 +21,7 @@ import numpy as np
 from . import __version__
 from .catalogue import CatalogueObject, load_object
 from .config import Config
-from .errors import StageFailure
+from .errors import StageFailure, SymfuseError
 from .evaluation import GroundTruth, evaluate_stage
 from .formats import (
     bias_to_json,
@@ -155,15 +155,17 @@ def run_trial(
     """Run one simulated trial as ``config`` says and write everything to ``out_dir``.
 
     Args:
+        out_dir: an empty folder to write into (the caller's output-folder policy,
+            :mod:`pipeline.outdir`, chose it).
         report: called with a short message as each phase starts (progress output).
 
     Raises:
         StageFailure: a stage could not produce a result (empty segmentation, refused grasp,
             rejected initialisation); ``result.json`` records how far the trial got.
+        PluginRaised: a plugin raised; once the trial has written data, ``result.json``
+            records the failure too.
+        SymfuseError: bad config or object (before anything but ``config.toml`` is written).
     """
-    from .images import save_depth, save_rgb
-    from .sim.world import PybulletWorld
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     config.write(out_dir / "config.toml")
@@ -179,16 +181,35 @@ def run_trial(
         "status": "running",
         "config": config.to_dict(),
     }
-
-    def fail(message: str) -> StageFailure:
-        document.update(status="failed", reason=message, timings=timer.seconds)
-        write_json(out_dir / "result.json", document)
-        return StageFailure(message)
-
     stages = {stage: config.create(registry, stage) for stage in config.choices}
+    obj = load_object(settings.object, units=settings.units)
+    try:
+        return _simulate(config, registry, stages, obj, out_dir, timer, document, report)
+    except SymfuseError as exc:
+        # A failure after the first data file is a result: record how far the trial got.
+        if any(path.name != "config.toml" for path in out_dir.iterdir()):
+            document.update(status="failed", reason=str(exc), timings=timer.seconds)
+            write_json(out_dir / "result.json", document)
+        raise
+
+
+def _simulate(
+    config: Config,
+    registry: StageRegistry,
+    stages: dict[str, Any],
+    obj: CatalogueObject,
+    out_dir: Path,
+    timer: PhaseTimer,
+    document: dict[str, Any],
+    report: Callable[[str], None],
+) -> TrialRecord:
+    """The body of :func:`run_trial`: simulate, estimate, evaluate, write."""
+    from .images import save_depth, save_rgb
+    from .sim.world import PybulletWorld
+
+    settings = config.trial
     report(f"scene: {settings.object} with {settings.gripper}")
     with timer.phase("scene"):
-        obj = load_object(settings.object)
         world = PybulletWorld.create(
             obj,
             settings.gripper,
@@ -211,11 +232,8 @@ def run_trial(
             np.save(out_dir / "depth.npy", observation.depth_m)
             write_json(out_dir / "camera.json", camera_to_json(observation))
         report("segmenting")
-        try:
-            with timer.phase("segmenter"):
-                cloud = stages["segmenter"].segment(observation)
-        except StageFailure as exc:
-            raise fail(str(exc)) from exc
+        with timer.phase("segmenter"):
+            cloud = stages["segmenter"].segment(observation)
         with timer.phase("write"):
             write_cloud(out_dir / "cloud.ply", cloud.points)
         document["points"] = len(cloud)
@@ -226,7 +244,9 @@ def run_trial(
             plan = stages["planner"].plan(cloud, proposal, world.gripper)
         document["plan"] = plan_to_json(plan)
         if plan.status != "ok":
-            raise fail(f"grasp planner '{config.choices['planner']}' refused: {plan.reason}")
+            raise StageFailure(
+                f"grasp planner '{config.choices['planner']}' refused: {plan.reason}"
+            )
         report("grasping")
         with timer.phase("grasp"):
             outcome = world.execute_grasp(plan)
@@ -239,7 +259,7 @@ def run_trial(
             "reason": outcome.reason,
         }
         if not outcome.executed:
-            raise fail(f"grasp not executed: {outcome.reason}")
+            raise StageFailure(f"grasp not executed: {outcome.reason}")
         with timer.phase("tactile"):
             contacts = stages["tactile"].read(world, outcome)
         with timer.phase("write"):
@@ -262,7 +282,7 @@ def run_trial(
         ],
     }
     if init.status != "ok":
-        raise fail(f"initialiser '{config.choices['initialiser']}' rejected: {init.reason}")
+        raise StageFailure(f"initialiser '{config.choices['initialiser']}' rejected: {init.reason}")
     with timer.phase("estimator"):
         result = estimate(config, registry, cloud, init, [contacts])
 

@@ -7,35 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.cli import main
-from pipeline.formats import contacts_to_json, read_cloud, write_cloud, write_json
+from pipeline.formats import contacts_to_json, read_cloud, write_json
 from pipeline.metrics import fit_circle_taubin
-from pipeline.synthetic import make_case
 
 
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory):
-    """A synthetic cylinder (r = 40 mm) seen from one side, grasped by two pads, with a
-    15 deg / 10 mm wrong initial plane; files as a robot would record them."""
-    folder = tmp_path_factory.mktemp("recording")
-    case = make_case(np.random.default_rng(3), theta_error_rad=np.radians(15.0), r_error_m=0.010)
-    write_cloud(folder / "cloud.ply", case.cloud.points)
-    np.save(folder / "cloud.npy", case.cloud.points)
-    write_json(folder / "contacts.json", contacts_to_json([case.contacts]))
-    plane = case.init_plane
-    return folder, case, ",".join(repr(float(v)) for v in (*plane.normal[:2], plane.offset_m))
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def test_fuse_writes_results_and_improves_the_diameter(recording, tmp_path, capsys):
+def test_fuse_writes_results_and_improves_the_diameter(recording, tmp_path, run):
     folder, case, plane = recording
     code, out, err = run(
-        capsys,
         "fuse",
         "--cloud",
         folder / "cloud.ply",
@@ -66,11 +44,10 @@ def test_fuse_writes_results_and_improves_the_diameter(recording, tmp_path, caps
     assert "stage" in out and "wrote" in out
 
 
-def test_npy_cloud_gives_the_same_estimate(recording, tmp_path, capsys):
+def test_npy_cloud_gives_the_same_estimate(recording, tmp_path, run):
     folder, _, plane = recording
     for suffix, out in ((".ply", tmp_path / "a"), (".npy", tmp_path / "b")):
         code, _, err = run(
-            capsys,
             "fuse",
             "--cloud",
             folder / f"cloud{suffix}",
@@ -91,7 +68,7 @@ def test_npy_cloud_gives_the_same_estimate(recording, tmp_path, capsys):
     ("schedule", "status"), [("standard", "no_correspondence"), ("hybrid", "diverged")]
 )
 def test_failed_estimate_still_writes_result_and_exits_3(
-    recording, tmp_path, capsys, schedule, status
+    recording, tmp_path, run, schedule, status
 ):
     """Taxels 5 m from the object: eq. 9 finds no correspondence; eq. 13 (hybrid's start)
     always finds some, by design, and the estimate runs away."""
@@ -102,7 +79,6 @@ def test_failed_estimate_still_writes_result_and_exits_3(
     )
     write_json(tmp_path / "far.json", contacts_to_json([moved]))
     code, _, err = run(
-        capsys,
         "fuse",
         "--cloud",
         folder / "cloud.ply",
@@ -125,10 +101,9 @@ def test_failed_estimate_still_writes_result_and_exits_3(
     assert (tmp_path / "out" / "completed_stage2.ply").exists()
 
 
-def test_initialiser_by_name_and_one_that_needs_a_depth_image(recording, tmp_path, capsys):
+def test_initialiser_by_name_and_one_that_needs_a_depth_image(recording, tmp_path, run):
     folder, _, _ = recording
     code, _, err = run(
-        capsys,
         "fuse",
         "--cloud",
         folder / "cloud.ply",
@@ -137,11 +112,10 @@ def test_initialiser_by_name_and_one_that_needs_a_depth_image(recording, tmp_pat
         "--init",
         "pca",
         "--out",
-        tmp_path,
+        tmp_path / "pca",
     )
     assert code == 0, err
     code, _, err = run(
-        capsys,
         "fuse",
         "--cloud",
         folder / "cloud.ply",
@@ -150,11 +124,12 @@ def test_initialiser_by_name_and_one_that_needs_a_depth_image(recording, tmp_pat
         "--init",
         "vc",
         "--out",
-        tmp_path,
+        tmp_path / "vc",
     )
     assert code == 2
     assert err.startswith("symfuse: error: initialiser 'vc' needs a depth image")
     assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "vc").exists()  # bad config: nothing left behind
 
 
 @pytest.mark.parametrize(
@@ -168,10 +143,9 @@ def test_initialiser_by_name_and_one_that_needs_a_depth_image(recording, tmp_pat
         ),
     ],
 )
-def test_bad_cloud_is_one_line_exit_2(recording, tmp_path, capsys, make, message):
+def test_bad_cloud_is_one_line_exit_2(recording, tmp_path, run, make, message):
     folder, _, plane = recording
     code, _, err = run(
-        capsys,
         "fuse",
         "--cloud",
         make(tmp_path),
@@ -190,7 +164,7 @@ def test_bad_cloud_is_one_line_exit_2(recording, tmp_path, capsys, make, message
 @pytest.mark.parametrize(
     ("document", "message"),
     [
-        ({"frame": "robot", "units": "mm", "grasps": []}, 'units must be "m"'),
+        ({"frame": "robot", "units": "inch", "grasps": []}, 'units must be "m" (metres) or "mm"'),
         ({"frame": "robot", "units": "m", "grasps": []}, "'grasps' must be a non-empty list"),
         (
             {
@@ -203,11 +177,10 @@ def test_bad_cloud_is_one_line_exit_2(recording, tmp_path, capsys, make, message
         ),
     ],
 )
-def test_bad_contacts_is_one_line_exit_2(recording, tmp_path, capsys, document, message):
+def test_bad_contacts_is_one_line_exit_2(recording, tmp_path, run, document, message):
     folder, _, plane = recording
     (tmp_path / "c.json").write_text(json.dumps(document))
     code, _, err = run(
-        capsys,
         "fuse",
         "--cloud",
         folder / "cloud.ply",
@@ -222,7 +195,7 @@ def test_bad_contacts_is_one_line_exit_2(recording, tmp_path, capsys, document, 
     assert message in err
 
 
-def test_bad_plane_and_bad_override(recording, tmp_path, capsys):
+def test_bad_plane_and_bad_override(recording, tmp_path, run):
     folder, _, _ = recording
     base = [
         "fuse",
@@ -233,11 +206,17 @@ def test_bad_plane_and_bad_override(recording, tmp_path, capsys):
         "--out",
         tmp_path,
     ]
-    code, _, err = run(capsys, *base, "--plane", "0,0,1")
-    assert (code, err.strip()) == (
-        2,
-        "symfuse: error: --plane '0,0,1': expected NX,NY,D with a non-zero normal",
-    )
-    code, _, err = run(capsys, *base, "--plane", "1,0,0", "--set", "estimator.iekf.bogus=1")
+    for plane, message in [
+        ("0,0,1", "the normal (NX, NY) must be non-zero"),
+        ("1,0", "expected three numbers NX,NY,D, got 2"),
+        ("1,0,0,4", "expected three numbers NX,NY,D, got 4"),
+        ("1,x,0", "expected three numbers NX,NY,D"),
+        ("nan,0,0", "NX, NY and D must be finite"),
+    ]:
+        code, _, err = run(*base, "--plane", plane)
+        assert code == 2
+        assert err.startswith(f"symfuse: error: --plane '{plane}': {message}")
+        assert len(err.strip().splitlines()) == 1
+    code, _, err = run(*base, "--plane", "1,0,0", "--set", "estimator.iekf.bogus=1")
     assert code == 2
     assert err.startswith("symfuse: error: unknown config key 'estimator.iekf.bogus'")

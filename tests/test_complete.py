@@ -17,12 +17,6 @@ from pipeline.formats import read_cloud
 KINECT = Path(__file__).parent / "data" / "kinect_laptop_box_floor.pcd"
 
 
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 @pytest.fixture(scope="module")
 def kinect_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("kinect")
@@ -152,7 +146,8 @@ def test_a_trial_recording_completes_to_the_trials_stage_0(vc_trial, tmp_path):
 
 def test_a_trial_recording_with_its_contacts_fuses_as_the_trial(tmp_path):
     trial = tmp_path / "trial"
-    assert main(["trial", "--set", "trial.pictures=false", "--out", str(trial)]) == 0
+    argv = ["trial", "--init", "ps", "--set", "trial.pictures=false", "--out", str(trial)]
+    assert main(argv) == 0
     out = tmp_path / "complete"
     argv = ["complete", trial / "depth.npy", "--contacts", trial / "contacts.json"]
     assert main([str(a) for a in [*argv, "--init", "ps", "--out", out]]) == 0
@@ -170,30 +165,43 @@ def test_a_trial_recording_with_its_contacts_fuses_as_the_trial(tmp_path):
         )
 
 
-def bad(capsys, tmp_path, scan, *extra):
-    code, _, err = run(capsys, "complete", scan, *extra, "--out", tmp_path / "out")
+def bad(run, tmp_path, scan, *extra):
+    code, _, err = run("complete", scan, *extra, "--out", tmp_path / "out")
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and lines[0].startswith("symfuse: error: "), err
     return lines[0]
 
 
-def test_bad_captures_are_one_line_exit_2(tmp_path, capsys):
+def test_bad_captures_are_one_line_exit_2(tmp_path, run):
     camera = {"intrinsics": {"width": 64, "height": 48, "fx": 50.0, "fy": 50.0, "cx": 32, "cy": 24}}
     (tmp_path / "camera.json").write_text(json.dumps(camera))
     garbage = tmp_path / "garbage.pcd"
     garbage.write_bytes(b"\x00\x01 not a point cloud")
-    assert "not a PCD file" in bad(capsys, tmp_path, garbage)
-    assert "no such file" in bad(capsys, tmp_path, tmp_path / "missing.pcd")
+    assert "not a PCD file" in bad(run, tmp_path, garbage)
+    assert "no such file" in bad(run, tmp_path, tmp_path / "missing.pcd")
     empty = tmp_path / "empty.npy"
     np.save(empty, np.full((48, 64), np.nan, dtype=np.float32))
-    assert "empty" in bad(capsys, tmp_path, empty)
+    assert "empty" in bad(run, tmp_path, empty)
     millimetres = tmp_path / "mm.npy"
     np.save(millimetres, np.full((48, 64), 850.0, dtype=np.float32))
-    assert "millimetres" in bad(capsys, tmp_path, millimetres)
+    assert "millimetres" in bad(run, tmp_path, millimetres)
     unorganised = tmp_path / "unorganised.pcd"
     write_pcd(unorganised, np.ones((1, 5, 3)), np.zeros((1, 5, 3), np.uint8), "ascii")
-    assert "not organised" in bad(capsys, tmp_path, unorganised)
+    assert "not organised" in bad(run, tmp_path, unorganised)
     scatter = tmp_path / "scatter.npy"
     np.save(scatter, np.random.default_rng(0).uniform(0.5, 3.0, (48, 64)).astype(np.float32))
-    assert "no support plane" in bad(capsys, tmp_path, scatter)
-    assert "unknown capture format" in bad(capsys, tmp_path, tmp_path / "camera.json")
+    assert "no support plane" in bad(run, tmp_path, scatter)
+    assert "unknown capture format" in bad(run, tmp_path, tmp_path / "camera.json")
+
+
+def test_complete_keeps_an_earlier_run_unless_told_to_overwrite(tmp_path, run):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "earlier.txt").write_text("keep me")
+    code, _, err = run("complete", KINECT, "--out", out)
+    assert code == 2
+    assert err.startswith("symfuse: error: --out") and "--overwrite" in err
+    assert (out / "earlier.txt").read_text() == "keep me"
+    assert main(["complete", str(KINECT), "--out", str(out), "--overwrite"]) == 0
+    assert not (out / "earlier.txt").exists()
+    assert (out / "objects.json").is_file()

@@ -53,7 +53,7 @@ def test_unknown_key_is_named(registry, tmp_path):
         load_config(registry, [path])
     assert str(error.value) == (
         "unknown config key 'trial.sede' "
-        "(known keys: object, gripper, seed, x_m, y_m, yaw_deg, pictures)"
+        "(known keys: object, gripper, seed, x_m, y_m, yaw_deg, pictures, units)"
     )
 
 

@@ -36,7 +36,7 @@ def test_cloud_errors_name_the_file(tmp_path):
     with pytest.raises(InputError, match=r"c\.xyz: unknown cloud format '\.xyz'"):
         read_cloud(tmp_path / "c.xyz")
     (tmp_path / "junk.ply").write_text("this is not a ply file")
-    with pytest.raises(InputError, match=r"junk\.ply: the cloud has no points"):
+    with pytest.raises(InputError, match=r"junk\.ply: not a PLY file \(bad first line\)"):
         read_cloud(tmp_path / "junk.ply")
     np.save(tmp_path / "flat.npy", np.zeros((4, 2)))
     with pytest.raises(InputError, match=r"flat\.npy: expected an \(N, 3\) array"):
@@ -49,6 +49,29 @@ def test_cloud_errors_name_the_file(tmp_path):
     np.save(tmp_path / "empty.npy", np.zeros((0, 3)))
     with pytest.raises(InputError, match="no points"):
         read_cloud(tmp_path / "empty.npy")
+
+
+def test_malformed_ply_and_pcd_are_refused_not_filled_with_garbage(tmp_path):
+    """open3d returns a cloud of the declared size for these, whatever the body holds."""
+    binary = write_cloud(tmp_path / "c.ply", POINTS).read_bytes()
+    (tmp_path / "cut.ply").write_bytes(binary[:-5])
+    with pytest.raises(InputError, match=r"cut\.ply: the header declares \d+ points \(\d+ bytes\), "
+                       r"the file holds \d+ bytes \(truncated\?\)"):  # fmt: skip
+        read_cloud(tmp_path / "cut.ply")
+    header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+    header += "property float z\nend_header\n"
+    for body, message in [
+        ("0.5 0 0.1\n0.5 0.1 0.1\n", "the header declares 3 points, the file holds 2"),
+        ("0.5 0 0.1\n0.5 nan 0.1\n0.4 0 0\n", "point 1 is not a row of 3 finite numbers"),
+        ("0.5 0 0.1\n0.5 0.1\n0.4 0 0\n", "point 1 is not a row of 3 finite numbers"),
+    ]:
+        (tmp_path / "a.ply").write_text(header + body)
+        with pytest.raises(InputError, match=message):
+            read_cloud(tmp_path / "a.ply")
+    pcd = write_cloud(tmp_path / "c.pcd", POINTS).read_bytes()
+    (tmp_path / "more.pcd").write_bytes(pcd.replace(b"POINTS ", b"POINTS 9", 1))
+    with pytest.raises(InputError, match=r"more\.pcd: PCD POINTS \d+ is not WIDTH x HEIGHT"):
+        read_cloud(tmp_path / "more.pcd")
 
 
 def contacts(n=3):
@@ -95,7 +118,10 @@ def test_minimal_contacts_document(tmp_path):
 @pytest.mark.parametrize(
     ("document", "message"),
     [
-        ({"frame": "robot", "units": "mm", "grasps": []}, r"units must be \"m\""),
+        (
+            {"frame": "robot", "units": "inch", "grasps": []},
+            r"units must be \"m\" \(metres\) or \"mm\"",
+        ),
         ({"frame": "camera", "units": "m", "grasps": []}, r"frame must be \"robot\""),
         ({"frame": "robot", "units": "m", "grasps": []}, "'grasps' must be a non-empty list"),
         ({"frame": "robot", "units": "m", "grasps": [{"taxels": []}]}, r"grasps\[0\]\.taxels"),

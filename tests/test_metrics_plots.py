@@ -14,6 +14,7 @@ from pipeline.plots import (
     box_plot_figure,
     deviation_heatmap,
     deviation_histogram,
+    deviation_scale_m,
     error_grid_figure,
     view_projection,
 )
@@ -56,6 +57,21 @@ def test_heatmap_and_histogram_of_three_stages(tmp_path):
     for path in (top, oblique, histogram):
         image = imread(path)
         assert image.ndim == 3 and image.shape[0] > 200
+
+
+def test_deviation_scale_spans_the_worst_panel_rounded_up():
+    """The 95th percentile of the worst panel, rounded up to 1, 2 or 5 x 10^k mm."""
+
+    def panel(distances_mm):
+        distances = np.asarray(distances_mm, dtype=float) * 1e-3
+        return DeviationPanel("p", np.zeros((len(distances), 3)), distances)
+
+    ramp = np.linspace(0.0, 1.0, 101)  # its 95th percentile is 0.95
+    assert deviation_scale_m([panel(3.3 / 0.95 * ramp)]) == pytest.approx(0.005)
+    assert deviation_scale_m([panel(0.7 / 0.95 * ramp), panel(0.2 * ramp)]) == pytest.approx(0.001)
+    assert deviation_scale_m([panel(12.0 / 0.95 * ramp)]) == pytest.approx(0.020)
+    assert deviation_scale_m([panel(2.0 / 0.95 * ramp)]) == pytest.approx(0.002)
+    assert deviation_scale_m([panel(np.zeros(5))]) == pytest.approx(0.001)
 
 
 def test_study_figures(tmp_path):

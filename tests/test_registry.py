@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline import hookimpl
-from pipeline.errors import PluginError
+from pipeline.errors import EXIT_PLUGIN_RAISED, PluginError, PluginRaised
 from pipeline.params import param
 from pipeline.registry import Origin, PluginManager, load_registry
 from pipeline.stages import STAGES, Segmenter
@@ -88,8 +88,9 @@ def test_unknown_name_lists_what_is_available():
 def test_exception_in_a_stage_names_plugin_and_distribution():
     registry = registry_of(("boom", "boomdist", plugin_module(Boom)))
     segmenter = registry.create("segmenter", "boom")
-    with pytest.raises(PluginError) as error:
+    with pytest.raises(PluginRaised) as error:
         segmenter.segment(None)
+    assert error.value.exit_code == EXIT_PLUGIN_RAISED
     assert str(error.value) == (
         "segmenter 'boom' (plugin 'boom' from distribution 'boomdist 9.9') "
         "failed in segment: ValueError: kaput"
@@ -107,7 +108,7 @@ def test_exception_while_registering_names_the_plugin():
     module.symfuse_register_stages = symfuse_register_stages
     manager = PluginManager()
     manager.register(module, Origin("broken", "brokendist", "0.1"))
-    with pytest.raises(PluginError) as error:
+    with pytest.raises(PluginRaised) as error:
         manager.build_registry()
     assert str(error.value) == (
         "plugin 'broken' from distribution 'brokendist 0.1' failed in "

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import sweep_toy
 
-from pipeline.errors import InputError
+from pipeline.errors import ConfigError, InputError
 from pipeline.experiments import SweepTask
-from pipeline.sweep import read_rows, run_sweep, write_csv
+from pipeline.sweep import read_rows, row_hash, run_sweep, write_csv
 
 
 def make_tasks(count: int, **extra_by_x: dict) -> list[SweepTask]:
@@ -27,12 +27,9 @@ def make_tasks(count: int, **extra_by_x: dict) -> list[SweepTask]:
 
 
 def expected_row(task: SweepTask) -> dict:
-    """The row the engine must record: key, params and the toy's own result, via JSON."""
-    return json.loads(
-        json.dumps(
-            {"key": task.key, "params": dict(task.params)} | sweep_toy.run_one(dict(task.params))
-        )
-    )
+    """The row the engine must record: key, params, hash and the toy's own result, via JSON."""
+    head = {"key": task.key, "params": dict(task.params), "config_hash": row_hash(task)}
+    return json.loads(json.dumps(head | sweep_toy.run_one(dict(task.params))))
 
 
 class CountingRunOne:
@@ -80,6 +77,35 @@ def test_rerun_skips_finished_keys_and_runs_only_new_ones(tmp_path):
     assert third.calls == []
 
 
+def test_rows_made_with_another_config_or_params_are_stale(tmp_path):
+    """A row is reused only when its task's params and the sweep's fingerprint match; a
+    stale row is refused, or dropped and re-run with rerun_stale."""
+    results = tmp_path / "r.jsonl"
+    run_sweep(make_tasks(3), sweep_toy.run_one, results, workers=1, progress=False,
+              fingerprint="config A")  # fmt: skip
+    with pytest.raises(ConfigError, match=r"3 of 3 finished rows were made with other params"):
+        run_sweep(make_tasks(3), sweep_toy.run_one, results, workers=1, progress=False,
+                  fingerprint="config B")  # fmt: skip
+    reseeded = make_tasks(3, x1={"seed": 5})
+    with pytest.raises(ConfigError, match=r"1 of 3 finished rows .* \(first: t01\)"):
+        run_sweep(reseeded, sweep_toy.run_one, results, workers=1, progress=False,
+                  fingerprint="config A")  # fmt: skip
+    counting = CountingRunOne()
+    rows = run_sweep(reseeded, counting, results, workers=1, progress=False,
+                     fingerprint="config A", rerun_stale=True)  # fmt: skip
+    assert counting.calls == [1]
+    assert rows[1]["params"]["seed"] == 5
+    assert [row["key"] for row in read_rows(results)] == ["t00", "t02", "t01"]
+    assert all(row["config_hash"] == row_hash(task, "config A")
+               for row, task in zip(rows, reseeded, strict=True))  # fmt: skip
+
+
+def test_where_a_trial_keeps_its_files_is_not_part_of_the_hash():
+    here = SweepTask("t", {"x": 1, "trial_dir": "/a/trials/t"})
+    moved = SweepTask("t", {"x": 1, "trial_dir": "/b/trials/t"})
+    assert row_hash(here, "c") == row_hash(moved, "c") != row_hash(here, "d")
+
+
 def test_interrupt_keeps_finished_rows_and_reraises(tmp_path):
     results = tmp_path / "results.jsonl"
     with pytest.raises(KeyboardInterrupt):
@@ -97,6 +123,7 @@ def test_a_raising_task_becomes_an_error_row_and_the_sweep_goes_on(tmp_path):
     tasks = make_tasks(4, x2={"fail": True})
     rows = run_sweep(tasks, sweep_toy.run_one, tmp_path / "r.jsonl", workers=1, progress=False)
     assert rows[2] == {"key": "t02", "params": dict(tasks[2].params),
+                       "config_hash": row_hash(tasks[2]),
                        "error": "ValueError: x=2 is not allowed"}  # fmt: skip
     assert [row for i, row in enumerate(rows) if i != 2] == [
         expected_row(task) for i, task in enumerate(tasks) if i != 2
@@ -114,7 +141,8 @@ def test_numpy_values_in_results_are_written_as_plain_json(tmp_path):
         return {"scalar": np.float64(0.25), "count": np.int64(3), "vector": np.array([1.5, 2.0])}
 
     rows = run_sweep(make_tasks(1), run_one, tmp_path / "r.jsonl", workers=1, progress=False)
-    assert rows[0] == {"key": "t00", "params": {"x": 0, "seed": 1000}, "scalar": 0.25,
+    assert rows[0] == {"key": "t00", "params": {"x": 0, "seed": 1000},
+                       "config_hash": row_hash(make_tasks(1)[0]), "scalar": 0.25,
                        "count": 3, "vector": [1.5, 2.0]}  # fmt: skip
 
 

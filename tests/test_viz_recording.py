@@ -122,6 +122,7 @@ def test_view_rebuilds_the_recording_from_the_files(trial, tmp_path, capsys):
 def test_a_fuse_folder_without_camera_or_truth(trial, tmp_path):
     out = tmp_path / "fuse"
     args = ["fuse", "--cloud", str(trial / "cloud.ply"), "--contacts", str(trial / "contacts.json")]
+    args += ["--init", "ps"]
     assert main([*args, "--out", str(out), "--rerun"]) in (0, 3)
     rrd = read_rrd(out / "recording.rrd")
     assert "world/camera" not in rrd and "world/truth" not in rrd

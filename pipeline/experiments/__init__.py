@@ -4,6 +4,7 @@ Each experiment is a module in this package exposing::
 
     NAME: str                 # the name users type after ``symfuse sweep``
     DESCRIPTION: str          # one line for ``symfuse sweep --help``
+    CONFIG_SECTIONS: tuple    # optional: the config sections its trials read (default all)
     def tasks(options: ExperimentOptions) -> list[SweepTask]
     def run_one(params: dict) -> dict          # top-level, picklable, JSON in and out
     def report(rows: list[dict], out_dir: Path) -> list[Path]
@@ -12,6 +13,11 @@ Each experiment is a module in this package exposing::
 finished ones); ``run_one`` runs a single trial from its JSON parameters and returns one
 JSON-serialisable result row; ``report`` turns all rows into the CSV, the figure PNG(s) and
 ``report.md``. :mod:`pipeline.sweep` runs the tasks locally or on Dask.
+
+A trial's config is the sweep's (the defaults, ``--config`` files and ``--set`` values; what
+the user changed travels in :attr:`ExperimentOptions.config`) with the experiment's own
+per-task settings applied over it; a task lists those in :attr:`SweepTask.settings` and the
+sweep's ``report.md`` shows where they replace the user's values.
 """
 
 from __future__ import annotations
@@ -36,12 +42,25 @@ EXPERIMENTS: dict[str, str] = {
 }
 
 
+#: Task params that say where a trial keeps its files, not what it computes: they are left
+#: out of the row hash, so a sweep folder can be moved and resumed.
+LOCATION_PARAMS = frozenset({"trial_dir"})
+
+
 @dataclass(frozen=True)
 class SweepTask:
-    """One trial of a sweep: a stable unique ``key`` and the JSON ``params`` for ``run_one``."""
+    """One trial of a sweep.
+
+    Attributes:
+        key: stable and unique within the sweep.
+        params: the JSON params for ``run_one``.
+        settings: the config values (``section.key=value``) the experiment sets for this
+            task over the sweep's config; for the report.
+    """
 
     key: str
     params: Mapping[str, Any]
+    settings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -50,7 +69,10 @@ class ExperimentOptions:
 
     Attributes:
         estimator: estimator implementation name (``iekf``, ``icp``, ``mirror-only``, ...).
-        estimator_params: parameter overrides for it (``[estimator.<name>]`` config values).
+        estimator_params: its parameters (``[estimator.<name>]`` config values).
+        config: the user's config where it differs from the shipped defaults (a sparse
+            nested dict of TOML values), every section; experiments pass on what their
+            trials read.
         quick: a reduced grid (a few points per axis) for smoke tests and CI.
         seed: base seed; every task derives its own seed from this and its key.
         repeats: trials per grid point where the experiment repeats (None: the paper's).
@@ -60,6 +82,7 @@ class ExperimentOptions:
 
     estimator: str = "iekf"
     estimator_params: Mapping[str, Any] = field(default_factory=dict)
+    config: Mapping[str, Any] = field(default_factory=dict)
     quick: bool = False
     seed: int = 0
     repeats: int | None = None

@@ -20,6 +20,7 @@ import numpy as np
 from ..plots import BoxPanel, box_plot_figure
 from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask
+from .synthetic_study import CONFIG_SECTIONS as CONFIG_SECTIONS
 from .synthetic_study import (
     SUCCESS_MM,
     failures_section,

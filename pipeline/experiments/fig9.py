@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from . import ExperimentOptions, SweepTask
+from .synthetic_study import CONFIG_SECTIONS as CONFIG_SECTIONS
 from .synthetic_study import R_MM_FULL, THETA_DEG_FULL, grid_tasks, report_grid, run_trial
 
 NAME = "fig9"

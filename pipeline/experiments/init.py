@@ -20,7 +20,7 @@ import numpy as np
 
 from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask
-from .paper_objects import INIT_LABELS, group_rows, run_paper_trial
+from .paper_objects import INIT_LABELS, group_rows, paper_task, run_paper_trial, user_settings
 from .synthetic_study import task_seed
 
 NAME = "init"
@@ -48,17 +48,22 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
             for init in INITS:
                 key = f"{name}/{init}/yaw{index:02d}"
                 result.append(
-                    SweepTask(
-                        key=key,
-                        params={
+                    paper_task(
+                        key,
+                        {
                             "object": name,
                             "init": init,
                             "gripper": "pg70",
                             "yaw_deg": float(yaw),
                             "seed": task_seed(options.seed, f"{name}/yaw{index}"),
                             "overrides": ["trial.pictures=false"],
+                            "config": user_settings(options),
                             "estimator": estimator,
-                            "estimator_params": {},
+                            "estimator_params": (
+                                dict(options.estimator_params)
+                                if estimator == options.estimator
+                                else {}
+                            ),
                             "trial_dir": None if root is None else str(root / key),
                         },
                     )

@@ -21,6 +21,8 @@ Task parameters (JSON; units in the names):
     view_offset_deg    yaw relative to the reference view; yaw_deg: the trial's object yaw
     seed               the trial's seed (scene, sensor and tactile noise)
     overrides          further ``--set`` strings of the experiment (planner, sensor)
+    config             the user's config values other than the estimator's, where they
+                       differ from the defaults; the trial's config starts from them
     estimator          estimator name; estimator_params: its parameters
     trial_dir          folder for the trial's files, or None (a temporary folder, deleted)
 
@@ -109,6 +111,17 @@ def trial_root(options: ExperimentOptions) -> Path | None:
     return None if options.out_dir is None else Path(options.out_dir) / "trials"
 
 
+def user_settings(options: ExperimentOptions) -> dict[str, Any]:
+    """The user's config changes a trial starts from (``config`` in the params); the
+    estimator's travel as ``estimator`` and ``estimator_params``."""
+    return {section: value for section, value in options.config.items() if section != "estimator"}
+
+
+def paper_task(key: str, params: dict[str, Any]) -> SweepTask:
+    """The task of ``params``, its :attr:`SweepTask.settings` from :func:`trial_overrides`."""
+    return SweepTask(key=key, params=params, settings=tuple(trial_overrides(params)))
+
+
 def object_tasks(
     options: ExperimentOptions,
     object_name: str,
@@ -130,9 +143,9 @@ def object_tasks(
             for repeat in range(repeats):
                 key = f"{object_name}/{init}/view{offset:+g}/rep{repeat}"
                 tasks.append(
-                    SweepTask(
-                        key=key,
-                        params={
+                    paper_task(
+                        key,
+                        {
                             "object": object_name,
                             "init": init,
                             "gripper": gripper,
@@ -140,6 +153,7 @@ def object_tasks(
                             "yaw_deg": float(base_yaw + offset),
                             "seed": task_seed(options.seed, key),
                             "overrides": list(overrides),
+                            "config": user_settings(options),
                             "estimator": options.estimator,
                             "estimator_params": dict(options.estimator_params),
                             "trial_dir": None if root is None else str(root / key),
@@ -155,7 +169,7 @@ def toml_value(value: Any) -> str:
 
 
 def trial_overrides(params: Mapping[str, Any]) -> list[str]:
-    """The ``--set`` strings that turn the default config into the trial of ``params``."""
+    """The ``--set`` strings that turn the sweep's config into the trial of ``params``."""
     estimator = params["estimator"]
     overrides = [
         f"trial.object={toml_value(params['object'])}",
@@ -173,6 +187,16 @@ def trial_overrides(params: Mapping[str, Any]) -> list[str]:
     return overrides
 
 
+def trial_config(params: Mapping[str, Any]):
+    """The resolved config of the trial of ``params``: the defaults, then the user's
+    changes (``config``), then the experiment's :func:`trial_overrides`."""
+    from ..config import load_config
+
+    return load_config(
+        _registry(), settings=params.get("config", {}), overrides=trial_overrides(params)
+    )
+
+
 @functools.cache
 def _registry():
     from ..registry import load_registry
@@ -183,21 +207,23 @@ def _registry():
 def run_paper_trial(params: Mapping[str, Any]) -> dict[str, Any]:
     """Run one trial from its task params and return its result row (see the module doc).
 
-    A :class:`StageFailure` becomes a row with ``failed`` set; any other exception
-    propagates (the sweep engine records it as an error row).
+    The trial runs with :func:`trial_config`. Its folder is replaced whole (a re-run never
+    mixes files of two runs). A :class:`StageFailure` becomes a row with ``failed`` set; any other
+    exception propagates (the sweep engine records it as an error row).
     """
-    from ..config import load_config
+    from ..outdir import staged_output
     from ..trial import run_trial
 
     registry = _registry()
-    config = load_config(registry, overrides=trial_overrides(params))
+    config = trial_config(params)
     started = time.perf_counter()
     with contextlib.ExitStack() as stack:
         trial_dir = params.get("trial_dir")
         if trial_dir is None:
             trial_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="symfuse-"))
         try:
-            record = run_trial(config, registry, Path(trial_dir))
+            with staged_output(Path(trial_dir), overwrite=True) as staging:
+                record = run_trial(config, registry, staging)
         except StageFailure as exc:
             return {
                 "failed": str(exc),

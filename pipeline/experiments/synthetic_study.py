@@ -39,6 +39,8 @@ from ..sweep import write_csv
 from ..synthetic import make_case
 from . import ExperimentOptions, SweepTask
 
+#: The config sections a synthetic trial reads: no scene, sensor or hand is simulated.
+CONFIG_SECTIONS = ("estimator",)
 #: A trial succeeds when the final diameter error is below this (the paper's 4 mm).
 SUCCESS_MM = 4.0
 #: Full grids of the initial plane error (paper Fig. 8/9 axes: theta 0..90 deg).

@@ -58,7 +58,8 @@ def plot_cloud_with_plane(
         or f"plane: theta {np.rad2deg(plane.theta_rad):.1f} deg, "
         f"offset {plane.offset_m * mm:.1f} mm"
     )
-    axes.legend(loc="upper right", markerscale=8)
+    # Below the axes, where it never hides points (the cloud may fill any corner).
+    axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, markerscale=8)
     path = Path(path)
     figure.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(figure)

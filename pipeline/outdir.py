@@ -1,0 +1,150 @@
+"""The output-folder policy of every command that writes a run's results.
+
+* A run writes into a fresh staging folder beside its target (``.NAME.partial-XXXX`` in the
+  same parent, so the final move is a rename on one file system) and the staging folder
+  is moved into place when the run ends.
+* An explicit target that exists and is not empty is refused before anything runs, unless
+  ``overwrite`` is given; then it is replaced whole when the run ends, never mixed with
+  the new files. A target that is a file is always refused.
+* Without an explicit target each run gets a fresh default folder (:func:`fresh_folder`),
+  so the same command can be typed twice.
+* A run that fails before it wrote any result (no ``result.json`` in the staging folder:
+  bad input, a plugin raising before the first result, Ctrl-C) leaves nothing behind; a run
+  that fails after (exit 3, or a plugin raising mid-trial, which records the failure in
+  ``result.json``) is moved into place with everything it wrote.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+from .errors import ConfigError
+
+#: The file whose presence marks a staging folder as holding a result worth keeping.
+RESULT_FILE = "result.json"
+
+
+def fresh_folder(base: Path) -> Path:
+    """``base`` if nothing is there yet, else the first free ``base-2``, ``base-3``, ..."""
+    base = Path(base)
+    candidate, number = base, 1
+    while candidate.exists():
+        number += 1
+        candidate = base.with_name(f"{base.name}-{number}")
+    return candidate
+
+
+def check_target(target: Path, *, overwrite: bool, inputs: Sequence[Path] = ()) -> None:
+    """Refuse ``target`` unless it is absent, an empty folder, or ``overwrite`` is given and
+    it holds none of the run's ``inputs`` (replacing it would delete them).
+
+    Raises:
+        ConfigError: ``target`` is a file, a non-empty folder without ``overwrite``, or
+            holds an input.
+    """
+    target = Path(target)
+    if target.is_symlink() or (target.exists() and not target.is_dir()):
+        raise ConfigError(f"--out {target}: exists and is not a folder")
+    if target.is_dir() and any(target.iterdir()) and not overwrite:
+        raise ConfigError(
+            f"--out {target}: the folder exists and is not empty; pass --overwrite to replace "
+            "it, or choose another --out"
+        )
+    if target.is_dir():
+        if Path.cwd().resolve().is_relative_to(target.resolve()):
+            raise ConfigError(f"--out {target}: holds the current folder; choose another --out")
+        inside = [path for path in inputs if Path(path).resolve().is_relative_to(target.resolve())]
+        if inside:
+            raise ConfigError(
+                f"--out {target}: holds the input {inside[0]}, which replacing it would "
+                "delete; choose another --out"
+            )
+
+
+def has_result(folder: Path) -> bool:
+    """Whether a run wrote its ``result.json`` into ``folder``."""
+    return (Path(folder) / RESULT_FILE).is_file()
+
+
+def create_folder(folder: Path, target: Path) -> Path:
+    """Create ``folder`` with its parents (as needed for the output folder ``target``).
+
+    Raises:
+        ConfigError: naming ``target`` and why: a parent is a file, or cannot be written.
+    """
+    for path in (folder, *folder.parents):
+        if path.exists() and not path.is_dir():
+            raise ConfigError(f"--out {target}: {path} is not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out {target}: cannot create {folder}: {exc.strerror}") from None
+    return folder
+
+
+def _staging_folder(target: Path) -> Path:
+    """A new empty folder beside ``target`` (its parent created as needed).
+
+    Raises:
+        ConfigError: the parent cannot be created or written (read-only, not a folder).
+    """
+    parent = create_folder(target.parent, target)
+    try:
+        staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-", dir=parent))
+    except OSError as exc:
+        raise ConfigError(f"--out {target}: cannot write in {parent}: {exc.strerror}") from None
+    staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; a result folder is not
+    return staging
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _move_into_place(staging: Path, target: Path, *, overwrite: bool) -> None:
+    """Rename ``staging`` to ``target``; an existing ``target`` (allowed by ``overwrite``,
+    or empty) is set aside first and deleted only once the new folder is in place."""
+    old = None
+    if target.exists():
+        check_target(target, overwrite=overwrite)  # anything new since the run started?
+        old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+        os.replace(target, old / target.name)
+    os.replace(staging, target)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def staged_output(
+    target: Path, *, overwrite: bool = False, inputs: Sequence[Path] = ()
+) -> Iterator[Path]:
+    """Stage a run's files beside ``target`` and move them into place when the run ends.
+
+    Checks ``target`` first (:func:`check_target`, with the run's ``inputs``), so a refused
+    target costs nothing.
+    Yields the staging folder to write into. On normal exit it becomes ``target``; on an
+    exception it becomes ``target`` only when it holds ``result.json`` (the run recorded
+    how far it got), else it is deleted; the exception propagates either way.
+
+    Raises:
+        ConfigError: ``target`` is refused, or its parent cannot be written.
+    """
+    target = Path(target)
+    check_target(target, overwrite=overwrite, inputs=inputs)
+    staging = _staging_folder(target)
+    try:
+        yield staging
+    except BaseException:
+        if has_result(staging):
+            _move_into_place(staging, target, overwrite=overwrite)
+        else:
+            shutil.rmtree(staging, ignore_errors=True)
+        raise
+    _move_into_place(staging, target, overwrite=overwrite)
