@@ -183,7 +183,7 @@ def test_solid_and_iou_match_the_per_cell_inside_test(mesh):
 
     rng = np.random.default_rng(5)
     model = sample_surface(mesh.vertices, mesh.faces, 3000, skip_support=False)
-    model += rng.normal(0.0, 0.004, model.shape) + [0.01, 0.0, 0.005]
+    model += rng.normal(0.0, 0.004, model.shape) + np.array([0.01, 0.0, 0.005])
     hull = trimesh.convex.convex_hull(model)
     in_hull = mesh_occupancy(solid.cells, hull.vertices, hull.faces)
     intersection = np.count_nonzero(in_hull) * solid.cell_volume_m3
