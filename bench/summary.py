@@ -22,7 +22,8 @@ def record(
     path = os.environ.get(SUMMARY_FILE)
     if not path:
         return
-    met = None if target is None else (value <= target if at_most else value >= target)
+    value = float(value)  # numpy scalars do not serialise
+    met = None if target is None else bool(value <= target if at_most else value >= target)
     row = {"measure": measure, "value": value, "unit": unit, "target": target}
     row.update(at_most=at_most, met=met)
     with open(path, "a", encoding="utf-8") as summary:
