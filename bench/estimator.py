@@ -16,6 +16,7 @@ for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
+from summary import record  # noqa: E402
 
 from pipeline.estimation.dense import DenseCovariance  # noqa: E402
 from pipeline.estimation.geometry import apply_bias  # noqa: E402
@@ -108,6 +109,8 @@ def main() -> None:
         times[(kind, n)] = seconds
         target = f"{TARGETS_S[n]:.2f}" if n in TARGETS_S and kind == "structured" else "-"
         print(f"{kind:<11}{n:>8}{seconds:>9.3f}{target:>10}{iterations:>7}{active:>7}  {status}")
+        if kind == "structured" and n in TARGETS_S:
+            record(f"estimator, Stages 1-2, N = {n}, one thread", seconds, "s", TARGETS_S[n])
     ratio = times[("dense", 1_500)] / times[("structured", 1_500)]
     print(f"dense / structured at N = 1500: {ratio:.1f}x")
 

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pybullet as pb
+from summary import record
 
 from pipeline.sim.grasping import execute_grasp
 from pipeline.sim.hands import Hand
@@ -86,6 +87,8 @@ def main() -> None:
     print("-" * len(header))
     for gripper, taxels, touching, times, cpu_s, grasp_s, executed in rows:
         target = ">= 1000" if gripper == "pg70" else "-"
+        if gripper == "pg70":
+            record("tactile reads per second, PG-70", 1.0 / times.mean(), "/s", 1000, at_most=False)
         print(
             f"{gripper:<6} {taxels:>6} {touching:>7} {times.mean() * 1e6:>8.0f} "
             f"{np.median(times) * 1e6:>9.0f} {cpu_s * 1e6:>7.0f} {1.0 / times.mean():>8.0f} "

@@ -21,6 +21,7 @@ import argparse
 import time
 
 import numpy as np
+from summary import record
 
 from pipeline.perception.grasp_geometry import PadBand, corridor
 from pipeline.perception.principal_axes import table_axes
@@ -48,6 +49,7 @@ PG70 = GripperSpec(
     0.154,
 )
 CENTRE_XY = np.array([0.6, 0.0])
+VC_SCORING_TARGET_S = 0.2
 
 
 def timing() -> list[tuple[str, float, str]]:
@@ -81,9 +83,21 @@ def timing() -> list[tuple[str, float, str]]:
         default_runs.append(time.perf_counter() - start)
     p = vc.params
     return [
-        ("score 200 hyp x 20000 pts, wall median of 9", float(np.median(wall)), "< 0.200 s"),
-        ("score 200 hyp x 20000 pts, wall best of 9", float(np.min(wall)), "< 0.200 s"),
-        ("score 200 hyp x 20000 pts, CPU median of 9", float(np.median(cpu)), "< 0.200 s"),
+        (
+            "score 200 hyp x 20000 pts, wall median of 9",
+            float(np.median(wall)),
+            f"< {VC_SCORING_TARGET_S:.3f} s",
+        ),
+        (
+            "score 200 hyp x 20000 pts, wall best of 9",
+            float(np.min(wall)),
+            f"< {VC_SCORING_TARGET_S:.3f} s",
+        ),
+        (
+            "score 200 hyp x 20000 pts, CPU median of 9",
+            float(np.median(cpu)),
+            f"< {VC_SCORING_TARGET_S:.3f} s",
+        ),
         (
             f"vc.propose, default {p.orientations}x{p.offsets} hyp x {len(cloud)} pts",
             float(np.median(default_runs)),
@@ -163,8 +177,10 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     print(f"{'VC scoring':<48} {'measured':>10} {'target':>10}")
-    for label, seconds, target in timing():
+    for k, (label, seconds, target) in enumerate(timing()):
         print(f"{label:<48} {seconds:>8.3f} s {target:>10}")
+        if k == 0:
+            record(f"VC: {label}", seconds, "s", VC_SCORING_TARGET_S)
     if args.timing_only:
         return
     print()

@@ -26,7 +26,6 @@ from .perception.principal_axes import table_axes
 from .perception.segmentation import outside_view, touches_view_edge
 from .perception.support import recentre
 from .registry import StageRegistry
-from .runner import estimate, initial_estimate
 from .types import (
     Contacts,
     DepthObservation,
@@ -151,6 +150,8 @@ def complete_object(
 ) -> ObjectCompletion:
     """Initialise one object's plane and complete it (Stage 0), fusing ``grasps`` when
     there are any (Stages 1, 2)."""
+    from .runner import estimate, initial_estimate  # the estimator's scipy: only when used
+
     initialiser = config.create(registry, "initialiser")
     proposal = initialiser.propose(cloud, observation)
     init = proposal

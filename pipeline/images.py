@@ -1,19 +1,15 @@
 """Saving camera images: ``rgb.png``, a colour-mapped ``depth.png`` and raw ``depth.npy``.
 
 Plots are drawn on a standalone matplotlib ``Figure`` with the Agg canvas (no pyplot state,
-no display needed).
+no display needed). matplotlib is imported by the functions that draw, so a trial without
+pictures never loads it.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-import matplotlib.image
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.patches import Patch
 
 from pipeline.types import DepthObservation
 
@@ -26,6 +22,8 @@ PNG_OPTIONS = {"compress_level": 1}
 
 def save_rgb(path: str | Path, rgb: np.ndarray) -> Path:
     """Write an ``(H, W, 3) uint8`` colour image as PNG; return the path."""
+    import matplotlib.image
+
     rgb = np.asarray(rgb)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise ValueError(f"rgb must be an (H, W, 3) uint8 image, got {rgb.shape} {rgb.dtype}")
@@ -37,6 +35,11 @@ def save_rgb(path: str | Path, rgb: np.ndarray) -> Path:
 def save_depth(path_png: str | Path, depth_m: np.ndarray, title: str = "depth") -> Path:
     """Write a depth image as a colour-mapped PNG with a colourbar in metres; pixels
     without depth (``NaN``) are drawn in magenta and named in a legend. Returns the path."""
+    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
+
     depth = np.asarray(depth_m, dtype=np.float64)
     if depth.ndim != 2:
         raise ValueError(f"depth must be an (H, W) image, got shape {depth.shape}")

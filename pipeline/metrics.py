@@ -23,6 +23,7 @@ Everything here is 2-D or 3-D geometry on arrays; the libraries beyond numpy are
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -367,13 +368,18 @@ def _raycasting_scene(vertices: np.ndarray, faces: np.ndarray):
     return scene, origin
 
 
-def _queries(points: np.ndarray, origin: np.ndarray):
+def _tensor(array: np.ndarray):
+    """An open3d tensor of a float32 array."""
     from .open3d_loader import open3d
 
+    return open3d().core.Tensor(np.ascontiguousarray(array, dtype=np.float32))
+
+
+def _queries(points: np.ndarray, origin: np.ndarray):
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points must have shape (N, 3), got {points.shape}")
-    return open3d().core.Tensor((points - origin).astype(np.float32))
+    return _tensor(points - origin)
 
 
 def point_to_mesh_distances(
@@ -515,15 +521,23 @@ def sample_surface(
 
 @dataclass(frozen=True)
 class SolidGrid:
-    """A closed mesh's solid as the centres of the cells of a regular grid inside it.
+    """A closed mesh's solid on a regular grid of cubic cells over its bounding box.
 
     Attributes:
-        cells: ``(M, 3)`` centres of the grid cells that lie inside the mesh (m).
-        pitch_m: the cells' edge length.
+        inside: ``(nx, ny, nz)`` bool, the cells whose centre lies inside the mesh.
+        origin_m: ``(3,)`` centre of cell ``(0, 0, 0)``, frame of the mesh (m).
+        pitch_m: the cells' edge length; cell ``(i, j, k)`` is centred on
+            ``origin_m + pitch_m * (i, j, k)``.
     """
 
-    cells: np.ndarray
+    inside: np.ndarray
+    origin_m: np.ndarray
     pitch_m: float
+
+    @property
+    def cells(self) -> np.ndarray:
+        """``(M, 3)`` centres of the cells inside the mesh (m)."""
+        return self.origin_m + self.pitch_m * np.argwhere(self.inside)
 
     @property
     def cell_volume_m3(self) -> float:
@@ -531,12 +545,49 @@ class SolidGrid:
 
     @property
     def volume_m3(self) -> float:
-        return len(self.cells) * self.cell_volume_m3
+        return int(np.count_nonzero(self.inside)) * self.cell_volume_m3
+
+    @functools.cached_property
+    def column_counts(self) -> np.ndarray:
+        """``(nx, ny, nz + 1)``: inside cells of column ``(i, j)`` below cell ``k``."""
+        counts = np.zeros((*self.inside.shape[:2], self.inside.shape[2] + 1), dtype=np.int32)
+        np.cumsum(self.inside, axis=2, out=counts[:, :, 1:])
+        return counts
+
+
+def _crossings_below(
+    scene, origin: np.ndarray, centres: list[np.ndarray], pitch: float, axis: int
+) -> np.ndarray:
+    """``(nx, ny, nz)`` int: how often a ray along ``+axis`` from outside the grid crosses the
+    mesh of ``scene`` before each cell centre, one ray per line of cells."""
+    across = [i for i in range(3) if i != axis]
+    grid = np.meshgrid(centres[across[0]], centres[across[1]], indexing="ij")
+    starts = np.empty((grid[0].size, 3))
+    starts[:, across[0]], starts[:, across[1]] = grid[0].ravel(), grid[1].ravel()
+    starts[:, axis] = centres[axis][0] - pitch
+    direction = np.zeros((len(starts), 3))
+    direction[:, axis] = 1.0
+    rays = np.hstack([starts - origin, direction]).astype(np.float32)
+    hits = scene.list_intersections(_tensor(rays))
+    line = hits["ray_ids"].numpy().astype(np.int64)
+    # The first cell whose centre lies beyond each crossing (the ray starts one pitch before
+    # cell 0); crossings past the last centre land in the spare slot n.
+    n = len(centres[axis])
+    beyond = np.clip(np.floor(hits["t_hit"].numpy() / pitch), 0, n).astype(np.int64)
+    counts = np.bincount(line * (n + 1) + beyond, minlength=len(starts) * (n + 1))
+    below = np.cumsum(counts.reshape(len(starts), n + 1)[:, :n], axis=1)
+    return np.moveaxis(below.reshape(len(grid[0]), len(grid[0][0]), n), 2, axis)
 
 
 def solid_grid(vertices: np.ndarray, faces: np.ndarray, max_cells: int = 1_000_000) -> SolidGrid:
     """The solid of a closed mesh on a grid over its bounding box, with as many cubic cells
     as fit in ``max_cells`` (a 170 x 146 x 42 mm box gets 1 mm cells).
+
+    A cell is inside when its centre is: the majority vote of three parity tests, along x, y
+    and z, each counting the crossings of one ray per line of cells (so a ray that grazes an
+    edge or a vertex does not flip the answer). This is :func:`mesh_occupancy` with three
+    fixed directions shared by whole lines of cells, a few tens of thousands of rays instead
+    of three per cell.
 
     The counted volume differs from the true one by a fraction of a cell layer over the
     surface: below 0.5 % for a 1 mm pitch on a 42 mm thick box.
@@ -548,9 +599,10 @@ def solid_grid(vertices: np.ndarray, faces: np.ndarray, max_cells: int = 1_000_0
         raise ValueError(f"the mesh is flat (extent {extent.tolist()} m): it has no solid")
     pitch = float(np.cbrt(np.prod(extent) / max_cells))
     counts = np.ceil(extent / pitch).astype(int)
-    axes = [low[i] + pitch * (np.arange(counts[i]) + 0.5) for i in range(3)]
-    centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    return SolidGrid(centres[mesh_occupancy(centres, vertices, faces)], pitch)
+    centres = [low[i] + pitch * (np.arange(counts[i]) + 0.5) for i in range(3)]
+    scene, origin = _raycasting_scene(vertices, faces)
+    votes = sum(_crossings_below(scene, origin, centres, pitch, axis) % 2 for axis in range(3))
+    return SolidGrid(votes >= 2, low + 0.5 * pitch, pitch)
 
 
 def hull_iou(points: np.ndarray, solid: SolidGrid) -> float:
@@ -559,12 +611,39 @@ def hull_iou(points: np.ndarray, solid: SolidGrid) -> float:
     The intersection is the solid's cells inside the hull; the union is the hull's exact
     volume plus the solid's counted volume minus the intersection. Points whose hull has no
     volume (fewer than four, or all in one plane) score 0.
+
+    Convexity makes the inside test one ray per column of cells: the hull spans the column
+    from its first to its last crossing, and the solid's cells in that span are counted from
+    the column's running count (:attr:`SolidGrid.column_counts`).
     """
     try:
         hull = ConvexHull(np.asarray(points, dtype=np.float64))
     except (QhullError, ValueError):
         return 0.0
-    inside = mesh_occupancy(solid.cells, hull.points, hull.simplices, rays=1)
-    intersection = float(np.count_nonzero(inside)) * solid.cell_volume_m3
+    scene, origin = _raycasting_scene(hull.points, hull.simplices)
+    nx, ny, nz = solid.inside.shape
+    x, y = np.meshgrid(
+        solid.origin_m[0] + solid.pitch_m * np.arange(nx),
+        solid.origin_m[1] + solid.pitch_m * np.arange(ny),
+        indexing="ij",
+    )
+    bottom = min(solid.origin_m[2], hull.min_bound[2]) - solid.pitch_m
+    starts = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, bottom)])
+    rays = np.hstack([starts - origin, np.tile([0.0, 0.0, 1.0], (len(starts), 1))])
+    hits = scene.list_intersections(_tensor(rays.astype(np.float32)))
+    column = hits["ray_ids"].numpy().astype(np.int64)
+    # Cell index (fractional) of every crossing along its column.
+    k = (bottom + hits["t_hit"].numpy() - solid.origin_m[2]) / solid.pitch_m
+    first = np.full(x.size, np.inf)
+    last = np.full(x.size, -np.inf)
+    np.minimum.at(first, column, k)
+    np.maximum.at(last, column, k)
+    crossed = np.flatnonzero(last > first)
+    lo = np.clip(np.ceil(first[crossed]), 0, nz).astype(np.int64)
+    hi = np.clip(np.floor(last[crossed]) + 1, 0, nz).astype(np.int64)
+    running = solid.column_counts.reshape(nx * ny, nz + 1)[crossed]
+    rows = np.arange(len(crossed))
+    inside = np.maximum(running[rows, hi] - running[rows, lo], 0)
+    intersection = float(inside.sum()) * solid.cell_volume_m3
     union = hull.volume + solid.volume_m3 - intersection
     return intersection / union if union > 0.0 else 0.0

@@ -5,16 +5,29 @@ fails at import where the system lacks it, e.g. a fresh Debian image without roo
 ``apt install libusb-1.0-0``. The ``libusb-package`` wheel ships that library; loading it
 with ``RTLD_GLOBAL`` before open3d makes the dynamic linker resolve open3d's dependency to
 it. Every symfuse module gets open3d through :func:`open3d`.
+
+open3d's ``__init__`` also imports ``open3d.visualization``, whose ``draw_plotly`` module
+imports plotly and dash (with IPython and requests behind it): more than half of open3d's
+import time, for browser plots symfuse never draws. open3d has no switch to skip it, so
+:func:`open3d` imports the package with a stand-in for that one module
+(:func:`_plotly_deferred`); its functions load the real module on first call.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import functools
 import importlib
+import importlib.util
 import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
 from types import ModuleType
+
+#: The open3d module that imports plotly and dash when loaded.
+PLOTLY_MODULE = "open3d.visualization.draw_plotly"
 
 
 def preload_libusb() -> str | None:
@@ -30,8 +43,61 @@ def preload_libusb() -> str | None:
     return path
 
 
+def _real_plotly_module() -> ModuleType:
+    """The real ``draw_plotly`` module, replacing the stand-in in ``sys.modules``."""
+    module = sys.modules.get(PLOTLY_MODULE)
+    if module is None or getattr(module, "_symfuse_stand_in", False):
+        sys.modules.pop(PLOTLY_MODULE, None)
+        module = importlib.import_module(PLOTLY_MODULE)
+    return module
+
+
+def _forwarder(name: str) -> Callable:
+    def forward(*args, **kwargs):
+        return getattr(_real_plotly_module(), name)(*args, **kwargs)
+
+    forward.__name__ = forward.__qualname__ = name
+    forward.__doc__ = f"``{PLOTLY_MODULE}.{name}``, imported (with plotly and dash) on call."
+    return forward
+
+
+@contextlib.contextmanager
+def _plotly_deferred() -> Iterator[None]:
+    """While open3d imports, ``open3d.visualization.draw_plotly`` is a module whose every
+    public name (``from .draw_plotly import draw_plotly`` and the like) is a function that
+    imports the real module when called. Afterwards the stand-in leaves ``sys.modules``, so
+    ``import open3d.visualization.draw_plotly`` gets the real module.
+
+    Where the wheel has no such module the import goes on untouched.
+    """
+    spec = importlib.util.find_spec("open3d")
+    folder = Path(spec.origin).parent if spec is not None and spec.origin else None
+    if folder is None or not (folder / "visualization" / "draw_plotly.py").is_file():
+        yield
+        return
+    stand_in = ModuleType(PLOTLY_MODULE, "plotly views, imported on first call")
+    stand_in._symfuse_stand_in = True
+
+    def attribute(name: str) -> Callable:
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return _forwarder(name)
+
+    stand_in.__getattr__ = attribute
+    sys.modules[PLOTLY_MODULE] = stand_in
+    try:
+        yield
+    finally:
+        if sys.modules.get(PLOTLY_MODULE) is stand_in:
+            del sys.modules[PLOTLY_MODULE]
+
+
 @functools.cache
 def open3d() -> ModuleType:
-    """The ``open3d`` module, imported after making sure its libusb dependency resolves."""
+    """The ``open3d`` module, imported after making sure its libusb dependency resolves,
+    without its plotly views (see the module docstring)."""
     preload_libusb()
-    return importlib.import_module("open3d")
+    if "open3d" in sys.modules:
+        return sys.modules["open3d"]
+    with _plotly_deferred():
+        return importlib.import_module("open3d")

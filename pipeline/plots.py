@@ -17,6 +17,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
+from .images import PNG_OPTIONS
+
 #: Colour map of deviation pictures (0 blue to the scale's top red) and the paper's fixed
 #: 0-30 mm scale, which the histograms keep; the heatmaps scale to their data instead
 #: (:func:`deviation_scale_m`), since a fixed 30 mm top shows sub-millimetre change as one
@@ -25,6 +27,16 @@ DEVIATION_CMAP = "jet"
 DEVIATION_MAX_M = 0.030
 #: The share of every panel's points the heatmap colour scale spans.
 DEVIATION_SCALE_QUANTILE = 0.95
+#: Points a scatter panel draws at most. Beyond that a fixed random subset is drawn: at
+#: these figure sizes it looks the same, and matplotlib's time grows with every marker.
+SCATTER_POINTS = 4000
+
+
+def scatter_subset(count: int, limit: int = SCATTER_POINTS) -> np.ndarray:
+    """Sorted indices of at most ``limit`` of ``count`` points (the same on every call)."""
+    if count <= limit:
+        return np.arange(count)
+    return np.sort(np.random.default_rng(0).choice(count, limit, replace=False))
 
 
 @dataclass(frozen=True)
@@ -46,7 +58,7 @@ def _save(figure: Figure, out_path: Path) -> Path:
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     FigureCanvasAgg(figure)
-    figure.savefig(out_path, dpi=120)
+    figure.savefig(out_path, dpi=120, pil_kwargs=PNG_OPTIONS)
     return out_path
 
 
@@ -111,7 +123,10 @@ def deviation_heatmap(
     scale = f"colours 0 to {max_deviation_m * 1e3:g} mm"
     title = f"{title}; {scale}" if title else scale
     projection = view_projection(azimuth_rad, elevation_rad)
-    figure = Figure(figsize=(4.2 * len(panels) + 1.0, 4.4), layout="constrained")
+    # Fixed margins: a constrained layout measures every label first, which costs more than
+    # drawing the figure.
+    figure = Figure(figsize=(4.2 * len(panels) + 1.0, 4.4))
+    figure.subplots_adjust(left=0.05, right=0.97, bottom=0.12, top=0.8, wspace=0.25)
     axes = figure.subplots(1, len(panels), squeeze=False)[0]
     scatter = None
     for ax, panel in zip(axes, panels, strict=True):
@@ -123,12 +138,13 @@ def deviation_heatmap(
                     screen[np.asarray(faces)], facecolors="0.85", edgecolors="none", zorder=0
                 )
             )
-        screen_points = np.asarray(panel.points) @ projection.T
+        shown = scatter_subset(len(panel.points))
+        screen_points = np.asarray(panel.points)[shown] @ projection.T
         order = np.argsort(screen_points[:, 2])
         scatter = ax.scatter(
             screen_points[order, 0] * 1e3,
             screen_points[order, 1] * 1e3,
-            c=np.asarray(panel.distances_m)[order] * 1e3,
+            c=np.asarray(panel.distances_m)[shown][order] * 1e3,
             cmap=DEVIATION_CMAP,
             vmin=0.0,
             vmax=max_deviation_m * 1e3,

@@ -204,13 +204,22 @@ class PluginManager:
 
     def load_entry_points(self, group: str = ENTRY_POINT_GROUP) -> None:
         """Load every entry point of ``group``; a failing import is reported by name."""
-        for entry_point in sorted(importlib.metadata.entry_points(group=group), key=_ep_key):
+        # ``dist.metadata`` parses the METADATA file anew: read it once per distribution.
+        declared: dict[int, tuple[str, str]] = {}
+
+        def declared_by(entry_point: importlib.metadata.EntryPoint) -> tuple[str, str]:
             dist = entry_point.dist
-            origin = Origin(
-                plugin=entry_point.name,
-                distribution=dist.metadata["Name"] if dist else "<unknown>",
-                version=dist.version if dist else "",
-            )
+            if dist is None:
+                return ("<unknown>", "")
+            if id(dist) not in declared:
+                metadata = dist.metadata
+                declared[id(dist)] = (metadata["Name"], metadata["Version"])
+            return declared[id(dist)]
+
+        found = [(declared_by(ep), ep) for ep in importlib.metadata.entry_points(group=group)]
+        found.sort(key=lambda item: (item[0][0], item[1].name))
+        for (distribution, version), entry_point in found:
+            origin = Origin(plugin=entry_point.name, distribution=distribution, version=version)
             try:
                 plugin = entry_point.load()
             except Exception as exc:
@@ -243,11 +252,6 @@ class PluginManager:
                         f"{origin} failed in symfuse_register_stages: {_first_line(exc)}"
                     ) from exc
         return registry
-
-
-def _ep_key(entry_point: importlib.metadata.EntryPoint) -> tuple[str, str]:
-    dist = entry_point.dist
-    return (dist.metadata["Name"] if dist else "", entry_point.name)
 
 
 def load_registry() -> StageRegistry:

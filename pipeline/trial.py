@@ -225,10 +225,11 @@ def _simulate(
         report("sensing")
         with timer.phase("sensor"):
             observation = stages["sensor"].observe(world)
-        with timer.phase("write"):
-            if settings.pictures:
+        if settings.pictures:
+            with timer.phase("pictures"):
                 save_rgb(out_dir / "rgb.png", observation.rgb)
                 save_depth(out_dir / "depth.png", observation.depth_m)
+        with timer.phase("write"):
             np.save(out_dir / "depth.npy", observation.depth_m)
             write_json(out_dir / "camera.json", camera_to_json(observation))
         report("segmenting")

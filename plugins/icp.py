@@ -7,7 +7,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 from pipeline import hookimpl
-from pipeline.estimation.icp import IcpSettings, icp_fuse
 from pipeline.estimation.problem import estimate_result
 from pipeline.params import param, project
 from pipeline.types import EstimateResult, EstimationProblem
@@ -34,6 +33,8 @@ class IcpEstimator(IekfEstimator):
         last_stage: Literal[1, 2] = param(2, "1: bias + plane only; 2: also the points")
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
+        from pipeline.estimation.icp import IcpSettings, icp_fuse  # scipy.optimize
+
         started = time.perf_counter()
         fusion = self.fusion_problem(problem)
         p = self.params

@@ -151,3 +151,42 @@ def test_surface_samples_leave_out_the_face_the_object_stands_on():
     assert np.mean(points[:, 2] > 0.1 - 1e-9) == pytest.approx(1.0 / 5.0, abs=0.02)
     again = sample_surface(box.vertices, box.faces, 5000, seed=7)
     np.testing.assert_array_equal(points, again)
+
+
+def _tilted(mesh: trimesh.Trimesh, seed: int) -> trimesh.Trimesh:
+    """``mesh`` turned about a random axis and moved away from the origin."""
+    rng = np.random.default_rng(seed)
+    turn = trimesh.transformations.random_rotation_matrix(rng.random(3))
+    turn[:3, 3] = [0.6, -0.2, 0.1]
+    return mesh.copy().apply_transform(turn)
+
+
+@pytest.mark.parametrize(
+    "mesh",
+    [
+        _tilted(trimesh.creation.box(extents=(0.17, 0.146, 0.042)), 1),
+        _tilted(trimesh.creation.cylinder(radius=0.03, height=0.1, sections=48), 2),
+        _tilted(trimesh.creation.annulus(r_min=0.02, r_max=0.04, height=0.05), 3),
+    ],
+    ids=["box", "cylinder", "annulus"],
+)
+def test_solid_and_iou_match_the_per_cell_inside_test(mesh):
+    """The line-of-cells parity votes and the hull's column spans give the solid and the IoU
+    that testing every cell centre on its own (:func:`mesh_occupancy`) gives."""
+    solid = solid_grid(mesh.vertices, mesh.faces, max_cells=200_000)
+    shape = solid.inside.shape
+    axes = [solid.origin_m[i] + solid.pitch_m * np.arange(shape[i]) for i in range(3)]
+    centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    reference = mesh_occupancy(centres, mesh.vertices, mesh.faces).reshape(shape)
+    assert np.count_nonzero(solid.inside != reference) <= 1e-4 * reference.sum()
+    assert solid.volume_m3 == pytest.approx(mesh.volume, rel=0.02)
+
+    rng = np.random.default_rng(5)
+    model = sample_surface(mesh.vertices, mesh.faces, 3000, skip_support=False)
+    model += rng.normal(0.0, 0.004, model.shape) + np.array([0.01, 0.0, 0.005])
+    hull = trimesh.convex.convex_hull(model)
+    in_hull = mesh_occupancy(solid.cells, hull.vertices, hull.faces)
+    intersection = np.count_nonzero(in_hull) * solid.cell_volume_m3
+    expected = intersection / (hull.volume + solid.volume_m3 - intersection)
+    assert 0.2 < expected < 0.95
+    assert hull_iou(model, solid) == pytest.approx(expected, abs=1e-4)

@@ -1,5 +1,8 @@
 """Clustering and subsampling of point clouds (scipy k-d tree; no open3d).
 
+scipy is imported where it is used: :mod:`pipeline.perception` loads this module, and the
+plugins that import from that package must stay quick to import (``symfuse plugins``).
+
 ``dbscan_labels`` follows the usual DBSCAN definition (the same as open3d's
 ``cluster_dbscan``): a point is *core* when at least ``min_points`` points, itself
 included, lie within ``eps_m``; clusters are the connected components of core points
@@ -11,9 +14,6 @@ With ``min_points = 1`` it is plain Euclidean (single-linkage) clustering.
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 
 def dbscan_labels(points: np.ndarray, eps_m: float, min_points: int) -> np.ndarray:
@@ -24,6 +24,10 @@ def dbscan_labels(points: np.ndarray, eps_m: float, min_points: int) -> np.ndarr
         eps_m: neighbourhood radius.
         min_points: neighbours (self included) that make a point core.
     """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
     points = np.asarray(points, dtype=np.float64)
     n = len(points)
     labels = np.full(n, -1, dtype=np.int64)

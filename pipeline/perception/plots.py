@@ -34,13 +34,21 @@ def plot_cloud_with_plane(
 ) -> Path:
     """Top-down view (robot x, y in mm) of the cloud coloured by height, its mirror image in
     grey and the plane's trace on the table as a line."""
+    from pipeline.images import PNG_OPTIONS
+    from pipeline.plots import scatter_subset
+
     plt = _figure()
     mm = 1000.0
     mirrored = plane.mirror(points_robot)
+    shown = scatter_subset(len(points_robot))
     figure, axes = plt.subplots(figsize=(6, 6))
-    axes.scatter(mirrored[:, 0] * mm, mirrored[:, 1] * mm, s=1, c="0.75", label="mirrored")
+    figure.subplots_adjust(left=0.14, right=0.98, bottom=0.1, top=0.93)
+    axes.scatter(mirrored[shown, 0] * mm, mirrored[shown, 1] * mm, s=1, c="0.75", label="mirrored")
     scatter = axes.scatter(
-        points_robot[:, 0] * mm, points_robot[:, 1] * mm, s=1, c=points_robot[:, 2] * mm
+        points_robot[shown, 0] * mm,
+        points_robot[shown, 1] * mm,
+        s=1,
+        c=points_robot[shown, 2] * mm,
     )
     figure.colorbar(scatter, ax=axes, label="height z (mm)")
     both = np.concatenate([points_robot, mirrored])[:, :2]
@@ -50,7 +58,8 @@ def plot_cloud_with_plane(
     along = np.array([-normal[1], normal[0]])
     ends = foot + np.outer([-span, span], along)
     axes.plot(ends[:, 0] * mm, ends[:, 1] * mm, "r-", label="symmetry plane")
-    axes.set_aspect("equal")
+    # The axes keep their place and the data limits grow to equal scales (no tight crop).
+    axes.set_aspect("equal", adjustable="datalim")
     axes.set_xlabel("x (mm)")
     axes.set_ylabel("y (mm)")
     axes.set_title(
@@ -61,7 +70,7 @@ def plot_cloud_with_plane(
     # Below the axes, where it never hides points (the cloud may fill any corner).
     axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, markerscale=8)
     path = Path(path)
-    figure.savefig(path, dpi=120, bbox_inches="tight")
+    figure.savefig(path, dpi=120, pil_kwargs=PNG_OPTIONS)
     plt.close(figure)
     return path
 

@@ -35,7 +35,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from scipy import ndimage
 
 from pipeline.types import CameraIntrinsics
 
@@ -236,6 +235,8 @@ def discontinuity_mask(
         return np.zeros(np.shape(depth_m), dtype=bool)
     jump = _jumps(disparity_px(depth_m, focal_px, baseline_m), jump_px)
     if margin_px > 1:
+        from scipy import ndimage  # here, so the sensor plugins import quickly
+
         jump = ndimage.binary_dilation(jump, iterations=margin_px - 1)
     return jump & np.isfinite(depth_m)
 
@@ -270,6 +271,8 @@ def move_edges_laterally(
     disparity = disparity_px(depth_m, focal_px, baseline_m)
     reach_px = int(np.ceil(4.0 * sigma.max()))
     jumps = _jumps(disparity, jump_px).astype(np.uint8)
+    from scipy import ndimage
+
     near_edge = ndimage.maximum_filter(jumps, size=2 * reach_px + 1) > 0
     flat = np.flatnonzero(near_edge)
     offsets = rng.standard_normal((2, flat.size)) * sigma.reshape(-1)[flat]

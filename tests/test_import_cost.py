@@ -1,0 +1,48 @@
+"""The quick commands import only what they use: ``symfuse --help``, ``plugins`` and
+``config`` never load open3d, trimesh or matplotlib (each costs a good part of a second)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("open3d", "trimesh", "matplotlib", "plotly", "dash")
+
+
+def loaded_after(code: str, modules: tuple[str, ...]) -> list[str]:
+    """The ``modules`` a fresh interpreter has imported after running ``code``."""
+    probe = (
+        f"{code}\nimport json, sys\nprint(json.dumps([m for m in {modules!r} if m in sys.modules]))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_importing_the_cli_loads_no_heavy_library():
+    assert loaded_after("import pipeline.cli", (*HEAVY, "scipy")) == []
+
+
+def test_building_the_parser_loads_no_heavy_library():
+    code = "from pipeline.cli import build_parser\nbuild_parser().format_help()"
+    assert loaded_after(code, (*HEAVY, "scipy")) == []
+
+
+@pytest.mark.parametrize("verb", ["plugins", "config"])
+def test_listing_plugins_and_config_loads_no_heavy_library(verb):
+    code = (
+        "import contextlib, io\nfrom pipeline.cli import main\n"
+        f"with contextlib.redirect_stdout(io.StringIO()):\n    assert main([{verb!r}]) == 0"
+    )
+    assert loaded_after(code, HEAVY) == []
+
+
+def test_the_completion_plugins_modules_load_no_scipy():
+    """Perception and the simulated sensors defer scipy to the functions that use it."""
+    code = "import pipeline.completion, pipeline.perception, plugins.pybullet_kinect, plugins.vc"
+    assert loaded_after(code, ("scipy", *HEAVY)) == []
