@@ -644,6 +644,8 @@ def hull_iou(points: np.ndarray, solid: SolidGrid) -> float:
     running = solid.column_counts.reshape(nx * ny, nz + 1)[crossed]
     rows = np.arange(len(crossed))
     inside = np.maximum(running[rows, hi] - running[rows, lo], 0)
-    intersection = float(inside.sum()) * solid.cell_volume_m3
+    # The counted intersection can exceed the hull's exact volume by the grid's error (a
+    # hull hugging the solid); it can never exceed either volume.
+    intersection = min(float(inside.sum()) * solid.cell_volume_m3, hull.volume, solid.volume_m3)
     union = hull.volume + solid.volume_m3 - intersection
     return intersection / union if union > 0.0 else 0.0

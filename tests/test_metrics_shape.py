@@ -111,6 +111,16 @@ def test_iou_of_a_shifted_cube_is_overlap_over_union():
     assert hull_iou(cube.vertices, solid) == pytest.approx(1.0, abs=0.01)
 
 
+@pytest.mark.parametrize("extents", [(0.045, 0.171, 0.146), (0.03, 0.05, 0.2)])
+def test_iou_of_a_solid_with_its_own_hull_never_exceeds_one(extents):
+    """A box's hull is the box: its counted solid may exceed the hull's exact volume by the
+    grid's error, and the IoU must still be at most 1."""
+    box = trimesh.creation.box(extents=extents)
+    box.apply_transform(trimesh.transformations.rotation_matrix(0.3, [0.0, 0.0, 1.0]))
+    iou = hull_iou(box.vertices, solid_grid(box.vertices, box.faces))
+    assert 0.98 <= iou <= 1.0
+
+
 def test_iou_of_two_overlapping_spheres_is_the_lens_over_the_union():
     """Spheres of radius R with centres d apart overlap in a lens of volume
     pi (4R + d) (2R - d)^2 / 12."""
