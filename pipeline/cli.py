@@ -181,7 +181,8 @@ def _cmd_fuse(args: argparse.Namespace) -> int:
 
 # --- symfuse trial ---------------------------------------------------------------------
 
-#: The planner ``--gripper`` selects along with the hand.
+#: The planner ``--gripper`` selects along with the hand (``auto``: every planner for an
+#: available hand is asked, :mod:`pipeline.hand_choice`).
 PLANNER_FOR_GRIPPER = {"pg70": "top-parallel", "sdh": "top-three-finger"}
 
 
@@ -191,10 +192,9 @@ def trial_overrides(args: argparse.Namespace) -> list[str]:
     if args.object or args.mesh:
         overrides.append(f"trial.object={json.dumps(str(args.object or args.mesh))}")
     if args.gripper:
-        overrides += [
-            f"trial.gripper={args.gripper}",
-            f"planner.use={PLANNER_FOR_GRIPPER[args.gripper]}",
-        ]
+        overrides.append(f"trial.gripper={args.gripper}")
+        if args.gripper in PLANNER_FOR_GRIPPER:
+            overrides.append(f"planner.use={PLANNER_FOR_GRIPPER[args.gripper]}")
     if args.init:
         overrides.append(f"initialiser.use={args.init}")
     if args.seed is not None:
@@ -423,8 +423,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     trial.add_argument(
         "--gripper",
-        choices=sorted(PLANNER_FOR_GRIPPER),
-        help="hand; also selects its planner (pg70: top-parallel, sdh: top-three-finger)",
+        choices=["auto", *sorted(PLANNER_FOR_GRIPPER)],
+        help="hand; pg70 and sdh also select their planner (top-parallel, "
+        "top-three-finger); auto (the default): the hand with the best feasible grasp",
     )
     trial.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
     trial.add_argument("--seed", type=int, help="random seed of the trial")

@@ -25,11 +25,12 @@ the others, which is the motion the estimator's bias has to absorb. The true obj
 before and after are read from the simulator. Timestep ``timestep_s`` (default 1/240 s); a
 PG-70 grasp takes a few hundred steps.
 
-Each hand has its own defaults (:data:`HAND_GRASP_SETTINGS`). The SDH-2 closes guarded: its
-fingers stop on proximity (no force needed) and press together. A light object (0.3 kg on
-friction 0.5 resists 1.5 N; a 170 mm tall, 65 mm thick box tips at 0.7 N pushed near its
-top) is otherwise flicked tens of millimetres by the first finger's 3-4 N before the others
-arrive - far outside the bias the estimator can absorb.
+Both hands close guarded by default (:data:`HAND_GRASP_SETTINGS`): their fingers stop on
+proximity (no force needed) and press together. A light object (0.3 kg on friction 0.5
+resists 1.5 N; a 170 mm tall, 65 mm thick box tips at 0.7 N pushed near its top) is
+otherwise shoved or tipped by the first finger's force before the others arrive - the
+SDH-2's 3-4 N flick it tens of millimetres, far outside the bias the estimator can absorb;
+the PG-70's 40 N jaws push it to the middle between the pads.
 """
 
 from __future__ import annotations
@@ -86,7 +87,7 @@ class GraspSettings:
 
 #: Default settings per hand name (:func:`execute_grasp` falls back to ``GraspSettings()``).
 HAND_GRASP_SETTINGS: dict[str, GraspSettings] = {
-    "pg70": GraspSettings(),
+    "pg70": GraspSettings(min_contact_force_N=0.0, press_together=True),
     "sdh": GraspSettings(min_contact_force_N=0.0, press_together=True),
 }
 

@@ -1,0 +1,503 @@
+"""Ranked top-grasp candidates: closing directions and heights enumerated on the completed
+cloud, infeasible ones rejected, the rest scored.
+
+A candidate closes along a horizontal direction at an angle from the proposed symmetry
+plane's normal, with its pads' centres at a height. It is *feasible* when the hand can
+descend around the object without touching it (its opened fingers and palm clear every
+cloud point above the fingertips) and the fingertips stay above the table. Its score, in
+[0, 1], multiplies three factors:
+
+* *contact*: the smallest predicted pad coverage over the fingers (:func:`pad_coverage`):
+  each finger must meet the surface with its pad, so the grasp has contacts on opposing
+  sides - a pad over a rim, a cap or an edge covers little;
+* *alignment* ``(1 + |cos angle|) / 2``: closing along the plane normal puts contacts on
+  the visible front and the hidden back, which is what the estimator learns most from;
+* *stability* ``1 / (1 + w h / f)``: the contact height ``h`` above the table over the
+  object's half-footprint ``f`` along the closing direction is the lever of any residual
+  push of the fingers; lower grasps on a wider footprint tip less (``w``: the planner's
+  ``tipping_weight``).
+
+Parallel-jaw candidates are built by :func:`parallel_candidate`, SDH-2 candidates by
+:func:`sdh_candidate`; both return a :class:`Candidate`.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.ndimage import maximum_filter1d
+
+from ..sim.taxels import pad_grid
+from ..types import GraspCandidate, GraspPlan, PadLayout
+from . import sdh_geometry as sdh
+from .grasp_geometry import hand_pose
+
+
+@dataclass(frozen=True)
+class PadContact:
+    """Where a pad moving toward the surface stops and how much of it touches.
+
+    Attributes:
+        touch_m: position of the pad's flat surface along its motion when it stops (m).
+        coverage: fraction of its taxels within the tolerance of the surface then.
+        points: ``(K, 3)`` surface points under those taxels.
+    """
+
+    touch_m: float
+    coverage: float
+    points: np.ndarray
+
+
+@dataclass(frozen=True)
+class PadTaxels:
+    """A vertical pad's taxel grid as it moves horizontally (metres): ``col_u`` the
+    columns' offsets across the motion (evenly ``pitch_m`` apart), ``row_z`` the rows'
+    heights, ``row_recess`` how far each row lies behind the pad's flat surface (a tip
+    curving away from the object)."""
+
+    col_u: np.ndarray
+    row_z: np.ndarray
+    row_recess: np.ndarray
+    pitch_m: float
+
+
+def flat_pad_taxels(pad: PadLayout, centre_z_m: float) -> PadTaxels:
+    """A flat vertical pad, rows along z around ``centre_z_m``."""
+    positions, _ = pad_grid(pad.rows, pad.cols, pad.pitch_m)
+    grid = positions.reshape(pad.rows, pad.cols, 3)
+    return PadTaxels(grid[0, :, 1], centre_z_m - grid[:, 0, 0], np.zeros(pad.rows), pad.pitch_m)
+
+
+def sdh_distal_taxels(pad: PadLayout, centre_z_m: float) -> PadTaxels:
+    """An SDH-2 distal pad on a vertical distal link: rows along the link toward the tip
+    (down), the curved tip rows recessed behind the flat surface."""
+    positions, _ = pad_grid(
+        pad.rows, pad.cols, pad.pitch_m, sdh.DISTAL_PAD_CURVED_ROWS, sdh.DISTAL_PAD_CURVE_RADIUS_M
+    )
+    grid = positions.reshape(pad.rows, pad.cols, 3)
+    return PadTaxels(grid[0, :, 1], centre_z_m - grid[:, 0, 0], -grid[:, 0, 2], pad.pitch_m)
+
+
+def pad_coverage(
+    points_robot: np.ndarray,
+    origin_m: np.ndarray,
+    direction: np.ndarray,
+    taxels: PadTaxels,
+    tolerance_m: float,
+) -> PadContact | None:
+    """Predict a pad's contact with the surface sampled by ``points_robot``.
+
+    The pad moves along ``direction`` (horizontal unit); its columns are offset across the
+    motion from the line through ``origin_m``. Each taxel sees the points within half a
+    pitch of it across and in height; their median position along ``direction`` is the
+    surface in front of it (robust to depth noise). The pad stops when its first taxel
+    reaches the surface; the taxels whose surface is then within ``tolerance_m`` count as
+    touching.
+
+    Returns:
+        The contact, or None when no point lies in front of any taxel.
+    """
+    direction = np.asarray(direction, dtype=np.float64)
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    half = taxels.pitch_m / 2.0
+    z = points_robot[:, 2]
+    relative = points_robot - origin_m
+    u = relative @ lateral
+    near = (
+        (u >= taxels.col_u.min() - half)
+        & (u <= taxels.col_u.max() + half)
+        & (z >= taxels.row_z.min() - half)
+        & (z <= taxels.row_z.max() + half)
+    )
+    u, z, relative, kept = u[near], z[near], relative[near], points_robot[near]
+    cols = len(taxels.col_u)
+    col = np.clip(np.round((u - taxels.col_u[0]) / taxels.pitch_m).astype(int), 0, cols - 1)
+    order = np.argsort(taxels.row_z)
+    sorted_z = taxels.row_z[order]
+    row = order[np.searchsorted((sorted_z[1:] + sorted_z[:-1]) / 2.0, z)]
+    inside = np.abs(z - taxels.row_z[row]) <= half
+    if not np.any(inside):
+        return None
+    taxel = (row * cols + col)[inside]
+    depth, kept = (relative @ direction)[inside], kept[inside]
+    by_taxel = np.lexsort((depth, taxel))
+    taxel, depth, kept = taxel[by_taxel], depth[by_taxel], kept[by_taxel]
+    seen, first, counts = np.unique(taxel, return_index=True, return_counts=True)
+    surface = depth[first + counts // 2] + taxels.row_recess[seen // cols]
+    touch = float(surface.min())
+    touching = seen[surface <= touch + tolerance_m]
+    return PadContact(
+        touch_m=touch + float(origin_m @ direction),
+        coverage=len(touching) / (len(taxels.row_z) * cols),
+        points=kept[np.isin(taxel, touching)],
+    )
+
+
+def candidate_score(
+    coverages: tuple[float, ...], angle_rad: float, tipping_ratio: float, tipping_weight: float
+) -> float:
+    """The module docstring's score: contact x alignment x stability, in [0, 1]."""
+    alignment = (1.0 + abs(math.cos(angle_rad))) / 2.0
+    return min(coverages) * alignment / (1.0 + tipping_weight * tipping_ratio)
+
+
+def footprint_half_m(completed_robot: np.ndarray, direction: np.ndarray) -> float:
+    """Half the object's extent along ``direction`` (2nd to 98th percentile), m."""
+    low, high = np.percentile(completed_robot @ direction, [2.0, 98.0])
+    return max(float(high - low) / 2.0, 1e-3)
+
+
+def height_grid(low_m: float, high_m: float, step_m: float) -> np.ndarray:
+    """Pad-centre heights from ``high_m`` down to ``low_m`` (inclusive), ``step_m`` apart;
+    only ``low_m`` when the range is empty."""
+    if high_m <= low_m:
+        return np.array([low_m])
+    heights = high_m - step_m * np.arange(math.floor((high_m - low_m) / step_m + 1e-9) + 1)
+    return heights if heights[-1] <= low_m + 1e-9 else np.append(heights, low_m)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One evaluated grasp: its summary (:class:`GraspCandidate`) and, when feasible, the
+    plan's geometry.
+
+    Attributes:
+        summary: what the ranking records.
+        T_robot_hand: palm pose.
+        opening_m: opening to pre-shape to before the descent.
+        spread_rad: SDH base rotation (0 for a parallel gripper).
+        predicted_contacts: ``(K, 3)`` surface points the pads are expected to touch.
+    """
+
+    summary: GraspCandidate
+    T_robot_hand: np.ndarray = field(default_factory=lambda: np.eye(4))
+    opening_m: float = 0.0
+    spread_rad: float = 0.0
+    predicted_contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+
+def _rejected(angle_rad: float, height_m: float, spread_rad: float, reason: str) -> Candidate:
+    return Candidate(
+        GraspCandidate(
+            closing_angle_deg=math.degrees(angle_rad),
+            height_m=height_m,
+            spread_deg=math.degrees(spread_rad),
+            width_m=math.nan,
+            contact_coverage=(),
+            tipping_ratio=math.nan,
+            score=0.0,
+            feasible=False,
+            reason=reason,
+        )
+    )
+
+
+@dataclass(frozen=True)
+class CandidateSettings:
+    """What every candidate builder needs besides the geometry (metres)."""
+
+    table_height_m: float
+    table_clearance_m: float
+    descent_clearance_m: float
+    touch_tolerance_m: float
+    tipping_weight: float
+
+
+@dataclass(frozen=True)
+class ParallelHand:
+    """A parallel-jaw gripper's geometry (m) for :func:`parallel_candidate`."""
+
+    pad: PadLayout
+    aperture_m: float
+    palm_to_pad_centre_m: float
+    pad_centre_to_fingertip_m: float
+    jaw_half_width_m: float
+    housing_half_length_m: float
+    housing_half_width_m: float
+    housing_depth_m: float
+
+
+def parallel_candidate(
+    visible: np.ndarray,
+    completed: np.ndarray,
+    centre_m: np.ndarray,
+    direction: np.ndarray,
+    angle_rad: float,
+    height_m: float,
+    hand: ParallelHand,
+    settings: CandidateSettings,
+    *,
+    jaw_clearance_m: float,
+    back_margin_m: float,
+) -> Candidate:
+    """A parallel-jaw grasp closing along ``direction`` (front to back) through ``centre_m``
+    with the pad centres at ``height_m``.
+
+    Both jaws descend clear of every point above the fingertips between their paths: the
+    front jaw ``jaw_clearance_m`` before the visible surface there, or less (down to
+    ``settings.descent_clearance_m``) when the object leaves less room in the aperture; the
+    back jaw at least that plus ``back_margin_m`` behind the completed back, whose position
+    is only the mirror plane's guess. The housing must pass above the object's top.
+    """
+    s = settings
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    fingertip_z = height_m - hand.pad_centre_to_fingertip_m
+    if fingertip_z < s.table_height_m + s.table_clearance_m:
+        return _rejected(angle_rad, height_m, 0.0, "fingertips below the table clearance")
+
+    def column(points: np.ndarray) -> np.ndarray:
+        across = np.abs((points - centre_m) @ lateral)
+        return points[(across <= hand.jaw_half_width_m) & (points[:, 2] >= fingertip_z)]
+
+    front_points, all_points = column(visible), column(completed)
+    if len(front_points) == 0:
+        return _rejected(angle_rad, height_m, 0.0, "no visible surface between the jaws")
+    front = float(np.percentile(front_points @ direction, 2.0))
+    back = float(np.percentile(all_points @ direction, 98.0))
+    width = back - front
+    room = hand.aperture_m - width - back_margin_m
+    if room < 2.0 * s.descent_clearance_m:
+        return _rejected(
+            angle_rad,
+            height_m,
+            0.0,
+            f"{width * 1e3:.0f} mm wide between the jaws' paths, aperture "
+            f"{hand.aperture_m * 1e3:.0f} mm",
+        )
+    front_pad = front - min(jaw_clearance_m, room / 2.0)
+    middle = front_pad + hand.aperture_m / 2.0
+    position = centre_m + (middle - centre_m @ direction) * direction
+    position[2] = height_m + hand.palm_to_pad_centre_m
+    housing_bottom = position[2] - hand.housing_depth_m
+    offset = completed - position
+    under_housing = (
+        (np.abs(offset @ direction) <= hand.housing_half_length_m + s.descent_clearance_m)
+        & (np.abs(offset @ lateral) <= hand.housing_half_width_m + s.descent_clearance_m)
+        & (completed[:, 2] >= housing_bottom - s.descent_clearance_m)
+    )
+    if np.any(under_housing):
+        return _rejected(angle_rad, height_m, 0.0, "the housing would hit the object's top")
+
+    contacts = []
+    taxels = flat_pad_taxels(hand.pad, height_m)
+    for points, sign in ((visible, 1.0), (completed, -1.0)):
+        contact = pad_coverage(points, position, sign * direction, taxels, s.touch_tolerance_m)
+        if contact is None:
+            side = "front" if sign > 0 else "back"
+            return _rejected(angle_rad, height_m, 0.0, f"no surface before the {side} pad")
+        contacts.append(contact)
+    coverages = tuple(c.coverage for c in contacts)
+    tipping = (height_m - s.table_height_m) / footprint_half_m(completed, direction)
+    return Candidate(
+        GraspCandidate(
+            closing_angle_deg=math.degrees(angle_rad),
+            height_m=height_m,
+            spread_deg=0.0,
+            width_m=width,
+            contact_coverage=coverages,
+            tipping_ratio=tipping,
+            score=candidate_score(coverages, angle_rad, tipping, s.tipping_weight),
+            feasible=True,
+        ),
+        T_robot_hand=hand_pose(position, direction),
+        opening_m=hand.aperture_m,
+        predicted_contacts=contacts[0].points,
+    )
+
+
+#: SDH-2 pre-shapes: base rotation -> where the object's centre sits on the palm's x axis
+#: (m): at 60 deg the fingers face the palm axis; at 0 fingers 1 and 2 face the thumb and
+#: the object sits midway between the thumb's base and theirs.
+SDH_SPREADS = {
+    math.radians(60.0): 0.0,
+    0.0: (sdh.FINGER_BASES_M[0, 0] + sdh.FINGER_BASES_M[2, 0]) / 2.0,
+}
+#: Steps of the pre-shape search: proximal angles tried below the contact angle (rad).
+_OPEN_STEP_RAD = math.radians(3.0)
+
+
+def sdh_candidate(
+    completed: np.ndarray,
+    centre_m: np.ndarray,
+    direction: np.ndarray,
+    angle_rad: float,
+    height_m: float,
+    spread_rad: float,
+    pad: PadLayout,
+    aperture_m: float,
+    settings: CandidateSettings,
+) -> Candidate:
+    """An SDH-2 grasp at base rotation ``spread_rad`` (a key of :data:`SDH_SPREADS`), the
+    palm's x axis along ``direction`` (thumb on the front side), distal pad centres at
+    ``height_m``.
+
+    Each finger's contact angle is the proximal angle at which its distal pad (distal link
+    parallel to the palm axis) touches the completed cloud (:func:`pad_coverage`); the palm
+    height puts the pads' centres at ``height_m`` at those angles. The pre-shape is the
+    most closed common proximal angle, at least 3 deg before the earliest contact, at which
+    every finger, the knuckles and the palm descend clear of the cloud
+    (:func:`sdh_geometry.finger_profile`); ``opening_m`` is that pre-shape's opening.
+    """
+    s = settings
+    x_hand = np.array([direction[0], direction[1], 0.0])
+    y_hand = np.array([direction[1], -direction[0], 0.0])
+    palm_xy = centre_m - SDH_SPREADS[spread_rad] * x_hand
+    rotation = np.column_stack([x_hand[:2], y_hand[:2]])
+    bases = palm_xy[:2] + sdh.FINGER_BASES_M @ rotation.T
+    facings = sdh.finger_facings(spread_rad) @ rotation.T
+    contacts, alphas = [], []
+    taxels = sdh_distal_taxels(pad, height_m)
+    for finger, base, facing in zip(sdh.FINGERS, bases, facings, strict=True):
+        origin = np.array([base[0], base[1], 0.0])
+        contact = pad_coverage(
+            completed, origin, np.array([facing[0], facing[1], 0.0]), taxels, s.touch_tolerance_m
+        )
+        if contact is None:
+            return _rejected(angle_rad, height_m, spread_rad, f"{finger} meets no surface")
+        alpha = float(sdh.alpha_for_reach(contact.touch_m - origin @ np.append(facing, 0.0)))
+        if not abs(alpha) < sdh.JOINT_LIMIT_RAD:
+            return _rejected(angle_rad, height_m, spread_rad, f"{finger} cannot reach the surface")
+        contacts.append(contact)
+        alphas.append(alpha)
+    palm_z = height_m + float(np.mean(sdh.distal_pad_depth_m(np.array(alphas))))
+    depth_below_palm = palm_z - completed[:, 2]
+    radial = np.hypot(*(completed[:, :2] - palm_xy[:2]).T)
+    palm_hit = (radial <= sdh.PALM_RADIUS_M + s.descent_clearance_m) & (
+        depth_below_palm <= sdh.BASE_DEPTH_M + s.descent_clearance_m
+    )
+    if np.any(palm_hit):
+        return _rejected(angle_rad, height_m, spread_rad, "the palm would hit the object's top")
+    open_alpha = _clear_preshape(completed, bases, facings, depth_below_palm, min(alphas), s)
+    if open_alpha is None:
+        return _rejected(
+            angle_rad, height_m, spread_rad, "the fingers cannot open around the object"
+        )
+    opening = sdh.opening_for_alpha(open_alpha)
+    if opening > aperture_m + 1e-9:
+        return _rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
+    # Closing from the pre-shape, the fingertips are lowest where the proximal links pass
+    # closest to vertical.
+    steepest = 0.0 if open_alpha <= 0.0 <= max(alphas) else min(abs(open_alpha), abs(max(alphas)))
+    lowest_tip = palm_z - (
+        sdh.KNUCKLE_DEPTH_M + sdh.PROXIMAL_LENGTH_M * math.cos(steepest) + sdh.DISTAL_LENGTH_M
+    )
+    if lowest_tip < s.table_height_m + s.table_clearance_m:
+        return _rejected(angle_rad, height_m, spread_rad, "fingertips below the table clearance")
+    coverages = tuple(c.coverage for c in contacts)
+    tipping = (height_m - s.table_height_m) / footprint_half_m(completed, x_hand)
+    in_band = np.abs(completed[:, 2] - height_m) <= pad.rows * pad.pitch_m / 2.0
+    width = float(np.ptp(completed[in_band] @ x_hand)) if np.any(in_band) else math.nan
+    position = np.array([palm_xy[0], palm_xy[1], palm_z])
+    order = (2, 0, 1)  # thumb, finger 1, finger 2
+    return Candidate(
+        GraspCandidate(
+            closing_angle_deg=math.degrees(angle_rad),
+            height_m=height_m,
+            spread_deg=math.degrees(spread_rad),
+            width_m=width,
+            contact_coverage=tuple(coverages[i] for i in order),
+            tipping_ratio=tipping,
+            score=candidate_score(coverages, angle_rad, tipping, s.tipping_weight),
+            feasible=True,
+        ),
+        T_robot_hand=hand_pose(position, x_hand),
+        opening_m=opening,
+        spread_rad=spread_rad,
+        predicted_contacts=np.concatenate([contacts[i].points for i in order]),
+    )
+
+
+def _clear_preshape(
+    completed: np.ndarray,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    depth_below_palm: np.ndarray,
+    contact_alpha: float,
+    s: CandidateSettings,
+) -> float | None:
+    """The most closed proximal angle on a 3-deg grid, at least 3 deg before
+    ``contact_alpha``, at which every finger descends clear of the cloud; None when none
+    does."""
+    corridors = []
+    for base, facing in zip(bases, facings, strict=True):
+        relative = completed[:, :2] - base
+        across = np.abs(relative @ np.array([-facing[1], facing[0]]))
+        near = across <= sdh.FINGER_HALF_WIDTH_M + s.descent_clearance_m
+        corridors.append((relative[near] @ facing, depth_below_palm[near]))
+    step = math.floor((contact_alpha - _OPEN_STEP_RAD) / _OPEN_STEP_RAD)
+    while step * _OPEN_STEP_RAD > -sdh.JOINT_LIMIT_RAD:
+        grid, reach = _swept_profile(step, s.descent_clearance_m)
+        clear = True
+        for t, d in corridors:
+            index = np.round((t - grid[0]) / _PROFILE_STEP_M).astype(int)
+            inside = (index >= 0) & (index < len(grid))
+            if np.any(d[inside] <= reach[index[inside]]):
+                clear = False
+                break
+        if clear:
+            return step * _OPEN_STEP_RAD
+        step -= 1
+    return None
+
+
+#: Resolution of the finger profiles the pre-shape search compares the cloud with (m).
+_PROFILE_STEP_M = 0.001
+
+
+@functools.lru_cache(maxsize=256)
+def _swept_profile(step: int, clearance_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The finger profile at proximal angle ``step`` x 3 deg, grown by ``clearance_m`` in
+    both directions."""
+    grid, depth = sdh.finger_profile(step * _OPEN_STEP_RAD, _PROFILE_STEP_M)
+    width = 2 * math.ceil(clearance_m / _PROFILE_STEP_M) + 1
+    return grid, maximum_filter1d(depth, width) + clearance_m
+
+
+def closing_angles(step_deg: float) -> np.ndarray:
+    """Closing angles from the plane normal (rad): 0, then outward either side in
+    ``step_deg`` steps, up to 90 deg (a closing line and its reverse are one grasp)."""
+    side = np.arange(step_deg, 90.0 + 1e-9, step_deg)
+    angles = [0.0, *(a for pair in zip(side, -side, strict=True) for a in pair)]
+    if side.size and abs(side[-1] - 90.0) < 1e-9:
+        angles.pop()  # -90 deg is the same line as +90 deg
+    return np.radians(angles)
+
+
+def plan_from_candidates(
+    gripper: str, candidates: list[Candidate], pregrasp_height_m: float, aperture_m: float
+) -> GraspPlan:
+    """The best feasible candidate as a plan, with every candidate ranked; refused (with
+    the most common reason) when none is feasible."""
+    ranked = sorted(candidates, key=lambda c: (not c.summary.feasible, -c.summary.score))
+    summaries = tuple(c.summary for c in ranked)
+    best = ranked[0]
+    if not best.summary.feasible:
+        reasons = Counter(c.summary.reason for c in ranked)
+        reason, count = reasons.most_common(1)[0]
+        return GraspPlan(
+            gripper=gripper,
+            status="refused",
+            T_robot_hand=best.T_robot_hand,
+            pregrasp_height_m=pregrasp_height_m,
+            opening_m=aperture_m,
+            closing_direction=best.T_robot_hand[:3, 0].copy(),
+            reason=f"none of {len(ranked)} grasps is feasible ({count} of them: {reason})",
+            score=0.0,
+            candidates=summaries,
+        )
+    return GraspPlan(
+        gripper=gripper,
+        status="ok",
+        T_robot_hand=best.T_robot_hand,
+        pregrasp_height_m=pregrasp_height_m,
+        opening_m=best.opening_m,
+        closing_direction=best.T_robot_hand[:3, 0].copy(),
+        predicted_contacts=best.predicted_contacts,
+        spread_rad=best.spread_rad,
+        score=best.summary.score,
+        candidates=summaries,
+    )
