@@ -220,8 +220,9 @@ class GraspCandidate:
         height_m: height of the pad centres above the table the planner assumed.
         spread_deg: SDH base rotation (0 for a parallel gripper).
         width_m: the object's width along the closing direction there (m).
-        contact_coverage: predicted fraction of each finger's pad touching the surface
-            (front/thumb first).
+        contact_coverage: predicted contact quality of each finger's pad (front/thumb
+            first): the fraction of its taxels touching the surface times the squared
+            cosine of the surface's inclination to the pad.
         tipping_ratio: contact height over the object's half-footprint along the closing
             direction.
         score: in [0, 1], higher is better; 0 when infeasible.

@@ -14,6 +14,7 @@ from pipeline.perception.grasp_candidates import (
     SDH_SPREADS,
     CandidateSettings,
     closing_angles,
+    covering_plane,
     height_grid,
     plan_from_candidates,
     sdh_candidate,
@@ -192,7 +193,7 @@ class TopThreeFinger(GraspPlanner):
     def _ranked(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params
         points = cloud.points
-        completed = np.concatenate([points, proposal.plane.mirror(points)])
+        completed = np.concatenate([points, covering_plane(points, proposal.plane).mirror(points)])
         pad = next(pad for pad in gripper.pads if pad.name.endswith("distal"))
         pad_length = pad.rows * pad.pitch_m
         table = float(points[:, 2].min()) - p.cloud_base_above_table_m
@@ -200,9 +201,7 @@ class TopThreeFinger(GraspPlanner):
         lowest = table + p.table_clearance_m + p.pad_centre_to_fingertip_m
         if p.keep_above_cloud:
             lowest = max(lowest, float(z_bottom) + pad_length / 2)
-        heights = height_grid(
-            lowest, float(z_top) - p.top_margin_m - pad_length / 2, p.height_step_m
-        )
+        heights = height_grid(lowest, float(z_top) - p.top_margin_m, p.height_step_m)
         settings = CandidateSettings(
             table_height_m=table,
             table_clearance_m=p.table_clearance_m,

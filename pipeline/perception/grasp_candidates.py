@@ -7,9 +7,10 @@ descend around the object without touching it (its opened fingers and palm clear
 cloud point above the fingertips) and the fingertips stay above the table. Its score, in
 [0, 1], multiplies three factors:
 
-* *contact*: the smallest predicted pad coverage over the fingers (:func:`pad_coverage`):
-  each finger must meet the surface with its pad, so the grasp has contacts on opposing
-  sides - a pad over a rim, a cap or an edge covers little;
+* *contact*: the smallest predicted pad contact quality over the fingers
+  (:attr:`PadContact.quality`, from :func:`pad_coverage`): each finger must meet the
+  surface squarely with its pad, so the grasp has contacts on opposing sides - a pad over
+  a rim, a cap or an edge covers little, a pad grazing a curved side meets it inclined;
 * *alignment* ``(1 + |cos angle|) / 2``: closing along the plane normal puts contacts on
   the visible front and the hidden back, which is what the estimator learns most from;
 * *stability* ``1 / (1 + w h / f)``: the contact height ``h`` above the table over the
@@ -32,9 +33,9 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d
 
 from ..sim.taxels import pad_grid
-from ..types import GraspCandidate, GraspPlan, PadLayout
+from ..types import GraspCandidate, GraspPlan, PadLayout, SymmetryPlane
 from . import sdh_geometry as sdh
-from .grasp_geometry import hand_pose
+from .grasp_geometry import front_to_back, hand_pose
 
 
 @dataclass(frozen=True)
@@ -45,11 +46,27 @@ class PadContact:
         touch_m: position of the pad's flat surface along its motion when it stops (m).
         coverage: fraction of its taxels within the tolerance of the surface then.
         points: ``(K, 3)`` surface points under those taxels.
+        inclination_rad: angle between the surface's normal there and the pad's.
     """
 
     touch_m: float
     coverage: float
     points: np.ndarray
+    inclination_rad: float = 0.0
+
+    @property
+    def quality(self) -> float:
+        """Coverage times ``cos^2`` of the inclination: an inclined surface takes the pad's
+        force partly along itself, and the pad slides off it."""
+        return self.coverage * math.cos(self.inclination_rad) ** 2
+
+
+#: Fewest cloud points inside a part of the hand that make a collision: fewer are taken
+#: for depth noise and mixed pixels at the object's silhouette (about 2 mm apart, a real
+#: overlap of 5 x 5 mm holds more).
+_MIN_HITS = 8
+#: Percentile of the taxels' surface positions where a pad is taken to stop.
+_TOUCH_PERCENTILE = 10.0
 
 
 @dataclass(frozen=True)
@@ -94,9 +111,10 @@ def pad_coverage(
     The pad moves along ``direction`` (horizontal unit); its columns are offset across the
     motion from the line through ``origin_m``. Each taxel sees the points within half a
     pitch of it across and in height; their median position along ``direction`` is the
-    surface in front of it (robust to depth noise). The pad stops when its first taxel
-    reaches the surface; the taxels whose surface is then within ``tolerance_m`` count as
-    touching.
+    surface in front of it. The pad stops when its first taxels reach the surface (the
+    10th percentile of the taxels' surfaces: the nearest single one would be the one whose
+    few points happen to be noisiest); the taxels whose surface is then within
+    ``tolerance_m`` count as touching.
 
     Returns:
         The contact, or None when no point lies in front of any taxel.
@@ -128,13 +146,46 @@ def pad_coverage(
     taxel, depth, kept = taxel[by_taxel], depth[by_taxel], kept[by_taxel]
     seen, first, counts = np.unique(taxel, return_index=True, return_counts=True)
     surface = depth[first + counts // 2] + taxels.row_recess[seen // cols]
-    touch = float(surface.min())
+    # The first touch, robust to the depth noise of the few points behind each taxel.
+    touch = float(np.percentile(surface, _TOUCH_PERCENTILE))
     touching = seen[surface <= touch + tolerance_m]
     return PadContact(
         touch_m=touch + float(origin_m @ direction),
         coverage=len(touching) / (len(taxels.row_z) * cols),
         points=kept[np.isin(taxel, touching)],
+        inclination_rad=_inclination(
+            taxels.col_u[seen % cols], taxels.row_z[seen // cols], surface, touch, tolerance_m
+        ),
     )
+
+
+def _inclination(
+    u: np.ndarray, z: np.ndarray, surface: np.ndarray, touch: float, tolerance_m: float
+) -> float:
+    """Angle between the pad's normal and the surface's, from a plane
+    ``surface = a + b u + c z`` fitted over the taxels whose surface lies within three
+    tolerances of the touch (too few of them, or a degenerate layout: 0)."""
+    near = surface <= touch + 3.0 * tolerance_m
+    design = np.column_stack([np.ones(np.count_nonzero(near)), u[near], z[near]])
+    if len(design) < 4 or np.linalg.matrix_rank(design) < 3:
+        return 0.0
+    _, b, c = np.linalg.lstsq(design, surface[near], rcond=None)[0]
+    return float(np.arctan(np.hypot(b, c)))
+
+
+def covering_plane(points_robot: np.ndarray, plane: SymmetryPlane) -> SymmetryPlane:
+    """``plane`` moved back along its normal, if needed, so that the cloud mirrored through
+    it reaches the farthest visible point: at least midway between the nearest and the
+    farthest visible points along the normal (1st and 99th percentiles), seen from the
+    visible side. A plane through the cloud's centroid (PCA) lies too close to the camera
+    when the view also sees the object's top reaching far back; the completed object then
+    ends before a top it must hold up."""
+    normal = plane.normal
+    along = points_robot @ normal
+    middle = float(np.mean(np.percentile(along, [1.0, 99.0])))
+    backward = front_to_back(points_robot, normal) @ normal > 0.0
+    offset = max(plane.offset_m, middle) if backward else min(plane.offset_m, middle)
+    return SymmetryPlane(plane.theta_rad, offset)
 
 
 def candidate_score(
@@ -279,7 +330,7 @@ def parallel_candidate(
         & (np.abs(offset @ lateral) <= hand.housing_half_width_m + s.descent_clearance_m)
         & (completed[:, 2] >= housing_bottom - s.descent_clearance_m)
     )
-    if np.any(under_housing):
+    if np.count_nonzero(under_housing) >= _MIN_HITS:
         return _rejected(angle_rad, height_m, 0.0, "the housing would hit the object's top")
 
     contacts = []
@@ -290,7 +341,7 @@ def parallel_candidate(
             side = "front" if sign > 0 else "back"
             return _rejected(angle_rad, height_m, 0.0, f"no surface before the {side} pad")
         contacts.append(contact)
-    coverages = tuple(c.coverage for c in contacts)
+    coverages = tuple(c.quality for c in contacts)
     tipping = (height_m - s.table_height_m) / footprint_half_m(completed, direction)
     return Candidate(
         GraspCandidate(
@@ -340,36 +391,36 @@ def sdh_candidate(
     height puts the pads' centres at ``height_m`` at those angles. The pre-shape is the
     most closed common proximal angle, at least 3 deg before the earliest contact, at which
     every finger, the knuckles and the palm descend clear of the cloud
-    (:func:`sdh_geometry.finger_profile`); ``opening_m`` is that pre-shape's opening.
+    (:func:`sdh_geometry.finger_profile`); ``opening_m`` is that pre-shape's opening. From
+    there to its contact no finger's knuckle or proximal link may meet the cloud
+    (:func:`sdh_geometry.closing_hits`).
     """
     s = settings
     x_hand = np.array([direction[0], direction[1], 0.0])
     y_hand = np.array([direction[1], -direction[0], 0.0])
     palm_xy = centre_m - SDH_SPREADS[spread_rad] * x_hand
     rotation = np.column_stack([x_hand[:2], y_hand[:2]])
-    bases = palm_xy[:2] + sdh.FINGER_BASES_M @ rotation.T
     facings = sdh.finger_facings(spread_rad) @ rotation.T
-    contacts, alphas = [], []
     taxels = sdh_distal_taxels(pad, height_m)
-    for finger, base, facing in zip(sdh.FINGERS, bases, facings, strict=True):
-        origin = np.array([base[0], base[1], 0.0])
-        contact = pad_coverage(
-            completed, origin, np.array([facing[0], facing[1], 0.0]), taxels, s.touch_tolerance_m
-        )
-        if contact is None:
-            return _rejected(angle_rad, height_m, spread_rad, f"{finger} meets no surface")
-        alpha = float(sdh.alpha_for_reach(contact.touch_m - origin @ np.append(facing, 0.0)))
-        if not abs(alpha) < sdh.JOINT_LIMIT_RAD:
-            return _rejected(angle_rad, height_m, spread_rad, f"{finger} cannot reach the surface")
-        contacts.append(contact)
-        alphas.append(alpha)
+    # Fingers meet an object off the palm axis inclined, so the palm is moved once, onto
+    # the centre of the contacts predicted from the first guess.
+    for attempt in range(2):
+        bases = palm_xy[:2] + sdh.FINGER_BASES_M @ rotation.T
+        found = _finger_contacts(completed, bases, facings, taxels, s.touch_tolerance_m)
+        if isinstance(found, str):
+            return _rejected(angle_rad, height_m, spread_rad, found)
+        contacts, alphas = found
+        if attempt == 0:
+            palm_xy = _contact_centre(contacts, x_hand, y_hand, spread_rad) - (
+                SDH_SPREADS[spread_rad] * x_hand
+            )
     palm_z = height_m + float(np.mean(sdh.distal_pad_depth_m(np.array(alphas))))
     depth_below_palm = palm_z - completed[:, 2]
     radial = np.hypot(*(completed[:, :2] - palm_xy[:2]).T)
     palm_hit = (radial <= sdh.PALM_RADIUS_M + s.descent_clearance_m) & (
         depth_below_palm <= sdh.BASE_DEPTH_M + s.descent_clearance_m
     )
-    if np.any(palm_hit):
+    if np.count_nonzero(palm_hit) >= _MIN_HITS:
         return _rejected(angle_rad, height_m, spread_rad, "the palm would hit the object's top")
     open_alpha = _clear_preshape(completed, bases, facings, depth_below_palm, min(alphas), s)
     if open_alpha is None:
@@ -379,6 +430,10 @@ def sdh_candidate(
     opening = sdh.opening_for_alpha(open_alpha)
     if opening > aperture_m + 1e-9:
         return _rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
+    if _closing_collides(completed, bases, facings, depth_below_palm, open_alpha, alphas, s):
+        return _rejected(
+            angle_rad, height_m, spread_rad, "a finger would hit the object while closing"
+        )
     # Closing from the pre-shape, the fingertips are lowest where the proximal links pass
     # closest to vertical.
     steepest = 0.0 if open_alpha <= 0.0 <= max(alphas) else min(abs(open_alpha), abs(max(alphas)))
@@ -387,7 +442,7 @@ def sdh_candidate(
     )
     if lowest_tip < s.table_height_m + s.table_clearance_m:
         return _rejected(angle_rad, height_m, spread_rad, "fingertips below the table clearance")
-    coverages = tuple(c.coverage for c in contacts)
+    coverages = tuple(c.quality for c in contacts)
     tipping = (height_m - s.table_height_m) / footprint_half_m(completed, x_hand)
     in_band = np.abs(completed[:, 2] - height_m) <= pad.rows * pad.pitch_m / 2.0
     width = float(np.ptp(completed[in_band] @ x_hand)) if np.any(in_band) else math.nan
@@ -409,6 +464,52 @@ def sdh_candidate(
         spread_rad=spread_rad,
         predicted_contacts=np.concatenate([contacts[i].points for i in order]),
     )
+
+
+def _finger_contacts(
+    completed: np.ndarray,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    taxels: PadTaxels,
+    tolerance_m: float,
+) -> tuple[list[PadContact], list[float]] | str:
+    """Each finger's predicted distal pad contact and its proximal angle there, or why a
+    finger finds none."""
+    contacts, alphas = [], []
+    for finger, base, facing in zip(sdh.FINGERS, bases, facings, strict=True):
+        origin = np.array([base[0], base[1], 0.0])
+        direction = np.array([facing[0], facing[1], 0.0])
+        contact = pad_coverage(completed, origin, direction, taxels, tolerance_m)
+        if contact is None:
+            return f"{finger} meets no surface"
+        alpha = float(sdh.alpha_for_reach(contact.touch_m - origin @ direction))
+        if not abs(alpha) < sdh.JOINT_LIMIT_RAD:
+            return f"{finger} cannot reach the surface"
+        contacts.append(contact)
+        alphas.append(alpha)
+    return contacts, alphas
+
+
+def _contact_centre(
+    contacts: list[PadContact], x_hand: np.ndarray, y_hand: np.ndarray, spread_rad: float
+) -> np.ndarray:
+    """Where the object's centre lies among the fingers' predicted contacts (f1, f2,
+    thumb), robot xy with z 0: midway between the thumb's contact and the fingers' along
+    the palm's x axis, between finger 1's and finger 2's across it (spread 0), or the
+    circumcentre of the three contacts (fingers facing the palm axis)."""
+    points = np.array([c.points.mean(axis=0)[:2] for c in contacts])
+    if spread_rad == 0.0:
+        x = (points[:2].mean(axis=0) @ x_hand[:2] + points[2] @ x_hand[:2]) / 2.0
+        y = points[:2].mean(axis=0) @ y_hand[:2]
+        return np.append(x * x_hand[:2] + y * y_hand[:2], 0.0)
+    a, b, c = points
+    d = 2.0 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))
+    if abs(d) < 1e-9:
+        return np.append(points.mean(axis=0), 0.0)
+    norms = (a @ a, b @ b, c @ c)
+    ux = (norms[0] * (b[1] - c[1]) + norms[1] * (c[1] - a[1]) + norms[2] * (a[1] - b[1])) / d
+    uy = (norms[0] * (c[0] - b[0]) + norms[1] * (a[0] - c[0]) + norms[2] * (b[0] - a[0])) / d
+    return np.array([ux, uy, 0.0])
 
 
 def _clear_preshape(
@@ -435,13 +536,37 @@ def _clear_preshape(
         for t, d in corridors:
             index = np.round((t - grid[0]) / _PROFILE_STEP_M).astype(int)
             inside = (index >= 0) & (index < len(grid))
-            if np.any(d[inside] <= reach[index[inside]]):
+            if np.count_nonzero(d[inside] <= reach[index[inside]]) >= _MIN_HITS:
                 clear = False
                 break
         if clear:
             return step * _OPEN_STEP_RAD
         step -= 1
     return None
+
+
+def _closing_collides(
+    completed: np.ndarray,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    depth_below_palm: np.ndarray,
+    open_alpha: float,
+    contact_alphas: list[float],
+    s: CandidateSettings,
+) -> bool:
+    """Whether a finger meets the cloud other than with its distal pad on its way from the
+    pre-shape to its contact angle (checked every 3 deg and at the contact): on a tall
+    object a low grasp swings the proximal links into its upper part, and on a wide one
+    the fingertips come down on its top."""
+    for base, facing, contact in zip(bases, facings, contact_alphas, strict=True):
+        relative = completed[:, :2] - base
+        across = np.abs(relative @ np.array([-facing[1], facing[0]]))
+        near = across <= sdh.FINGER_HALF_WIDTH_M + s.touch_tolerance_m
+        t, d = relative[near] @ facing, depth_below_palm[near]
+        for alpha in [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]:
+            if np.count_nonzero(sdh.closing_hits(t, d, alpha, s.touch_tolerance_m)) >= _MIN_HITS:
+                return True
+    return False
 
 
 #: Resolution of the finger profiles the pre-shape search compares the cloud with (m).

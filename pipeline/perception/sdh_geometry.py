@@ -43,10 +43,14 @@ DISTAL_PAD_CURVED_ROWS = 9
 DISTAL_PAD_CURVE_RADIUS_M = 0.059
 #: Half the fingers' width across the facing (m) (29 mm links).
 FINGER_HALF_WIDTH_M = 0.0145
-#: Proximal link half-thickness along the facing (m) (28 mm).
-PROXIMAL_HALF_THICKNESS_M = 0.014
-#: Distal link's extent along the facing around its axis: back face, pad surface (m).
+#: Proximal link's extent across its axis: its back (28 mm thick link) and the surface of
+#: the pad on its front (m).
+PROXIMAL_BACK_M = -0.014
+PROXIMAL_PAD_OFFSET_M = 0.0154
+#: Distal link's extent along the facing around its axis: back face, the front of its body
+#: (in front of it a step carrying the pad, up to the pad surface) (m).
 DISTAL_BACK_M = -0.0172
+DISTAL_BODY_FRONT_M = 0.005
 #: Knuckle (base rotation housing) radius (m).
 KNUCKLE_RADIUS_M = 0.0145
 #: Palm housing: a cylinder of this radius down to the finger bases (m).
@@ -107,10 +111,10 @@ def finger_profile(alpha_rad: float, step_m: float = 0.001) -> tuple[np.ndarray,
     # Knuckle: a cylinder about the base's vertical axis, down to the proximal joint.
     t_knuckle = np.arange(-KNUCKLE_RADIUS_M, KNUCKLE_RADIUS_M + step_m / 2, step_m)
     knuckle = np.column_stack([t_knuckle, np.full_like(t_knuckle, KNUCKLE_DEPTH_M)])
-    # Proximal link: from the joint along (sin, cos) for its length, 28 mm thick.
+    # Proximal link with its pad: from the joint along (sin, cos) for its length.
     along, across = np.meshgrid(
         np.arange(0.0, PROXIMAL_LENGTH_M + step_m / 4, step_m / 2),
-        np.arange(-PROXIMAL_HALF_THICKNESS_M, PROXIMAL_HALF_THICKNESS_M + step_m / 4, step_m / 2),
+        np.arange(PROXIMAL_BACK_M, PROXIMAL_PAD_OFFSET_M + step_m / 4, step_m / 2),
     )
     proximal = np.column_stack(
         [
@@ -131,3 +135,36 @@ def finger_profile(alpha_rad: float, step_m: float = 0.001) -> tuple[np.ndarray,
     index = np.clip(np.round((samples[:, 0] - grid[0]) / step_m).astype(int), 0, len(grid) - 1)
     np.maximum.at(depth, index, samples[:, 1])
     return grid, depth
+
+
+def closing_hits(
+    t_m: np.ndarray, depth_m: np.ndarray, alpha_rad: float, clearance_m: float
+) -> np.ndarray:
+    """Which points, at distance ``t_m`` along a finger's facing from its base and
+    ``depth_m`` below the palm (both ``(N,)``, within the finger's width), lie inside the
+    finger at proximal angle ``alpha_rad`` (distal link parallel to the palm axis): inside
+    its knuckle, or its proximal link with pad, grown by ``clearance_m``, or inside its
+    distal link's body, grown by ``clearance_m`` except in front: the pad and the step
+    carrying it, where the finger is meant to touch, stand 10 mm in front of that body
+    already."""
+    knuckle = (np.abs(t_m) <= KNUCKLE_RADIUS_M + clearance_m) & (
+        (depth_m >= BASE_DEPTH_M - clearance_m) & (depth_m <= KNUCKLE_DEPTH_M + clearance_m)
+    )
+    s, c = math.sin(alpha_rad), math.cos(alpha_rad)
+    relative_d = depth_m - KNUCKLE_DEPTH_M
+    along = t_m * s + relative_d * c
+    across = t_m * c - relative_d * s
+    proximal = (
+        (along >= -clearance_m)
+        & (along <= PROXIMAL_LENGTH_M + clearance_m)
+        & (across >= PROXIMAL_BACK_M - clearance_m)
+        & (across <= PROXIMAL_PAD_OFFSET_M + clearance_m)
+    )
+    joint_t, joint_d = PROXIMAL_LENGTH_M * s, KNUCKLE_DEPTH_M + PROXIMAL_LENGTH_M * c
+    distal = (
+        (t_m >= joint_t + DISTAL_BACK_M - clearance_m)
+        & (t_m <= joint_t + DISTAL_BODY_FRONT_M)
+        & (depth_m >= joint_d - clearance_m)
+        & (depth_m <= joint_d + DISTAL_LENGTH_M + clearance_m)
+    )
+    return knuckle | proximal | distal

@@ -15,8 +15,9 @@ Sequence (:func:`execute_grasp`):
    normal force between its pads and the object - or it reaches its joint limit; a finger
    in contact stops, and its joint targets move ``FingerDrive.squeeze`` further in so that
    it presses with its force caps - at once, or, with ``press_together``, only once every
-   finger has stopped (a guarded close: a finger that arrives first waits at the surface
-   instead of pushing the object away from the others);
+   finger has stopped, and only when every finger is in contact (a guarded close: a
+   finger that arrives first waits at the surface instead of pushing the object away from
+   the others, and none presses when one closed on nothing);
 6. let everything settle for ``settle_s`` and report.
 
 The hand closes along the x axis of ``plan.T_robot_hand`` (``plan.closing_direction`` is
@@ -188,6 +189,9 @@ def _close(
                 stopped[i] = True
         if stopped.all():
             break
+    if s.press_together and not contact.all():
+        # A finger closed on nothing: pressing with the others would only shove the object.
+        contact[:] = 0.0
     hand.command(_finger_targets(hand, open_targets, closure, contact), s.force_fraction)
 
 
