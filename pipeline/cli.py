@@ -251,6 +251,11 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     record = run_trial(config, registry, out, report=lambda m: print(f"... {m}", flush=True))
     print(trial_summary(record))
+    grasp = record.document["grasp"]
+    print(
+        f"grasp: {record.document['hand']['reason']}; the object moved "
+        f"{grasp['object_shift_mm']:.1f} mm and tilted {grasp['object_tilt_deg']:.1f} deg"
+    )
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())
     print(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s")
     print(f"wrote {out}/ (result.json, clouds, contacts.json, pictures)")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
@@ -11,11 +10,10 @@ from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.params import param
 from pipeline.perception.grasp_candidates import (
-    CandidateSettings,
+    CandidateParams,
     ParallelHand,
+    candidate_frame,
     closing_angles,
-    covering_plane,
-    height_grid,
     parallel_candidate,
     plan_from_candidates,
 )
@@ -66,18 +64,13 @@ class TopParallel(GraspPlanner):
     name = "top-parallel"
 
     @dataclass(frozen=True)
-    class Params:
+    class Params(CandidateParams):
         tactile_angle_deg: float = param(
             0.0, "rotation of the closing direction from the plane normal about z (deg)"
         )
         jaw_clearance_m: float = param(0.01, "front pad distance before the visible surface (m)")
-        top_margin_m: float = param(0.005, "pad top edge below the object's top (m)")
-        table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
         pad_above_cloud: bool = param(
             True, "keep the pads' lower edge above the cloud's bottom (short objects)"
-        )
-        cloud_base_above_table_m: float = param(
-            0.02, "the table lies this far below the cloud's lowest point (m)"
         )
         palm_to_pad_centre_m: float = param(0.125, "palm origin to pad centre along z (m)")
         pad_centre_to_fingertip_m: float = param(0.029, "pad centre to fingertip along z (m)")
@@ -93,29 +86,9 @@ class TopParallel(GraspPlanner):
             0.001, "visible surface within this depth of the pad's first touch is touched (m)"
         )
         pregrasp_height_m: float = param(0.1, "start of the descent above the grasp pose (m)")
-        strategy: Literal["candidates", "paper"] = param(
-            "candidates",
-            "candidates: rank closing directions and heights; paper: close along the plane "
-            "normal at the top (the paper's reproductions)",
-        )
-        angle_step_deg: float = param(
-            15.0, "candidates: closing directions tried this far apart (deg)", above=0.0
-        )
-        height_step_m: float = param(
-            0.01, "candidates: pad heights tried this far apart (m)", above=0.0
-        )
-        descent_clearance_m: float = param(
-            0.004, "candidates: least gap between the descending hand and the cloud (m)"
-        )
         back_margin_m: float = param(
             0.01,
             "candidates: extra room for the back jaw behind the mirrored back, a guess (m)",
-        )
-        touch_tolerance_m: float = param(
-            0.003, "candidates: surface within this of the pad at its first touch counts (m)"
-        )
-        tipping_weight: float = param(
-            0.2, "candidates: weight of the contact height / half-footprint in the score"
         )
         housing_depth_m: float = param(0.078, "palm origin to the housing's bottom (m)")
         housing_length_m: float = param(0.112, "housing length along the closing direction (m)")
@@ -193,15 +166,15 @@ class TopParallel(GraspPlanner):
     def _ranked(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params
         points = cloud.points
-        completed = np.concatenate([points, covering_plane(points, proposal.plane).mirror(points)])
         pad = gripper.pads[0]
-        pad_length = pad.rows * pad.pitch_m
-        table = float(points[:, 2].min()) - p.cloud_base_above_table_m
-        z_bottom, z_top = np.percentile(points[:, 2], [2.0, 98.0])
-        lowest = table + p.table_clearance_m + p.pad_centre_to_fingertip_m
-        if p.pad_above_cloud:
-            lowest = max(lowest, float(z_bottom) + pad_length / 2)
-        heights = height_grid(lowest, float(z_top) - p.top_margin_m, p.height_step_m)
+        frame = candidate_frame(
+            points,
+            proposal.plane,
+            pad,
+            p,
+            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            keep_above_cloud=p.pad_above_cloud,
+        )
         hand = ParallelHand(
             pad=pad,
             aperture_m=gripper.max_aperture_m,
@@ -212,32 +185,23 @@ class TopParallel(GraspPlanner):
             housing_half_width_m=p.housing_width_m / 2,
             housing_depth_m=p.housing_depth_m,
         )
-        settings = CandidateSettings(
-            table_height_m=table,
-            table_clearance_m=p.table_clearance_m,
-            descent_clearance_m=p.descent_clearance_m,
-            touch_tolerance_m=p.touch_tolerance_m,
-            tipping_weight=p.tipping_weight,
-        )
-        centre = completed.mean(axis=0)
-        candidates = []
-        for angle in closing_angles(p.angle_step_deg):
-            direction = front_to_back(points, rotate_z(proposal.plane.normal, angle))
-            for height in heights:
-                candidates.append(
-                    parallel_candidate(
-                        points,
-                        completed,
-                        centre,
-                        direction,
-                        angle,
-                        height,
-                        hand,
-                        settings,
-                        jaw_clearance_m=p.jaw_clearance_m,
-                        back_margin_m=p.back_margin_m,
-                    )
-                )
+        centre = frame.completed.mean(axis=0)
+        candidates = [
+            parallel_candidate(
+                points,
+                frame.completed,
+                centre,
+                front_to_back(points, rotate_z(proposal.plane.normal, angle)),
+                angle,
+                height,
+                hand,
+                frame.settings,
+                jaw_clearance_m=p.jaw_clearance_m,
+                back_margin_m=p.back_margin_m,
+            )
+            for angle in closing_angles(p.angle_step_deg)
+            for height in frame.heights_m
+        ]
         return plan_from_candidates(
             gripper.name, candidates, p.pregrasp_height_m, gripper.max_aperture_m
         )

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
@@ -12,10 +11,9 @@ from pipeline.errors import ConfigError
 from pipeline.params import param
 from pipeline.perception.grasp_candidates import (
     SDH_SPREADS,
-    CandidateSettings,
+    CandidateParams,
+    candidate_frame,
     closing_angles,
-    covering_plane,
-    height_grid,
     plan_from_candidates,
     sdh_candidate,
 )
@@ -73,7 +71,7 @@ class TopThreeFinger(GraspPlanner):
     name = "top-three-finger"
 
     @dataclass(frozen=True)
-    class Params:
+    class Params(CandidateParams):
         tactile_angle_deg: float = param(
             0.0, "rotation of the palm x axis from the plane normal about z (deg)"
         )
@@ -88,10 +86,6 @@ class TopThreeFinger(GraspPlanner):
             0.015,
             "pad top edge below the object's top (m); 5 mm put the pads on lids and domed tops",
         )
-        table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
-        cloud_base_above_table_m: float = param(
-            0.02, "the table lies this far below the cloud's lowest point (m)"
-        )
         keep_above_cloud: bool = param(
             True,
             "raise the pads so their lower edge stays above the cloud's bottom: taxels below "
@@ -105,27 +99,10 @@ class TopThreeFinger(GraspPlanner):
             0.008, "depth of the first-touched surface layer, about 4 sigma of depth noise (m)"
         )
         pregrasp_height_m: float = param(0.1, "start of the descent above the grasp pose (m)")
-        strategy: Literal["candidates", "paper"] = param(
-            "candidates",
-            "candidates: rank pre-shaped grasps over directions and heights; paper: the "
-            "cylindrical grasp at the top at full opening (the paper's reproductions)",
-        )
-        angle_step_deg: float = param(
-            15.0, "candidates: palm directions tried this far apart (deg)", above=0.0
-        )
-        height_step_m: float = param(
-            0.01, "candidates: pad heights tried this far apart (m)", above=0.0
-        )
         descent_clearance_m: float = param(
             0.01,
             "candidates: least gap between the descending hand and the completed cloud, "
             "whose back is only the mirror plane's guess (m)",
-        )
-        touch_tolerance_m: float = param(
-            0.003, "candidates: surface within this of a pad at its first touch counts (m)"
-        )
-        tipping_weight: float = param(
-            0.2, "candidates: weight of the contact height / half-footprint in the score"
         )
 
     grippers = ("sdh",)
@@ -193,41 +170,33 @@ class TopThreeFinger(GraspPlanner):
     def _ranked(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params
         points = cloud.points
-        completed = np.concatenate([points, covering_plane(points, proposal.plane).mirror(points)])
         pad = next(pad for pad in gripper.pads if pad.name.endswith("distal"))
-        pad_length = pad.rows * pad.pitch_m
-        table = float(points[:, 2].min()) - p.cloud_base_above_table_m
-        z_bottom, z_top = np.percentile(completed[:, 2], [2.0, 98.0])
-        lowest = table + p.table_clearance_m + p.pad_centre_to_fingertip_m
-        if p.keep_above_cloud:
-            lowest = max(lowest, float(z_bottom) + pad_length / 2)
-        heights = height_grid(lowest, float(z_top) - p.top_margin_m, p.height_step_m)
-        settings = CandidateSettings(
-            table_height_m=table,
-            table_clearance_m=p.table_clearance_m,
-            descent_clearance_m=p.descent_clearance_m,
-            touch_tolerance_m=p.touch_tolerance_m,
-            tipping_weight=p.tipping_weight,
+        frame = candidate_frame(
+            points,
+            proposal.plane,
+            pad,
+            p,
+            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            keep_above_cloud=p.keep_above_cloud,
         )
-        centre = completed.mean(axis=0)
-        candidates = []
-        for spread in SDH_SPREADS:
-            for angle in closing_angles(p.angle_step_deg):
-                direction = front_to_back(points, rotate_z(proposal.plane.normal, angle))
-                for height in heights:
-                    candidates.append(
-                        sdh_candidate(
-                            completed,
-                            centre,
-                            direction,
-                            angle,
-                            height,
-                            spread,
-                            pad,
-                            gripper.max_aperture_m,
-                            settings,
-                        )
-                    )
+        centre = frame.completed.mean(axis=0)
+        candidates = [
+            sdh_candidate(
+                points,
+                frame.completed,
+                centre,
+                front_to_back(points, rotate_z(proposal.plane.normal, angle)),
+                angle,
+                height,
+                spread,
+                pad,
+                gripper.max_aperture_m,
+                frame.settings,
+            )
+            for spread in SDH_SPREADS
+            for angle in closing_angles(p.angle_step_deg)
+            for height in frame.heights_m
+        ]
         return plan_from_candidates(
             gripper.name, candidates, p.pregrasp_height_m, gripper.max_aperture_m
         )

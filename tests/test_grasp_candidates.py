@@ -160,7 +160,7 @@ def test_sdh_pre_shape_puts_the_pads_on_a_narrow_cylinder_at_the_chosen_height()
     plan = TopThreeFinger().plan(cloud, _true_plane(), GRIPPERS["sdh"])
     assert plan.status == "ok", plan.reason
     best = plan.candidates[0]
-    assert best.feasible and min(best.contact_coverage) > 0.2
+    assert best.feasible and min(best.contact_coverage) > 0.15
     # Pre-shaped around the object with the descent clearance, far from fully open.
     alpha_open = sdh.alpha_for_opening(plan.opening_m)
     assert 0.045 + 2 * 0.01 < plan.opening_m < 0.13

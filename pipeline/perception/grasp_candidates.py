@@ -28,10 +28,12 @@ import functools
 import math
 from collections import Counter
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from scipy.ndimage import maximum_filter1d
 
+from ..params import param
 from ..sim.taxels import pad_grid
 from ..types import GraspCandidate, GraspPlan, PadLayout, SymmetryPlane
 from . import sdh_geometry as sdh
@@ -65,8 +67,8 @@ class PadContact:
 #: for depth noise and mixed pixels at the object's silhouette (about 2 mm apart, a real
 #: overlap of 5 x 5 mm holds more).
 _MIN_HITS = 8
-#: Percentile of the taxels' surface positions where a pad is taken to stop.
-_TOUCH_PERCENTILE = 10.0
+#: Fewest taxel rows a pad must touch for its contact to be a side of the object.
+_MIN_CONTACT_ROWS = 3
 
 
 @dataclass(frozen=True)
@@ -111,13 +113,13 @@ def pad_coverage(
     The pad moves along ``direction`` (horizontal unit); its columns are offset across the
     motion from the line through ``origin_m``. Each taxel sees the points within half a
     pitch of it across and in height; their median position along ``direction`` is the
-    surface in front of it. The pad stops when its first taxels reach the surface (the
-    10th percentile of the taxels' surfaces: the nearest single one would be the one whose
-    few points happen to be noisiest); the taxels whose surface is then within
-    ``tolerance_m`` count as touching.
+    surface in front of it. The pad stops when its first taxel reaches the surface; the
+    taxels whose surface is then within ``tolerance_m`` count as touching.
 
     Returns:
-        The contact, or None when no point lies in front of any taxel.
+        The contact, or None when no point lies in front of any taxel or the touching
+        taxels span fewer than three rows (about 10 mm: the pad meets an edge or a
+        horizontal top, not a side).
     """
     direction = np.asarray(direction, dtype=np.float64)
     lateral = np.array([-direction[1], direction[0], 0.0])
@@ -146,9 +148,13 @@ def pad_coverage(
     taxel, depth, kept = taxel[by_taxel], depth[by_taxel], kept[by_taxel]
     seen, first, counts = np.unique(taxel, return_index=True, return_counts=True)
     surface = depth[first + counts // 2] + taxels.row_recess[seen // cols]
-    # The first touch, robust to the depth noise of the few points behind each taxel.
-    touch = float(np.percentile(surface, _TOUCH_PERCENTILE))
+    # The first touch: the nearest surface seen by at least two points (a single point may
+    # be a mixed pixel at the silhouette).
+    supported = counts >= 2
+    touch = float(surface[supported].min() if np.any(supported) else surface.min())
     touching = seen[surface <= touch + tolerance_m]
+    if len(np.unique(touching // cols)) < _MIN_CONTACT_ROWS:
+        return None  # an edge or a horizontal top, not a side
     return PadContact(
         touch_m=touch + float(origin_m @ direction),
         coverage=len(touching) / (len(taxels.row_z) * cols),
@@ -256,6 +262,84 @@ class CandidateSettings:
     descent_clearance_m: float
     touch_tolerance_m: float
     tipping_weight: float
+
+
+@dataclass(frozen=True)
+class CandidateParams:
+    """The parameters both shipped planners share for ranking candidates (each planner's
+    ``Params`` extends these)."""
+
+    strategy: Literal["candidates", "paper"] = param(
+        "candidates",
+        "candidates: rank closing directions, heights (and pre-shapes) on the cloud; "
+        "paper: the paper's single grasp at the top (its reproductions)",
+    )
+    angle_step_deg: float = param(
+        15.0, "candidates: closing directions tried this far apart (deg)", above=0.0
+    )
+    height_step_m: float = param(
+        0.01, "candidates: pad heights tried this far apart (m)", above=0.0
+    )
+    descent_clearance_m: float = param(
+        0.004, "candidates: least gap between the descending hand and the cloud (m)"
+    )
+    touch_tolerance_m: float = param(
+        0.003, "candidates: surface within this of a pad at its first touch counts (m)"
+    )
+    tipping_weight: float = param(
+        0.2, "candidates: weight of the contact height / half-footprint in the score"
+    )
+    top_margin_m: float = param(0.005, "pad top edge below the object's top (m)")
+    table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
+    cloud_base_above_table_m: float = param(
+        0.02, "the table lies this far below the cloud's lowest point (m)"
+    )
+
+
+@dataclass(frozen=True)
+class CandidateFrame:
+    """What a planner enumerates candidates on: the cloud completed by
+    :func:`covering_plane`, the pad heights to try and the settings."""
+
+    completed: np.ndarray
+    heights_m: np.ndarray
+    settings: CandidateSettings
+
+
+def candidate_frame(
+    points_robot: np.ndarray,
+    plane: SymmetryPlane,
+    pad: PadLayout,
+    params: CandidateParams,
+    *,
+    pad_centre_to_fingertip_m: float,
+    keep_above_cloud: bool,
+) -> CandidateFrame:
+    """The completed cloud, and pad-centre heights every ``params.height_step_m`` from the
+    lowest allowed - fingertips ``table_clearance_m`` above the table (taken
+    ``cloud_base_above_table_m`` below the cloud), and with ``keep_above_cloud`` the pad's
+    lower edge above the cloud's bottom - to ``top_margin_m`` below the cloud's top (the
+    pads may reach above a short object; their predicted contact says how much of them
+    touches)."""
+    completed = np.concatenate(
+        [points_robot, covering_plane(points_robot, plane).mirror(points_robot)]
+    )
+    table = float(points_robot[:, 2].min()) - params.cloud_base_above_table_m
+    z_bottom, z_top = np.percentile(completed[:, 2], [2.0, 98.0])
+    lowest = table + params.table_clearance_m + pad_centre_to_fingertip_m
+    if keep_above_cloud:
+        lowest = max(lowest, float(z_bottom) + pad.rows * pad.pitch_m / 2)
+    return CandidateFrame(
+        completed,
+        height_grid(lowest, float(z_top) - params.top_margin_m, params.height_step_m),
+        CandidateSettings(
+            table_height_m=table,
+            table_clearance_m=params.table_clearance_m,
+            descent_clearance_m=params.descent_clearance_m,
+            touch_tolerance_m=params.touch_tolerance_m,
+            tipping_weight=params.tipping_weight,
+        ),
+    )
 
 
 @dataclass(frozen=True)
@@ -372,6 +456,7 @@ _OPEN_STEP_RAD = math.radians(3.0)
 
 
 def sdh_candidate(
+    visible: np.ndarray,
     completed: np.ndarray,
     centre_m: np.ndarray,
     direction: np.ndarray,
@@ -387,7 +472,8 @@ def sdh_candidate(
     ``height_m``.
 
     Each finger's contact angle is the proximal angle at which its distal pad (distal link
-    parallel to the palm axis) touches the completed cloud (:func:`pad_coverage`); the palm
+    parallel to the palm axis) touches the ``completed`` cloud (``visible`` and mirrored)
+    (:func:`pad_coverage`); the palm
     height puts the pads' centres at ``height_m`` at those angles. The pre-shape is the
     most closed common proximal angle, at least 3 deg before the earliest contact, at which
     every finger, the knuckles and the palm descend clear of the cloud
@@ -430,9 +516,9 @@ def sdh_candidate(
     opening = sdh.opening_for_alpha(open_alpha)
     if opening > aperture_m + 1e-9:
         return _rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
-    if _closing_collides(completed, bases, facings, depth_below_palm, open_alpha, alphas, s):
+    if _closing_collides(visible, bases, facings, palm_z, open_alpha, alphas, s):
         return _rejected(
-            angle_rad, height_m, spread_rad, "a finger would hit the object while closing"
+            angle_rad, height_m, spread_rad, "a proximal link would hit the object while closing"
         )
     # Closing from the pre-shape, the fingertips are lowest where the proximal links pass
     # closest to vertical.
@@ -546,20 +632,22 @@ def _clear_preshape(
 
 
 def _closing_collides(
-    completed: np.ndarray,
+    visible: np.ndarray,
     bases: np.ndarray,
     facings: np.ndarray,
-    depth_below_palm: np.ndarray,
+    palm_z: float,
     open_alpha: float,
     contact_alphas: list[float],
     s: CandidateSettings,
 ) -> bool:
-    """Whether a finger meets the cloud other than with its distal pad on its way from the
-    pre-shape to its contact angle (checked every 3 deg and at the contact): on a tall
-    object a low grasp swings the proximal links into its upper part, and on a wide one
-    the fingertips come down on its top."""
+    """Whether a finger's knuckle or proximal link meets the visible cloud on its way from
+    the pre-shape to its contact angle (checked every 3 deg and at the contact): on a tall
+    object a low grasp swings the proximal links into its upper part. Only seen points
+    count: the mirrored ones are where the plane guesses the back, too uncertain to veto a
+    grasp on."""
+    depth_below_palm = palm_z - visible[:, 2]
     for base, facing, contact in zip(bases, facings, contact_alphas, strict=True):
-        relative = completed[:, :2] - base
+        relative = visible[:, :2] - base
         across = np.abs(relative @ np.array([-facing[1], facing[0]]))
         near = across <= sdh.FINGER_HALF_WIDTH_M + s.touch_tolerance_m
         t, d = relative[near] @ facing, depth_below_palm[near]

@@ -47,10 +47,8 @@ FINGER_HALF_WIDTH_M = 0.0145
 #: the pad on its front (m).
 PROXIMAL_BACK_M = -0.014
 PROXIMAL_PAD_OFFSET_M = 0.0154
-#: Distal link's extent along the facing around its axis: back face, the front of its body
-#: (in front of it a step carrying the pad, up to the pad surface) (m).
+#: Distal link's back face behind its axis, along the facing (m).
 DISTAL_BACK_M = -0.0172
-DISTAL_BODY_FRONT_M = 0.005
 #: Knuckle (base rotation housing) radius (m).
 KNUCKLE_RADIUS_M = 0.0145
 #: Palm housing: a cylinder of this radius down to the finger bases (m).
@@ -142,11 +140,9 @@ def closing_hits(
 ) -> np.ndarray:
     """Which points, at distance ``t_m`` along a finger's facing from its base and
     ``depth_m`` below the palm (both ``(N,)``, within the finger's width), lie inside the
-    finger at proximal angle ``alpha_rad`` (distal link parallel to the palm axis): inside
-    its knuckle, or its proximal link with pad, grown by ``clearance_m``, or inside its
-    distal link's body, grown by ``clearance_m`` except in front: the pad and the step
-    carrying it, where the finger is meant to touch, stand 10 mm in front of that body
-    already."""
+    finger's knuckle or proximal link with pad, grown by ``clearance_m``, at proximal angle
+    ``alpha_rad``. The distal link is left out: its pad is where the finger means to touch,
+    and its tip only ever moves toward the surface that pad meets."""
     knuckle = (np.abs(t_m) <= KNUCKLE_RADIUS_M + clearance_m) & (
         (depth_m >= BASE_DEPTH_M - clearance_m) & (depth_m <= KNUCKLE_DEPTH_M + clearance_m)
     )
@@ -160,11 +156,4 @@ def closing_hits(
         & (across >= PROXIMAL_BACK_M - clearance_m)
         & (across <= PROXIMAL_PAD_OFFSET_M + clearance_m)
     )
-    joint_t, joint_d = PROXIMAL_LENGTH_M * s, KNUCKLE_DEPTH_M + PROXIMAL_LENGTH_M * c
-    distal = (
-        (t_m >= joint_t + DISTAL_BACK_M - clearance_m)
-        & (t_m <= joint_t + DISTAL_BODY_FRONT_M)
-        & (depth_m >= joint_d - clearance_m)
-        & (depth_m <= joint_d + DISTAL_LENGTH_M + clearance_m)
-    )
-    return knuckle | proximal | distal
+    return knuckle | proximal
