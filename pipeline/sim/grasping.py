@@ -12,7 +12,8 @@ Sequence (:func:`execute_grasp`):
 5. close every finger at its own speed (position control with a force cap) until its pads
    report sufficient contact - at least ``min_contact_taxels`` taxels within
    ``contact_gap_m`` of the object (ray probes) and at least ``min_contact_force_N`` summed
-   normal force between its pads and the object - or it reaches its joint limit; a finger
+   normal force between its pads and the object - or any of its links presses on the
+   object with ``blocked_force_N``, or it reaches its joint limit; a finger
    in contact stops, and its joint targets move ``FingerDrive.squeeze`` further in so that
    it presses with its force caps - at once, or, with ``press_together``, only once every
    finger has stopped, and only when every finger is in contact (a guarded close: a
@@ -61,6 +62,9 @@ class GraspSettings:
         probe_behind_m: contact probe rays start this far behind the pad surface.
         min_contact_taxels: touching taxels a finger needs (over its pads) to stop closing.
         min_contact_force_N: summed pad-object normal force a finger needs to stop closing.
+        blocked_force_N: a finger also stops when this much normal force (summed over all
+            its links) presses it against the object: it met the object off its pads and
+            would only push it.
         check_every_steps: contact is checked every this many physics steps.
         max_close_s: closing gives up after this much simulated time.
         settle_s: simulated time the grasp is held before the final poses are read.
@@ -78,6 +82,7 @@ class GraspSettings:
     probe_behind_m: float = 0.0015
     min_contact_taxels: int = 2
     min_contact_force_N: float = 1.0
+    blocked_force_N: float = 2.0
     check_every_steps: int = 2
     max_close_s: float = 2.0
     settle_s: float = 0.15
@@ -175,12 +180,14 @@ def _close(
         frames, gaps = hand.taxel_gaps(object_id, s.probe_behind_m, s.contact_gap_m)
         touched_pads = frames.pads[gaps <= s.contact_gap_m]
         forces = hand.pad_contact_forces(object_id)
+        blocking = hand.finger_contact_forces(object_id)
         for i, finger in enumerate(fingers):
             if stopped[i]:
                 continue
             taxels = int(np.isin(touched_pads, finger.pads).sum())
             force = forces[[pad_row[p] for p in finger.pads]].sum()
-            if taxels >= s.min_contact_taxels and force >= s.min_contact_force_N:
+            touched = taxels >= s.min_contact_taxels and force >= s.min_contact_force_N
+            if touched or blocking[i] >= s.blocked_force_N:
                 stopped[i] = True
                 contact[i] = 1.0
                 if not s.press_together:

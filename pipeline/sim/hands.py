@@ -247,6 +247,13 @@ class Hand:
                 self._joint_limits[name] = (info[8], info[9])
                 self._joint_effort[name] = info[10]
         self._pad_links = [link_index[pad.layout.link] for pad in model.pads]
+        # Each finger's links: those named after it (f1_knuckle, f1_proximal_pad, left_jaw...).
+        self._finger_of_link = {
+            index: i
+            for name, index in link_index.items()
+            for i, finger in enumerate(model.fingers)
+            if name.startswith(f"{finger.name}_")
+        }
         self._links = [-1, *link_index.values()]
 
         grids = [
@@ -491,6 +498,18 @@ class Hand:
             row = row_of_link.get(contact[3])
             if row is not None:
                 forces[row] += contact[9]
+        return forces
+
+    def finger_contact_forces(self, object_id: int) -> np.ndarray:
+        """``(F,)`` summed contact normal force (N) between each finger (all its links, pads
+        included; :attr:`HandModel.fingers` order) and the object."""
+        forces = np.zeros(len(self.model.fingers))
+        for contact in pb.getContactPoints(
+            bodyA=self.body_id, bodyB=object_id, physicsClientId=self.client
+        ):
+            finger = self._finger_of_link.get(contact[3])
+            if finger is not None:
+                forces[finger] += contact[9]
         return forces
 
     def touches(self, object_id: int) -> bool:
