@@ -469,7 +469,8 @@ def sdh_candidate(
 ) -> Candidate:
     """An SDH-2 grasp at base rotation ``spread_rad`` (a key of :data:`SDH_SPREADS`), the
     palm's x axis along ``direction`` (thumb on the front side), distal pad centres at
-    ``height_m``.
+    ``height_m``. Fingers 1 and 2 facing the thumb (spread 0) need the object as wide as
+    their two pads across the closing line.
 
     Each finger's contact angle is the proximal angle at which its distal pad (distal link
     parallel to the palm axis) touches the ``completed`` cloud (``visible`` and mirrored)
@@ -488,6 +489,16 @@ def sdh_candidate(
     rotation = np.column_stack([x_hand[:2], y_hand[:2]])
     facings = sdh.finger_facings(spread_rad) @ rotation.T
     taxels = sdh_distal_taxels(pad, height_m)
+    if spread_rad == 0.0:
+        # Fingers 1 and 2 facing the thumb meet the back 33 mm either side of the closing
+        # line: the object must be wide enough there for both their pads.
+        in_band = np.abs(completed[:, 2] - height_m) <= pad.rows * pad.pitch_m / 2.0
+        across = completed[in_band] @ y_hand
+        span = sdh.FINGER_BASES_M[0, 1] + pad.cols * pad.pitch_m / 2.0
+        if len(across) == 0 or np.ptp(np.percentile(across, [2.0, 98.0])) < 2.0 * span:
+            return _rejected(
+                angle_rad, height_m, spread_rad, "too narrow for fingers facing the thumb"
+            )
     # Fingers meet an object off the palm axis inclined, so the palm is moved once, onto
     # the centre of the contacts predicted from the first guess.
     for attempt in range(2):
