@@ -2,9 +2,12 @@
 cloud, infeasible ones rejected, the rest scored.
 
 A candidate closes along a horizontal direction at an angle from the proposed symmetry
-plane's normal, with its pads' centres at a height. It is *feasible* when the hand can
-descend around the object without touching it (its opened fingers and palm clear every
-cloud point above the fingertips) and the fingertips stay above the table. Its score, in
+plane's normal, with its pads' centres at a height, on the cloud completed by mirroring
+it through the proposed plane (moved back if needed to cover every visible point,
+:func:`covering_plane`). It is *feasible* when the hand can descend around the object
+without touching it (its opened fingers and palm clear every cloud point above the
+fingertips), close without touching it other than with its pads, and every pad meets a
+side (not only an edge or the top) with the fingertips above the table. Its score, in
 [0, 1], multiplies three factors:
 
 * *contact*: the smallest predicted pad contact quality over the fingers
