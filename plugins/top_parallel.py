@@ -174,6 +174,7 @@ class TopParallel(GraspPlanner):
             p,
             pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
             keep_above_cloud=p.pad_above_cloud,
+            contact_edge_below_centre_m=pad.rows * pad.pitch_m / 2,
         )
         hand = ParallelHand(
             pad=pad,

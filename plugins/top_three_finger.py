@@ -16,6 +16,7 @@ from pipeline.perception.grasp_candidates import (
     closing_angles,
     plan_from_candidates,
     sdh_candidate,
+    sdh_flat_part_edge_m,
 )
 from pipeline.perception.grasp_geometry import (
     SDH_FINGER_ANGLES_RAD,
@@ -178,6 +179,7 @@ class TopThreeFinger(GraspPlanner):
             p,
             pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
             keep_above_cloud=p.keep_above_cloud,
+            contact_edge_below_centre_m=sdh_flat_part_edge_m(pad),
         )
         centre = frame.completed.mean(axis=0)
         candidates = [

@@ -94,6 +94,13 @@ def flat_pad_taxels(pad: PadLayout, centre_z_m: float) -> PadTaxels:
     return PadTaxels(grid[0, :, 1], centre_z_m - grid[:, 0, 0], np.zeros(pad.rows), pad.pitch_m)
 
 
+def sdh_flat_part_edge_m(pad: PadLayout) -> float:
+    """How far below the SDH-2 distal pad's centre its flat rows end (negative: above
+    it): the curved tip rows below them lie back from a side the pad presses on."""
+    flat_rows = pad.rows - sdh.DISTAL_PAD_CURVED_ROWS
+    return (flat_rows - (pad.rows - 1) / 2.0 - 0.5) * pad.pitch_m
+
+
 def sdh_distal_taxels(pad: PadLayout, centre_z_m: float) -> PadTaxels:
     """An SDH-2 distal pad on a vertical distal link: rows along the link toward the tip
     (down), the curved tip rows recessed behind the flat surface."""
@@ -317,11 +324,13 @@ def candidate_frame(
     *,
     pad_centre_to_fingertip_m: float,
     keep_above_cloud: bool,
+    contact_edge_below_centre_m: float,
 ) -> CandidateFrame:
     """The completed cloud, and pad-centre heights every ``params.height_step_m`` from the
     lowest allowed - fingertips ``table_clearance_m`` above the table (taken
-    ``cloud_base_above_table_m`` below the cloud), and with ``keep_above_cloud`` the pad's
-    lower edge above the cloud's bottom - to ``top_margin_m`` below the cloud's top (the
+    ``cloud_base_above_table_m`` below the cloud), and with ``keep_above_cloud`` the lower
+    edge of the pad's touching part (``contact_edge_below_centre_m`` below its centre;
+    negative above it) above the cloud's bottom - to ``top_margin_m`` below the cloud's top (the
     pads may reach above a short object; their predicted contact says how much of them
     touches)."""
     completed = np.concatenate(
@@ -331,7 +340,7 @@ def candidate_frame(
     z_bottom, z_top = np.percentile(completed[:, 2], [2.0, 98.0])
     lowest = table + params.table_clearance_m + pad_centre_to_fingertip_m
     if keep_above_cloud:
-        lowest = max(lowest, float(z_bottom) + pad.rows * pad.pitch_m / 2)
+        lowest = max(lowest, float(z_bottom) + contact_edge_below_centre_m)
     return CandidateFrame(
         completed,
         height_grid(lowest, float(z_top) - params.top_margin_m, params.height_step_m),
