@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 import yourdfpy
+from test_planners import _true_plane, _view
 
 from pipeline.perception import sdh_geometry as sdh
 from pipeline.perception.grasp_candidates import (
@@ -16,9 +17,8 @@ from pipeline.perception.grasp_candidates import (
     pad_coverage,
     sdh_distal_taxels,
 )
-from pipeline.perception.synthetic import box_object, cylinder_object, synthetic_observation
-from pipeline.types import Bias, PadLayout, SymmetryInit, SymmetryPlane
-from plugins.table_cluster import TableCluster
+from pipeline.perception.synthetic import box_object, cylinder_object
+from pipeline.types import PadLayout
 from plugins.top_parallel import TopParallel
 from plugins.top_three_finger import TopThreeFinger
 from robots import ROOT
@@ -141,16 +141,6 @@ def test_height_grid_runs_from_the_top_down_and_ends_at_the_bottom():
 
 
 # ---------------------------------------------------------------- ranked planners
-
-
-def _view(obj, yaw=0.0):
-    observation = synthetic_observation(obj, (0.6, 0.0, yaw), rng=np.random.default_rng(8))
-    return TableCluster().segment(observation)
-
-
-def _true_plane(yaw=0.0):
-    normal = np.array([np.cos(yaw), np.sin(yaw)])
-    return SymmetryInit(plane=SymmetryPlane(yaw, float(normal @ [0.6, 0.0])), bias=Bias())
 
 
 def test_sdh_pre_shape_puts_the_pads_on_a_narrow_cylinder_at_the_chosen_height():

@@ -31,8 +31,12 @@ def _cylinder(name: str, diameter: float, height: float, mass: float) -> SimpleN
     return SimpleNamespace(name=name, mesh=mesh, mass_kg=mass, friction=0.6)
 
 
-def _auto_grasp(registry, obj, yaw_deg: float, seed: int = 0):
-    config = load_config(registry, overrides=["trial.gripper=auto", f"trial.seed={seed}"])
+def _auto_grasp(registry, obj, yaw_deg: float, seed: int = 0, hand: str = "auto"):
+    """Sense, choose the hand (``trial.gripper = hand``), grasp, read the taxels."""
+    overrides = [f"trial.gripper={hand}", f"trial.seed={seed}"]
+    if hand == "sdh":
+        overrides.append("planner.use=top-three-finger")
+    config = load_config(registry, overrides=overrides)
     stages = {s: config.create(registry, s) for s in ("sensor", "segmenter", "initialiser")}
     with PybulletWorld.create(obj, None, yaw=np.radians(yaw_deg), seed=seed) as world:
         observation = stages["sensor"].observe(world)
@@ -73,23 +77,10 @@ def test_a_narrow_cylinder_is_held_from_opposing_sides(registry):
 
 def test_a_narrow_cylinder_is_held_by_the_sdh_pre_shaped_to_it(registry):
     narrow = _cylinder("narrow", 0.04, 0.1, 0.2)
-    config = load_config(registry, overrides=["trial.gripper=sdh", "planner.use=top-three-finger"])
-    stages = {s: config.create(registry, s) for s in ("sensor", "segmenter", "initialiser")}
-    with PybulletWorld.create(narrow, None, yaw=0.3, seed=1) as world:
-        observation = stages["sensor"].observe(world)
-        cloud = stages["segmenter"].segment(observation)
-        proposal = stages["initialiser"].propose(cloud, observation)
-        choice = choose_grasp(
-            config, registry, cloud, proposal, GRIPPERS, observation.table_height_m
-        )
-        assert choice.plan.status == "ok", choice.plan.reason
-        world.add_hand("sdh")
-        outcome = world.execute_grasp(choice.plan)
-        contacts = config.create(registry, "tactile").read(world, outcome)
-    assert outcome.executed, outcome.reason
+    choice, contacts, _, tilt = _auto_grasp(registry, narrow, 17.0, seed=1, hand="sdh")
+    assert choice.plan.gripper == "sdh"
     assert opposing_contacts(contacts)
-    _, tilt = object_motion(narrow.mesh, outcome.object_before, outcome.object_after)
-    assert np.degrees(tilt) < 5.0
+    assert tilt < 5.0
 
 
 def test_an_object_no_hand_can_hold_is_refused_in_one_line(tmp_path, capsys):
