@@ -253,7 +253,8 @@ def _fuse_into(
 
 # --- symfuse trial ---------------------------------------------------------------------
 
-#: The planner ``--gripper`` selects along with the hand.
+#: The planner ``--gripper`` selects along with the hand (``auto``: every planner for an
+#: available hand is asked, :mod:`pipeline.hand_choice`).
 PLANNER_FOR_GRIPPER = {"pg70": "top-parallel", "sdh": "top-three-finger"}
 
 
@@ -263,10 +264,9 @@ def trial_overrides(args: argparse.Namespace) -> list[str]:
     if args.object or args.mesh:
         overrides.append(f"trial.object={json.dumps(str(args.object or args.mesh))}")
     if args.gripper:
-        overrides += [
-            f"trial.gripper={args.gripper}",
-            f"planner.use={PLANNER_FOR_GRIPPER[args.gripper]}",
-        ]
+        overrides.append(f"trial.gripper={args.gripper}")
+        if args.gripper in PLANNER_FOR_GRIPPER:
+            overrides.append(f"planner.use={PLANNER_FOR_GRIPPER[args.gripper]}")
     if args.init:
         overrides.append(f"initialiser.use={args.init}")
     if args.seed is not None:
@@ -343,6 +343,11 @@ def _cmd_trial(args: argparse.Namespace) -> int:
             config, registry, staging, report=lambda m: print(f"... {m}", flush=True)
         )
     print(trial_summary(record))
+    grasp = record.document["grasp"]
+    print(
+        f"grasp: {record.document['hand']['reason']}; the object moved "
+        f"{grasp['object_shift_mm']:.1f} mm and tilted {grasp['object_tilt_deg']:.1f} deg"
+    )
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())
     print(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s")
     print(f"wrote {out}/ (result.json, clouds, contacts.json, pictures)")
@@ -551,8 +556,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     trial.add_argument(
         "--gripper",
-        choices=sorted(PLANNER_FOR_GRIPPER),
-        help="hand; also selects its planner (pg70: top-parallel, sdh: top-three-finger)",
+        choices=["auto", *sorted(PLANNER_FOR_GRIPPER)],
+        help="hand; pg70 and sdh also select their planner (top-parallel, "
+        "top-three-finger); auto (the default): the hand with the best feasible grasp",
     )
     trial.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
     trial.add_argument("--seed", type=int, help="random seed of the trial")

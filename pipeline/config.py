@@ -42,7 +42,11 @@ class TrialSettings:
     object: str = param(
         "cd_drive", "catalogue name, or path of an OBJ/STL/PLY mesh or a URDF (metres)"
     )
-    gripper: Literal["pg70", "sdh"] = param("pg70", "hand: Schunk PG-70 or SDH-2")
+    gripper: Literal["auto", "pg70", "sdh"] = param(
+        "auto",
+        "hand: Schunk PG-70 or SDH-2, or auto: the hand whose planner finds the best "
+        "feasible grasp on this object",
+    )
     seed: int = param(0, "seed of every random choice in the trial")
     x_m: float = param(0.0, "object position on the table, robot frame x (m)")
     y_m: float = param(0.0, "object position on the table, robot frame y (m)")

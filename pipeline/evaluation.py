@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,7 +30,10 @@ from .metrics import (
     solid_grid,
     surface_scores,
 )
-from .types import StageEstimate, SymmetryPlane
+from .types import Contacts, ObjectPose, StageEstimate, SymmetryPlane
+
+if TYPE_CHECKING:
+    import trimesh
 
 
 @dataclass(frozen=True)
@@ -144,3 +147,32 @@ def _measure(name: str, measured_m: float, true_m: float) -> dict[str, float]:
         f"{name}_error_mm": error_m * 1e3,
         f"{name}_error_pct": abs(error_m) / true_m * 100.0,
     }
+
+
+def object_motion(
+    mesh: trimesh.Trimesh, before: ObjectPose, after: ObjectPose
+) -> tuple[float, float]:
+    """How far a grasp moved the object: the displacement of the centre of its mesh's
+    bounding box (m; the mesh origin may lie anywhere, e.g. off a scan) and the angle its
+    up axis tilted (rad)."""
+    centre = np.append(np.asarray(mesh.bounds).mean(axis=0), 1.0)
+    shift = (after.transform @ centre - before.transform @ centre)[:3]
+    cosine = float(np.clip(after.transform[:3, 2] @ before.transform[:3, 2], -1.0, 1.0))
+    return float(np.linalg.norm(shift)), float(np.arccos(cosine))
+
+
+def opposing_contacts(contacts: Contacts, tolerance_deg: float = 30.0) -> bool:
+    """Whether the contacts press on opposing sides: the horizontal mean normals of the
+    touching pads are not all within an arc narrower than ``180 - tolerance_deg`` deg, i.e.
+    the largest angular gap between them is at most ``180 + tolerance_deg`` (two antipodal
+    pads: 180; three pads 120 deg apart: 120; a single pad: 360)."""
+    bearings = []
+    for pad in np.unique(contacts.pads):
+        normal = contacts.normals[contacts.pads == pad].mean(axis=0)
+        if np.hypot(normal[0], normal[1]) > 1e-6:
+            bearings.append(np.arctan2(normal[1], normal[0]))
+    if len(bearings) < 2:
+        return False
+    ordered = np.sort(bearings)
+    gaps = np.diff(np.append(ordered, ordered[0] + 2.0 * np.pi))
+    return bool(np.degrees(gaps.max()) <= 180.0 + tolerance_deg)

@@ -142,6 +142,10 @@ class GraspPlanner(StageImplementation):
     """Plans a grasp from the cloud and the proposed plane."""
 
     stage = "planner"
+    #: Names of the hands this planner plans for. With ``trial.gripper = "auto"`` every
+    #: installed planner naming an available hand is asked for its best grasp, and the
+    #: best-scored feasible plan decides the hand (:mod:`pipeline.hand_choice`).
+    grippers: ClassVar[tuple[str, ...]] = ()
 
     @abstractmethod
     def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:

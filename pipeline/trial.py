@@ -1,7 +1,10 @@
 """One full simulated grasp trial, from the camera to the evaluated estimate.
 
-    sensor -> segmenter -> initialiser.propose -> planner -> grasp -> tactile
-      -> initialiser.refine -> estimator -> evaluation
+    sensor -> segmenter -> initialiser.propose -> planner (and hand choice) -> grasp
+      -> tactile -> initialiser.refine -> estimator -> evaluation
+
+The scene is sensed before its hand is chosen (:mod:`pipeline.hand_choice`); the chosen
+hand is then added to it.
 
 Every file the trial writes goes into one output folder (see :data:`TRIAL_FILES`); the
 stages are timed one by one, and the resolved config is written next to the results.
@@ -22,7 +25,7 @@ from . import __version__
 from .catalogue import CatalogueObject, load_object
 from .config import Config
 from .errors import StageFailure, SymfuseError
-from .evaluation import GroundTruth, evaluate_stage
+from .evaluation import GroundTruth, evaluate_stage, object_motion
 from .formats import (
     bias_to_json,
     camera_to_json,
@@ -34,6 +37,7 @@ from .formats import (
     write_completed_clouds,
     write_json,
 )
+from .hand_choice import choice_to_json, choose_grasp
 from .registry import StageRegistry
 from .runner import estimate
 from .types import EstimateResult, ObjectPose, SymmetryInit, SymmetryPlane
@@ -205,6 +209,7 @@ def _simulate(
 ) -> TrialRecord:
     """The body of :func:`run_trial`: simulate, estimate, evaluate, write."""
     from .images import save_depth, save_rgb
+    from .sim.hands import GRIPPERS
     from .sim.world import PybulletWorld
 
     settings = config.trial
@@ -212,7 +217,7 @@ def _simulate(
     with timer.phase("scene"):
         world = PybulletWorld.create(
             obj,
-            settings.gripper,
+            None,
             x=settings.x_m,
             y=settings.y_m,
             yaw=np.radians(settings.yaw_deg),
@@ -242,22 +247,35 @@ def _simulate(
         with timer.phase("initialiser"):
             proposal = stages["initialiser"].propose(cloud, observation)
         with timer.phase("planner"):
-            plan = stages["planner"].plan(cloud, proposal, world.gripper)
+            choice = choose_grasp(
+                config, registry, cloud, proposal, GRIPPERS, observation.table_height_m
+            )
+        plan = choice.plan
+        document["gripper"] = choice.answer.gripper
+        document["hand"] = choice_to_json(choice)
+        if choice.answer.planner:
+            document["stages_used"]["planner"] = choice.answer.planner
         document["plan"] = plan_to_json(plan)
         if plan.status != "ok":
+            if not choice.answer.planner:
+                raise StageFailure(plan.reason)
             raise StageFailure(
-                f"grasp planner '{config.choices['planner']}' refused: {plan.reason}"
+                f"grasp planner '{choice.answer.planner}' refused: {plan.reason}"
             )
-        report("grasping")
+        report(f"grasping with {plan.gripper}")
         with timer.phase("grasp"):
+            world.add_hand(plan.gripper)
             outcome = world.execute_grasp(plan)
         document["object_pose_after"] = pose_to_json(outcome.object_after)
+        shift_m, tilt_rad = object_motion(obj.mesh, outcome.object_before, outcome.object_after)
         document["grasp"] = {
             "executed": outcome.executed,
             "aperture_m": outcome.aperture_m,
             "joint_positions": outcome.joint_positions,
             "T_robot_hand": np.asarray(outcome.T_robot_hand).tolist(),
             "reason": outcome.reason,
+            "object_shift_mm": 1e3 * shift_m,
+            "object_tilt_deg": float(np.degrees(tilt_rad)),
         }
         if not outcome.executed:
             raise StageFailure(f"grasp not executed: {outcome.reason}")

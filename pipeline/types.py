@@ -16,6 +16,7 @@ The estimator's parameter order, used by every covariance in these types, is
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -215,6 +216,36 @@ class GripperSpec:
 
 
 @dataclass(frozen=True)
+class GraspCandidate:
+    """A top grasp a planner considered (:mod:`pipeline.perception.grasp_candidates`).
+
+    Attributes:
+        closing_angle_deg: closing direction's angle from the proposed plane's normal.
+        height_m: height of the pad centres above the table the planner assumed.
+        spread_deg: SDH base rotation (0 for a parallel gripper).
+        width_m: the object's width along the closing direction there (m).
+        contact_coverage: predicted contact quality of each finger's pad (front/thumb
+            first): the fraction of its taxels touching the surface times the squared
+            cosine of the surface's inclination to the pad.
+        tipping_ratio: contact height over the object's half-footprint along the closing
+            direction.
+        score: in [0, 1], higher is better; 0 when infeasible.
+        feasible: whether the hand can execute it.
+        reason: why it is infeasible, else empty.
+    """
+
+    closing_angle_deg: float
+    height_m: float
+    spread_deg: float
+    width_m: float
+    contact_coverage: tuple[float, ...]
+    tipping_ratio: float
+    score: float
+    feasible: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True)
 class GraspPlan:
     """A planned top grasp, in frame ``R``.
 
@@ -230,6 +261,11 @@ class GraspPlan:
             touch first (used by PS initialisation for the initial bias).
         spread_rad: SDH base rotation (0 for a parallel gripper).
         reason: why a plan was refused, else empty.
+        score: how good the planner deems the grasp, in [0, 1] (higher is better; the
+            same scale for every planner, so that ``trial.gripper = "auto"`` can compare
+            hands); NaN when the planner does not score.
+        candidates: the grasps the planner considered, best first (empty when it
+            considered only one).
     """
 
     gripper: str
@@ -241,6 +277,8 @@ class GraspPlan:
     predicted_contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     spread_rad: float = 0.0
     reason: str = ""
+    score: float = math.nan
+    candidates: tuple[GraspCandidate, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Planner ``top-parallel``: a PG-70 top grasp closing along the symmetry plane's normal."""
+"""Planner ``top-parallel``: a PG-70 top grasp, ranked among candidates or the paper's rule."""
 
 from __future__ import annotations
 
@@ -9,6 +9,14 @@ import numpy as np
 from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.params import param
+from pipeline.perception.grasp_candidates import (
+    CandidateParams,
+    ParallelHand,
+    candidate_frame,
+    closing_angles,
+    parallel_candidate,
+    plan_from_candidates,
+)
 from pipeline.perception.grasp_geometry import (
     front_to_back,
     hand_pose,
@@ -21,43 +29,48 @@ from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
 
 
 class TopParallel(GraspPlanner):
-    """Parallel-jaw top grasp at the widest opening, front jaw 10 mm before the visible side.
+    """Parallel-jaw top grasp: the best of many closing directions and heights, or the paper's.
 
-    The closing direction is the proposed plane's normal rotated about z by
-    ``tactile_angle_deg``; the hand's x axis points from the front jaw (the PG-70's
-    ``"left"`` pad, camera side) to the back jaw. The closing line passes through the
-    cloud's centroid projected onto the proposed plane (the centroid of the cloud completed
-    by that plane; METHOD.md section 5); the front pad's surface
-    stands ``jaw_clearance_m`` in front of where it would first touch the visible surface on
-    that line (within the pad's width and height range; a curved face at its fitted
-    extreme, :func:`pipeline.perception.grasp_geometry.pad_touch`). Pads cover the object's
-    upper part (top edge ``top_margin_m`` below the cloud's top) but the fingertips stay
-    ``table_clearance_m`` above the table, which is taken to lie ``cloud_base_above_table_m``
-    below the cloud's lowest point (the segmentation's height cut), and the pads' lower edge
-    stays above the cloud's bottom (``pad_above_cloud``; on short objects the pads reach
-    above the top instead of touching unseen surface). Palm-to-pad-centre and
-    pad-centre-to-fingertip distances default to ``robots/pg70.urdf`` (125 mm and 29 mm).
-    ``predicted_contacts`` are the visible points the front pad meets first, moved onto the
-    pad's plane at that touch. The plan is refused when the object's width along the
-    closing direction (visible cloud and its mirror image, between the pads' paths) plus the
-    jaw clearance exceeds the gripper's aperture.
+    With ``strategy = "candidates"`` (the default) the closing direction is tried every
+    ``angle_step_deg`` from the proposed plane's normal and the pad height every
+    ``height_step_m`` from the lowest the fingertips and pads may go to the highest below
+    the object's top (the limits below); each candidate is kept when both jaws and the
+    housing descend clear of the cloud, and ranked by its predicted pad contact on both
+    sides, its alignment with the plane normal and its tipping lever
+    (:mod:`pipeline.perception.grasp_candidates`). ``GraspPlan.candidates`` holds the
+    ranking. The housing (``robots/pg70.urdf``: 112 x 80 mm, 78 mm deep) must pass
+    ``descent_clearance_m`` above the object.
+
+    With ``strategy = "paper"`` (the paper's reproductions) the closing direction is the
+    proposed plane's normal rotated about z by ``tactile_angle_deg``; the hand's x axis
+    points from the front jaw (the PG-70's ``"left"`` pad, camera side) to the back jaw. The
+    closing line passes through the cloud's centroid projected onto the proposed plane (the
+    centroid of the cloud completed by that plane; METHOD.md section 5); the front pad's
+    surface stands ``jaw_clearance_m`` in front of where it would first touch the visible
+    surface on that line (within the pad's width and height range; a curved face at its
+    fitted extreme, :func:`pipeline.perception.grasp_geometry.pad_touch`). Pads cover the
+    object's upper part (top edge ``top_margin_m`` below the cloud's top) but the fingertips
+    stay ``table_clearance_m`` above the table, which is taken to lie
+    ``cloud_base_above_table_m`` below the cloud's lowest point (the segmentation's height
+    cut), and the pads' lower edge stays above the cloud's bottom (``pad_above_cloud``; on
+    short objects the pads reach above the top instead of touching unseen surface).
+    Palm-to-pad-centre and pad-centre-to-fingertip distances default to ``robots/pg70.urdf``
+    (125 mm and 29 mm). ``predicted_contacts`` are the visible points the front pad meets
+    first, moved onto the pad's plane at that touch. The plan is refused when the object's
+    width along the closing direction (visible cloud and its mirror image, between the pads'
+    paths) plus the jaw clearance exceeds the gripper's aperture.
     """
 
     name = "top-parallel"
 
     @dataclass(frozen=True)
-    class Params:
+    class Params(CandidateParams):
         tactile_angle_deg: float = param(
             0.0, "rotation of the closing direction from the plane normal about z (deg)"
         )
         jaw_clearance_m: float = param(0.01, "front pad distance before the visible surface (m)")
-        top_margin_m: float = param(0.005, "pad top edge below the object's top (m)")
-        table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
         pad_above_cloud: bool = param(
             True, "keep the pads' lower edge above the cloud's bottom (short objects)"
-        )
-        cloud_base_above_table_m: float = param(
-            0.02, "the table lies this far below the cloud's lowest point (m)"
         )
         palm_to_pad_centre_m: float = param(0.125, "palm origin to pad centre along z (m)")
         pad_centre_to_fingertip_m: float = param(0.029, "pad centre to fingertip along z (m)")
@@ -73,6 +86,16 @@ class TopParallel(GraspPlanner):
             0.001, "visible surface within this depth of the pad's first touch is touched (m)"
         )
         pregrasp_height_m: float = param(0.1, "start of the descent above the grasp pose (m)")
+        back_margin_m: float = param(
+            0.01,
+            "candidates: extra room for the back jaw behind the mirrored back, a guess (m)",
+        )
+        housing_depth_m: float = param(0.078, "palm origin to the housing's bottom (m)")
+        housing_length_m: float = param(0.112, "housing length along the closing direction (m)")
+        housing_width_m: float = param(0.08, "housing width across the closing direction (m)")
+        jaw_width_m: float = param(0.04, "width of the jaws across the closing direction (m)")
+
+    grippers = ("pg70",)
 
     def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params
@@ -81,6 +104,8 @@ class TopParallel(GraspPlanner):
                 f"planner 'top-parallel' needs a two-finger gripper, got '{gripper.name}' with "
                 f"{gripper.fingers} fingers (use planner 'top-three-finger')"
             )
+        if p.strategy == "candidates":
+            return self._ranked(cloud, proposal, gripper)
         points = cloud.points
         plane = proposal.plane
         normal = plane.normal
@@ -136,6 +161,50 @@ class TopParallel(GraspPlanner):
                 if refused
                 else ""
             ),
+        )
+
+    def _ranked(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
+        p = self.params
+        points = cloud.points
+        pad = gripper.pads[0]
+        frame = candidate_frame(
+            points,
+            proposal.plane,
+            pad,
+            p,
+            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            keep_above_cloud=p.pad_above_cloud,
+            contact_edge_below_centre_m=pad.rows * pad.pitch_m / 2,
+        )
+        hand = ParallelHand(
+            pad=pad,
+            aperture_m=gripper.max_aperture_m,
+            palm_to_pad_centre_m=p.palm_to_pad_centre_m,
+            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            jaw_half_width_m=p.jaw_width_m / 2,
+            housing_half_length_m=p.housing_length_m / 2,
+            housing_half_width_m=p.housing_width_m / 2,
+            housing_depth_m=p.housing_depth_m,
+        )
+        centre = frame.completed.mean(axis=0)
+        candidates = [
+            parallel_candidate(
+                points,
+                frame.completed,
+                centre,
+                front_to_back(points, rotate_z(proposal.plane.normal, angle)),
+                angle,
+                height,
+                hand,
+                frame.settings,
+                jaw_clearance_m=p.jaw_clearance_m,
+                back_margin_m=p.back_margin_m,
+            )
+            for angle in closing_angles(p.angle_step_deg)
+            for height in frame.heights_m
+        ]
+        return plan_from_candidates(
+            gripper.name, candidates, p.pregrasp_height_m, gripper.max_aperture_m
         )
 
 

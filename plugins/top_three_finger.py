@@ -1,4 +1,4 @@
-"""Planner ``top-three-finger``: an SDH cylindrical top grasp on the completed cloud."""
+"""Planner ``top-three-finger``: an SDH-2 top grasp pre-shaped to the completed cloud."""
 
 from __future__ import annotations
 
@@ -9,6 +9,15 @@ import numpy as np
 from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.params import param
+from pipeline.perception.grasp_candidates import (
+    SDH_SPREADS,
+    CandidateParams,
+    candidate_frame,
+    closing_angles,
+    plan_from_candidates,
+    sdh_candidate,
+    sdh_flat_part_edge_m,
+)
 from pipeline.perception.grasp_geometry import (
     SDH_FINGER_ANGLES_RAD,
     SDH_PARALLEL_FINGER_ANGLES_RAD,
@@ -25,31 +34,45 @@ from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
 
 
 class TopThreeFinger(GraspPlanner):
-    """Three-finger cylindrical top grasp toward the completed cloud's centroid.
+    """Three-finger top grasp: pre-shaped and ranked on the completed cloud, or the paper's.
 
-    The cloud is completed by mirroring it through the proposed plane; the palm descends
-    on the vertical line through the completed cloud's centroid with the fingers 120 deg
-    apart (SDH base rotation ``spread_deg`` = 60) and closes radially - or, with
-    ``flat_spread`` and a flat completed back face at least as wide as the two fingers
-    (:func:`back_face_is_flat`), with fingers 1 and 2 facing the thumb (spread 0) so that
-    their pads lie flat on the back instead of meeting it with their edges. The palm's x
-    axis is the plane normal rotated about z by ``tactile_angle_deg``, oriented from the
-    visible (camera) side to the back, so at tactile angle 0 the thumb touches the visible
-    front and the two fingers the mirrored back. The distal pads cover the object's upper
-    part (their top edge ``top_margin_m`` below the top), the fingertips stay
-    ``table_clearance_m`` above the table (taken ``cloud_base_above_table_m`` below the
-    cloud's lowest point) and, with ``keep_above_cloud``, the pads' lower edge above the
-    cloud's bottom. ``palm_to_pad_centre_m`` defaults to the SDH-2 URDF's distal pad
-    centre depth with the distal link vertical and the pads touching a 60-150 mm wide
-    object (74.5 + 16.5 + 86.5 cos(alpha) + 42 mm = 0.20-0.22 m). ``predicted_contacts``
-    are the completed-cloud points each finger meets first (thumb, f1, f2). Refused when
-    the completed cloud is wider along the closing direction than the hand's aperture.
+    With ``strategy = "candidates"`` (the default) the palm's x axis is tried every
+    ``angle_step_deg`` from the proposed plane's normal (thumb on the visible side), with
+    the fingers 120 deg apart (spread 60 deg) and facing the thumb (spread 0), and the
+    distal pads' centre height every ``height_step_m`` between the lowest the fingertips and
+    pads may go and the highest below the object's top (limits below). For each, every
+    finger's proximal angle is where its distal pad, held parallel to the palm axis, meets
+    the completed cloud; the palm height puts the pads at the chosen height there; the
+    pre-shape is the most closed opening at which fingers, knuckles and palm descend
+    ``descent_clearance_m`` clear of the cloud
+    (:func:`pipeline.perception.grasp_candidates.sdh_candidate`). Candidates are ranked by
+    predicted pad contact, alignment with the plane normal and tipping lever;
+    ``GraspPlan.candidates`` holds the ranking.
+
+    With ``strategy = "paper"`` (the paper's reproductions) the cloud is completed by
+    mirroring it through the proposed plane; the palm descends on the vertical line through
+    the completed cloud's centroid with the fingers 120 deg apart (SDH base rotation
+    ``spread_deg`` = 60) and closes radially - or, with ``flat_spread`` and a flat completed
+    back face at least as wide as the two fingers (:func:`back_face_is_flat`), with fingers
+    1 and 2 facing the thumb (spread 0) so that their pads lie flat on the back instead of
+    meeting it with their edges. The palm's x axis is the plane normal rotated about z by
+    ``tactile_angle_deg``, oriented from the visible (camera) side to the back, so at
+    tactile angle 0 the thumb touches the visible front and the two fingers the mirrored
+    back. The distal pads cover the object's upper part (their top edge ``top_margin_m``
+    below the top), the fingertips stay ``table_clearance_m`` above the table (taken
+    ``cloud_base_above_table_m`` below the cloud's lowest point) and, with
+    ``keep_above_cloud``, the pads' lower edge above the cloud's bottom.
+    ``palm_to_pad_centre_m`` defaults to the SDH-2 URDF's distal pad centre depth with the
+    distal link vertical and the pads touching a 60-150 mm wide object (74.5 + 16.5 + 86.5
+    cos(alpha) + 42 mm = 0.20-0.22 m). ``predicted_contacts`` are the completed-cloud points
+    each finger meets first (thumb, f1, f2). Refused when the completed cloud is wider along
+    the closing direction than the hand's aperture.
     """
 
     name = "top-three-finger"
 
     @dataclass(frozen=True)
-    class Params:
+    class Params(CandidateParams):
         tactile_angle_deg: float = param(
             0.0, "rotation of the palm x axis from the plane normal about z (deg)"
         )
@@ -64,10 +87,6 @@ class TopThreeFinger(GraspPlanner):
             0.015,
             "pad top edge below the object's top (m); 5 mm put the pads on lids and domed tops",
         )
-        table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
-        cloud_base_above_table_m: float = param(
-            0.02, "the table lies this far below the cloud's lowest point (m)"
-        )
         keep_above_cloud: bool = param(
             True,
             "raise the pads so their lower edge stays above the cloud's bottom: taxels below "
@@ -81,6 +100,13 @@ class TopThreeFinger(GraspPlanner):
             0.008, "depth of the first-touched surface layer, about 4 sigma of depth noise (m)"
         )
         pregrasp_height_m: float = param(0.1, "start of the descent above the grasp pose (m)")
+        descent_clearance_m: float = param(
+            0.01,
+            "candidates: least gap between the descending hand and the completed cloud, "
+            "whose back is only the mirror plane's guess (m)",
+        )
+
+    grippers = ("sdh",)
 
     def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params
@@ -89,6 +115,8 @@ class TopThreeFinger(GraspPlanner):
                 f"planner 'top-three-finger' needs a three-finger hand, got '{gripper.name}' "
                 f"with {gripper.fingers} fingers (use planner 'top-parallel')"
             )
+        if p.strategy == "candidates":
+            return self._ranked(cloud, proposal, gripper)
         points = cloud.points
         completed = np.concatenate([points, proposal.plane.mirror(points)])
         direction = front_to_back(
@@ -138,6 +166,41 @@ class TopThreeFinger(GraspPlanner):
                 if refused
                 else ""
             ),
+        )
+
+    def _ranked(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
+        p = self.params
+        points = cloud.points
+        pad = next(pad for pad in gripper.pads if pad.name.endswith("distal"))
+        frame = candidate_frame(
+            points,
+            proposal.plane,
+            pad,
+            p,
+            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            keep_above_cloud=p.keep_above_cloud,
+            contact_edge_below_centre_m=sdh_flat_part_edge_m(pad),
+        )
+        centre = frame.completed.mean(axis=0)
+        candidates = [
+            sdh_candidate(
+                points,
+                frame.completed,
+                centre,
+                front_to_back(points, rotate_z(proposal.plane.normal, angle)),
+                angle,
+                height,
+                spread,
+                pad,
+                gripper.max_aperture_m,
+                frame.settings,
+            )
+            for spread in SDH_SPREADS
+            for angle in closing_angles(p.angle_step_deg)
+            for height in frame.heights_m
+        ]
+        return plan_from_candidates(
+            gripper.name, candidates, p.pregrasp_height_m, gripper.max_aperture_m
         )
 
 

@@ -84,7 +84,9 @@ def test_wrong_type_is_named(registry):
     assert str(error.value) == "config key 'trial.seed': expected int, got float"
     with pytest.raises(ConfigError) as error:
         load_config(registry, overrides=["trial.gripper=robotiq"])
-    assert str(error.value) == "config key 'trial.gripper': 'robotiq' is not one of 'pg70', 'sdh'"
+    assert str(error.value) == (
+        "config key 'trial.gripper': 'robotiq' is not one of 'auto', 'pg70', 'sdh'"
+    )
 
 
 def test_bad_files_are_named(registry, tmp_path):

@@ -119,6 +119,7 @@ def test_overrides_build_the_trial_config(registry):
     assert config.trial.yaw_deg == pytest.approx(task.params["yaw_deg"])
     assert config.choices["initialiser"] == "vc"
     assert config.choices["planner"] == "top-three-finger"
+    assert config.stage_params("planner").strategy == "paper"
     assert config.choices["sensor"] == "pybullet-stereo"
     assert config.stage_params("estimator").max_iterations == 7
 
@@ -130,6 +131,7 @@ def test_overrides_select_another_estimator(registry):
     assert config.choices["estimator"] == "mirror-only"
     assert config.choices["planner"] == "top-parallel"
     assert config.trial.gripper == "pg70"
+    assert config.stage_params("planner").strategy == "paper"
 
 
 def test_narrowest_width_of_a_rotated_rectangle():

@@ -1,4 +1,4 @@
-"""Top-grasp planners on synthetic views with known geometry."""
+"""Top-grasp planners on synthetic views with known geometry: the paper's strategy."""
 
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ def _true_plane(yaw=0.0):
 def test_parallel_grasp_geometry_on_a_box_facing_the_camera():
     # Camera on the -x side; box 42 mm thick along x: front face at x = 0.579.
     cloud = _view(box_object(0.042, 0.15, 0.12))
-    plan = TopParallel().plan(cloud, _true_plane(), PG70)
+    plan = TopParallel(TopParallel.Params(strategy="paper")).plan(cloud, _true_plane(), PG70)
     assert plan.status == "ok"
     np.testing.assert_allclose(plan.closing_direction, [1.0, 0.0, 0.0], atol=1e-9)
     T = plan.T_robot_hand
@@ -74,7 +74,7 @@ def test_parallel_grasp_geometry_on_a_box_facing_the_camera():
 
 def test_parallel_tactile_angle_rotates_the_closing_direction():
     cloud = _view(box_object(0.042, 0.042, 0.12))
-    params = TopParallel.Params(tactile_angle_deg=45.0)
+    params = TopParallel.Params(strategy="paper", tactile_angle_deg=45.0)
     plan = TopParallel(params).plan(cloud, _true_plane(), PG70)
     angle = np.degrees(np.arctan2(plan.closing_direction[1], plan.closing_direction[0]))
     assert abs(angle) == pytest.approx(45.0, abs=1e-6)
@@ -83,14 +83,14 @@ def test_parallel_tactile_angle_rotates_the_closing_direction():
 
 def test_parallel_pads_stay_above_the_table_for_a_short_object():
     cloud = _view(box_object(0.04, 0.1, 0.05))
-    plan = TopParallel().plan(cloud, _true_plane(), PG70)
+    plan = TopParallel(TopParallel.Params(strategy="paper")).plan(cloud, _true_plane(), PG70)
     fingertip_z = plan.T_robot_hand[2, 3] - 0.125 - 0.029
     assert fingertip_z >= 0.01 - 1e-6
 
 
 def test_parallel_refuses_a_too_wide_object():
     cloud = _view(box_object(0.09, 0.15, 0.12))
-    plan = TopParallel().plan(cloud, _true_plane(), PG70)
+    plan = TopParallel(TopParallel.Params(strategy="paper")).plan(cloud, _true_plane(), PG70)
     assert plan.status == "refused"
     width_mm = float(plan.reason.split(" mm wide")[0].split()[-1])
     assert width_mm == pytest.approx(90.0, abs=3.0)
@@ -162,7 +162,7 @@ def test_parallel_pads_stay_above_the_cloud_bottom_on_a_short_object():
     bottom = np.percentile(cloud.points[:, 2], 2.0)
     pad_bottom = {}
     for keep in (True, False):
-        plan = TopParallel(TopParallel.Params(pad_above_cloud=keep)).plan(
+        plan = TopParallel(TopParallel.Params(strategy="paper", pad_above_cloud=keep)).plan(
             cloud, _true_plane(), PG70
         )
         pad_bottom[keep] = plan.T_robot_hand[2, 3] - 0.125 - 0.0238
@@ -172,7 +172,7 @@ def test_parallel_pads_stay_above_the_cloud_bottom_on_a_short_object():
 
 def test_three_finger_grasp_on_a_cylinder():
     cloud = _view(cylinder_object(0.04, 0.15))
-    plan = TopThreeFinger().plan(cloud, _true_plane(), SDH)
+    plan = TopThreeFinger(TopThreeFinger.Params(strategy="paper")).plan(cloud, _true_plane(), SDH)
     assert plan.status == "ok"
     assert plan.spread_rad == pytest.approx(np.deg2rad(60.0))
     # Completed cloud centroid ~ axis (mirror through the true plane).
@@ -187,7 +187,7 @@ def test_three_finger_faces_the_thumb_on_a_flat_back():
     # Box 65 mm thick along x (back face at x = 0.6325), 130 mm long: fingers 1 and 2 at
     # spread 0 close along -x on lines 33 mm either side of the closing line.
     cloud = _view(box_object(0.065, 0.13, 0.15))
-    plan = TopThreeFinger().plan(cloud, _true_plane(), SDH)
+    plan = TopThreeFinger(TopThreeFinger.Params(strategy="paper")).plan(cloud, _true_plane(), SDH)
     assert plan.status == "ok" and plan.spread_rad == 0.0
     contacts = plan.predicted_contacts
     back = contacts[contacts[:, 0] > 0.6]
@@ -227,7 +227,7 @@ def test_three_finger_pads_stay_above_the_cloud_bottom_on_a_low_object():
     # bound alone would put the distal pad's (44.2 mm) lower edge at 15 mm, on surface that
     # no cloud point represents.
     cloud = _view(box_object(0.065, 0.13, 0.06))
-    plan = TopThreeFinger().plan(cloud, _true_plane(), SDH)
+    plan = TopThreeFinger(TopThreeFinger.Params(strategy="paper")).plan(cloud, _true_plane(), SDH)
     pad_bottom_z = plan.T_robot_hand[2, 3] - 0.21 - 13 * 0.0034 / 2
     assert pad_bottom_z >= np.percentile(cloud.points[:, 2], 2.0) - 1e-5
     assert pad_bottom_z >= 0.019
@@ -236,13 +236,13 @@ def test_three_finger_pads_stay_above_the_cloud_bottom_on_a_low_object():
 def test_three_finger_refuses_when_the_aperture_is_too_small():
     cloud = _view(cylinder_object(0.04, 0.15))
     small = GripperSpec("sdh", 3, 0.06, SDH.pads, 0.246)
-    plan = TopThreeFinger().plan(cloud, _true_plane(), small)
+    plan = TopThreeFinger(TopThreeFinger.Params(strategy="paper")).plan(cloud, _true_plane(), small)
     assert plan.status == "refused" and "60.0 mm" in plan.reason
 
 
 def test_planners_check_the_number_of_fingers():
     cloud = _view(box_object(0.042, 0.15, 0.12))
     with pytest.raises(ConfigError, match="top-three-finger"):
-        TopParallel().plan(cloud, _true_plane(), SDH)
+        TopParallel(TopParallel.Params(strategy="paper")).plan(cloud, _true_plane(), SDH)
     with pytest.raises(ConfigError, match="top-parallel"):
-        TopThreeFinger().plan(cloud, _true_plane(), PG70)
+        TopThreeFinger(TopThreeFinger.Params(strategy="paper")).plan(cloud, _true_plane(), PG70)

@@ -56,6 +56,7 @@ import tomli_w
 
 from ..catalogue import list_objects
 from ..errors import ConfigError, StageFailure
+from ..perception.grasp_geometry import narrowest_width
 from ..plots import BoxPanel, box_plot_figure
 from ..sim.camera import CameraParams
 from ..sweep import write_csv
@@ -168,12 +169,20 @@ def toml_value(value: Any) -> str:
     return tomli_w.dumps({"v": value}).partition("=")[2].strip()
 
 
+#: The paper's grasps, whatever the planners' defaults: closing along the proposed plane's
+#: normal at the object's top (``strategy = "paper"`` of both shipped planners).
+PAPER_GRASP = ("planner.top-parallel.strategy=paper", "planner.top-three-finger.strategy=paper")
+
+
 def trial_overrides(params: Mapping[str, Any]) -> list[str]:
-    """The ``--set`` strings that turn the sweep's config into the trial of ``params``."""
+    """The ``--set`` strings that turn the sweep's config into the trial of ``params``: its
+    object, hand, seed, yaw and initialiser, the paper's grasp strategy
+    (:data:`PAPER_GRASP`), the experiment's overrides and the estimator."""
     estimator = params["estimator"]
     overrides = [
         f"trial.object={toml_value(params['object'])}",
         f"trial.gripper={params['gripper']}",
+        *PAPER_GRASP,
         f"trial.seed={int(params['seed'])}",
         f"trial.yaw_deg={toml_value(float(params['yaw_deg']))}",
         f"initialiser.use={params['init']}",
@@ -278,33 +287,6 @@ def is_diverged(row: Mapping[str, Any]) -> bool:
 
 
 # ------------------------------------------------------------------------- scanned meshes
-
-
-def narrowest_width(points_xy: np.ndarray) -> tuple[float, float]:
-    """The smallest width of a planar point set and the direction it is measured along.
-
-    Rotating calipers: the minimum width of a convex polygon is attained with one hull edge
-    flush against a caliper, so only the hull edges' normals need testing.
-
-    Args:
-        points_xy: ``(N, 2)`` points (m), e.g. a mesh's vertices projected onto the table.
-
-    Returns:
-        ``(width_m, direction_rad)``: the width and the angle of the measuring direction
-        about +z, in [0, pi).
-    """
-    from scipy.spatial import ConvexHull
-
-    points_xy = np.asarray(points_xy, dtype=np.float64)
-    hull = points_xy[ConvexHull(points_xy).vertices]
-    edges = np.roll(hull, -1, axis=0) - hull
-    normals = np.column_stack([-edges[:, 1], edges[:, 0]])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    projections = hull @ normals.T
-    widths = projections.max(axis=0) - projections.min(axis=0)
-    best = int(np.argmin(widths))
-    direction = math.atan2(normals[best, 1], normals[best, 0]) % math.pi
-    return float(widths[best]), direction
 
 
 def scan_trial_params(

@@ -16,9 +16,11 @@ Pads: ``PadLayout.rows`` taxels run along the finger (the pad's length ``rows * 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from pipeline.types import PadLayout
 
@@ -368,3 +370,28 @@ def cylindrical_top_grasp(
         width_m=float(along.max() - along.min()),
         predicted_contacts=np.concatenate(contacts) if contacts else np.zeros((0, 3)),
     )
+
+
+def narrowest_width(points_xy: np.ndarray) -> tuple[float, float]:
+    """The smallest width of a planar point set and the direction it is measured along.
+
+    Rotating calipers: the minimum width of a convex polygon is attained with one hull edge
+    flush against a caliper, so only the hull edges' normals need testing.
+
+    Args:
+        points_xy: ``(N, 2)`` points (m), e.g. a mesh's vertices projected onto the table.
+
+    Returns:
+        ``(width_m, direction_rad)``: the width and the angle of the measuring direction
+        about +z, in [0, pi).
+    """
+    points_xy = np.asarray(points_xy, dtype=np.float64)
+    hull = points_xy[ConvexHull(points_xy).vertices]
+    edges = np.roll(hull, -1, axis=0) - hull
+    normals = np.column_stack([-edges[:, 1], edges[:, 0]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    projections = hull @ normals.T
+    widths = projections.max(axis=0) - projections.min(axis=0)
+    best = int(np.argmin(widths))
+    direction = math.atan2(normals[best, 1], normals[best, 0]) % math.pi
+    return float(widths[best]), direction

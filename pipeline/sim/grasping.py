@@ -12,11 +12,13 @@ Sequence (:func:`execute_grasp`):
 5. close every finger at its own speed (position control with a force cap) until its pads
    report sufficient contact - at least ``min_contact_taxels`` taxels within
    ``contact_gap_m`` of the object (ray probes) and at least ``min_contact_force_N`` summed
-   normal force between its pads and the object - or it reaches its joint limit; a finger
+   normal force between its pads and the object - or any of its links presses on the
+   object with ``blocked_force_N``, or it reaches its joint limit; a finger
    in contact stops, and its joint targets move ``FingerDrive.squeeze`` further in so that
    it presses with its force caps - at once, or, with ``press_together``, only once every
-   finger has stopped (a guarded close: a finger that arrives first waits at the surface
-   instead of pushing the object away from the others);
+   finger has stopped, and only when every finger is in contact (a guarded close: a
+   finger that arrives first waits at the surface instead of pushing the object away from
+   the others, and none presses when one closed on nothing);
 6. let everything settle for ``settle_s`` and report.
 
 The hand closes along the x axis of ``plan.T_robot_hand`` (``plan.closing_direction`` is
@@ -25,11 +27,12 @@ the others, which is the motion the estimator's bias has to absorb. The true obj
 before and after are read from the simulator. Timestep ``timestep_s`` (default 1/240 s); a
 PG-70 grasp takes a few hundred steps.
 
-Each hand has its own defaults (:data:`HAND_GRASP_SETTINGS`). The SDH-2 closes guarded: its
-fingers stop on proximity (no force needed) and press together. A light object (0.3 kg on
-friction 0.5 resists 1.5 N; a 170 mm tall, 65 mm thick box tips at 0.7 N pushed near its
-top) is otherwise flicked tens of millimetres by the first finger's 3-4 N before the others
-arrive - far outside the bias the estimator can absorb.
+Both hands close guarded by default (:data:`HAND_GRASP_SETTINGS`): their fingers stop on
+proximity (no force needed) and press together. A light object (0.3 kg on friction 0.5
+resists 1.5 N; a 170 mm tall, 65 mm thick box tips at 0.7 N pushed near its top) is
+otherwise shoved or tipped by the first finger's force before the others arrive - the
+SDH-2's 3-4 N flick it tens of millimetres, far outside the bias the estimator can absorb;
+the PG-70's 40 N jaws push it to the middle between the pads.
 """
 
 from __future__ import annotations
@@ -59,6 +62,9 @@ class GraspSettings:
         probe_behind_m: contact probe rays start this far behind the pad surface.
         min_contact_taxels: touching taxels a finger needs (over its pads) to stop closing.
         min_contact_force_N: summed pad-object normal force a finger needs to stop closing.
+        blocked_force_N: a finger also stops when this much normal force (summed over all
+            its links) presses it against the object: it met the object off its pads and
+            would only push it.
         check_every_steps: contact is checked every this many physics steps.
         max_close_s: closing gives up after this much simulated time.
         settle_s: simulated time the grasp is held before the final poses are read.
@@ -76,6 +82,7 @@ class GraspSettings:
     probe_behind_m: float = 0.0015
     min_contact_taxels: int = 2
     min_contact_force_N: float = 1.0
+    blocked_force_N: float = 2.0
     check_every_steps: int = 2
     max_close_s: float = 2.0
     settle_s: float = 0.15
@@ -86,7 +93,7 @@ class GraspSettings:
 
 #: Default settings per hand name (:func:`execute_grasp` falls back to ``GraspSettings()``).
 HAND_GRASP_SETTINGS: dict[str, GraspSettings] = {
-    "pg70": GraspSettings(),
+    "pg70": GraspSettings(min_contact_force_N=0.0, press_together=True),
     "sdh": GraspSettings(min_contact_force_N=0.0, press_together=True),
 }
 
@@ -173,12 +180,14 @@ def _close(
         frames, gaps = hand.taxel_gaps(object_id, s.probe_behind_m, s.contact_gap_m)
         touched_pads = frames.pads[gaps <= s.contact_gap_m]
         forces = hand.pad_contact_forces(object_id)
+        blocking = hand.finger_contact_forces(object_id)
         for i, finger in enumerate(fingers):
             if stopped[i]:
                 continue
             taxels = int(np.isin(touched_pads, finger.pads).sum())
             force = forces[[pad_row[p] for p in finger.pads]].sum()
-            if taxels >= s.min_contact_taxels and force >= s.min_contact_force_N:
+            touched = taxels >= s.min_contact_taxels and force >= s.min_contact_force_N
+            if touched or blocking[i] >= s.blocked_force_N:
                 stopped[i] = True
                 contact[i] = 1.0
                 if not s.press_together:
@@ -187,6 +196,9 @@ def _close(
                 stopped[i] = True
         if stopped.all():
             break
+    if s.press_together and not contact.all():
+        # A finger closed on nothing: pressing with the others would only shove the object.
+        contact[:] = 0.0
     hand.command(_finger_targets(hand, open_targets, closure, contact), s.force_fraction)
 
 

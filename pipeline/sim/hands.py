@@ -16,10 +16,11 @@ centres are 125 mm and its fingertips 154 mm down ``z``; the SDH-2's straight fi
 
 Opening: for the PG-70 ``opening_m`` is the distance between the pad surfaces. For the
 SDH-2 it is twice the distance from the palm axis of the distal pads' flat surfaces when
-each proximal link is tilted outward by ``alpha`` and the distal link held parallel to the
-palm axis (distal joint ``-alpha``): ``opening = 2 (r_base - 14.8 mm + 86.5 mm sin(-alpha))``
-with ``r_base = 38.1 mm``; at spread 60 deg that is the diameter of the circle the three
-distal pads touch.
+each proximal link is tilted by ``alpha`` and the distal link held parallel to the palm
+axis (distal joint ``-alpha``): ``opening = 2 (r_base - 14.8 mm - 86.5 mm sin(alpha))``
+with ``r_base = 38.1 mm`` (:mod:`pipeline.perception.sdh_geometry`); at spread 60 deg that
+is the diameter of the circle the three distal pads touch. Openings below 46.6 mm flex the
+proximal links inward (``alpha > 0``), for narrow objects.
 
 The hand's base floats freely in PyBullet and is held by a fixed constraint whose target
 :meth:`Hand.move_to` sets (PyBullet's world frame is the robot frame ``R``).
@@ -38,6 +39,7 @@ from scipy.spatial.transform import Rotation
 from robots import ROOT as ROBOTS_ROOT
 
 from ..errors import ConfigError
+from ..perception import sdh_geometry
 from ..types import GripperSpec, PadLayout
 from .taxels import (
     pad_grid,
@@ -50,11 +52,7 @@ from .taxels import (
 
 TAXEL_PITCH_M = 0.0034
 
-# SDH-2 geometry used by the opening <-> joint-angle mapping (must match robots/sdh2.urdf).
-SDH_BASE_RADIUS_M = 0.03811
-SDH_PROXIMAL_LENGTH_M = 0.0865
-SDH_DISTAL_PAD_OFFSET_M = 0.0148
-SDH_FINGERS = ("f1", "f2", "thumb")
+SDH_FINGERS = sdh_geometry.FINGERS
 #: How far (rad, each bending joint) an SDH-2 finger's targets move past the contact to press.
 #: Fingers 1 and 2 together overpower the thumb and push the object toward it until they
 #: reach their targets, so theirs is small (about 4 mm at the distal pad); the thumb's is
@@ -139,14 +137,8 @@ def _pg70_aperture(hand: Hand) -> float:
     return joints["left_jaw"] + joints["right_jaw"]
 
 
-def sdh_proximal_angle(opening_m: float) -> float:
-    """SDH-2 proximal angle (rad, negative = outward) giving ``opening_m`` (module doc)."""
-    reach_m = opening_m / 2.0 - SDH_BASE_RADIUS_M + SDH_DISTAL_PAD_OFFSET_M
-    return -math.asin(reach_m / SDH_PROXIMAL_LENGTH_M)
-
-
 def _sdh_open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
-    alpha = sdh_proximal_angle(opening_m)
+    alpha = sdh_geometry.alpha_for_opening(opening_m)
     configuration = {"f1_base": spread_rad, "f2_base": spread_rad}
     for finger in SDH_FINGERS:
         configuration[f"{finger}_proximal"] = alpha
@@ -186,14 +178,20 @@ def _sdh_model() -> HandModel:
         proximal = f"{finger}_proximal"
         distal = f"{finger}_distal"
         pads.append(PadGeometry(PadLayout(proximal, f"{proximal}_pad", 14, 6, TAXEL_PITCH_M)))
-        pads.append(PadGeometry(PadLayout(distal, f"{distal}_pad", 13, 6, TAXEL_PITCH_M), 9, 0.059))
+        pads.append(
+            PadGeometry(
+                PadLayout(distal, f"{distal}_pad", 13, 6, TAXEL_PITCH_M),
+                sdh_geometry.DISTAL_PAD_CURVED_ROWS,
+                sdh_geometry.DISTAL_PAD_CURVE_RADIUS_M,
+            )
+        )
         squeeze = SDH_THUMB_SQUEEZE_RAD if finger == "thumb" else SDH_FINGER_SQUEEZE_RAD
         fingers.append(
             FingerDrive(
                 finger, (proximal, distal), (proximal, distal), (1.0, -1.0), 1.0, (squeeze,) * 2
             )
         )
-    max_aperture_m = 2.0 * (SDH_BASE_RADIUS_M - SDH_DISTAL_PAD_OFFSET_M + SDH_PROXIMAL_LENGTH_M)
+    max_aperture_m = sdh_geometry.opening_for_alpha(-sdh_geometry.JOINT_LIMIT_RAD)
     spec = GripperSpec("sdh", 3, max_aperture_m, tuple(p.layout for p in pads), 0.246)
     return HandModel(
         spec, "sdh2.urdf", tuple(pads), tuple(fingers), _sdh_open_configuration, _sdh_aperture
@@ -249,6 +247,13 @@ class Hand:
                 self._joint_limits[name] = (info[8], info[9])
                 self._joint_effort[name] = info[10]
         self._pad_links = [link_index[pad.layout.link] for pad in model.pads]
+        # Each finger's links: those named after it (f1_knuckle, f1_proximal_pad, left_jaw...).
+        self._finger_of_link = {
+            index: i
+            for name, index in link_index.items()
+            for i, finger in enumerate(model.fingers)
+            if name.startswith(f"{finger.name}_")
+        }
         self._links = [-1, *link_index.values()]
 
         grids = [
@@ -493,6 +498,18 @@ class Hand:
             row = row_of_link.get(contact[3])
             if row is not None:
                 forces[row] += contact[9]
+        return forces
+
+    def finger_contact_forces(self, object_id: int) -> np.ndarray:
+        """``(F,)`` summed contact normal force (N) between each finger (all its links, pads
+        included; :attr:`HandModel.fingers` order) and the object."""
+        forces = np.zeros(len(self.model.fingers))
+        for contact in pb.getContactPoints(
+            bodyA=self.body_id, bodyB=object_id, physicsClientId=self.client
+        ):
+            finger = self._finger_of_link.get(contact[3])
+            if finger is not None:
+                forces[finger] += contact[9]
         return forces
 
     def touches(self, object_id: int) -> bool:

@@ -83,7 +83,8 @@ class PybulletWorld:
         urdf_path: str | Path | None = None,
     ) -> PybulletWorld:
         """Build a world: table, ``obj`` standing at ``(x, y)`` m with ``yaw`` rad, and the
-        hand named ``gripper`` (``"pg70"``, ``"sdh"``; None for no hand).
+        hand named ``gripper`` (``"pg70"``, ``"sdh"``; None for no hand, or one added later
+        with :meth:`add_hand`).
 
         With ``urdf_path`` the object's body comes from that URDF (its base frame must be
         the frame ``obj.mesh`` is expressed in); otherwise it is built from ``obj.mesh``,
@@ -96,15 +97,27 @@ class PybulletWorld:
             else:
                 object_id = scene.add_urdf(urdf_path, x, y, yaw)
             scene.step(SETTLE_STEPS)
-            hand = None
+            world = cls(scene, None, object_id, obj.mesh, obj.name, seed)
             if gripper is not None:
-                from pipeline.sim.hands import Hand
-
-                hand = Hand.load(scene.client, gripper)
+                world.add_hand(gripper)
         except BaseException:
             scene.close()
             raise
-        return cls(scene, hand, object_id, obj.mesh, obj.name, seed)
+        return world
+
+    def add_hand(self, gripper: str) -> None:
+        """Load the hand named ``gripper`` (parked high above the table, out of the camera's
+        view, so a world sensed before its hand is chosen sees exactly the same scene).
+
+        Raises:
+            ConfigError: the world has a hand already, or the name is unknown.
+        """
+        if self.hand is not None:
+            raise ConfigError(f"this PybulletWorld already has the hand '{self.hand.spec.name}'")
+        from pipeline.sim.hands import Hand
+
+        self.hand = Hand.load(self.client, gripper)
+        self.gripper = self.hand.spec
 
     def __enter__(self) -> PybulletWorld:
         return self

@@ -1,0 +1,183 @@
+"""Which hand grasps the object, and with which plan (``trial.gripper``).
+
+Each planner declares the hands it plans for (:attr:`pipeline.stages.GraspPlanner.grippers`).
+With a named gripper the configured planner plans for it. With ``"auto"`` every installed
+planner that names an available hand plans on the cloud (before any hand is in the
+scene), and the feasible plan with the highest score wins; planners score on one scale
+(:attr:`pipeline.types.GraspPlan.score`), so a hand wins by the quality of the grasp it can
+make on this object, not by its name. When no planner finds a feasible grasp, the
+refusal names the object's measured size and every hand's aperture.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .config import Config
+from .params import to_toml
+from .perception.grasp_geometry import narrowest_width
+from .registry import StageRegistry
+from .types import GraspCandidate, GraspPlan, GripperSpec, PointCloud, SymmetryInit
+
+#: ``trial.gripper`` value that lets the planners choose the hand.
+AUTO = "auto"
+
+
+@dataclass(frozen=True)
+class PlannerAnswer:
+    """One planner's plan for one hand."""
+
+    gripper: str
+    planner: str
+    plan: GraspPlan
+
+
+@dataclass(frozen=True)
+class HandChoice:
+    """The plan a trial executes and how it was chosen.
+
+    Attributes:
+        answer: the chosen hand, its planner and plan (refused when no hand can grasp).
+        reason: one line saying why this hand.
+        answers: every planner's answer, in the order they were asked.
+    """
+
+    answer: PlannerAnswer
+    reason: str
+    answers: tuple[PlannerAnswer, ...]
+
+    @property
+    def plan(self) -> GraspPlan:
+        return self.answer.plan
+
+
+def choose_grasp(
+    config: Config,
+    registry: StageRegistry,
+    cloud: PointCloud,
+    proposal: SymmetryInit,
+    grippers: Mapping[str, GripperSpec],
+    table_height_m: float,
+) -> HandChoice:
+    """Plan the grasp for ``config.trial.gripper`` (a name in ``grippers``, or ``"auto"``).
+
+    Args:
+        grippers: the hands available, by name.
+        table_height_m: z of the table top (for the size quoted in a refusal), m.
+    """
+    wanted = config.trial.gripper
+    if wanted != AUTO:
+        name = config.choices["planner"]
+        plan = config.create(registry, "planner").plan(cloud, proposal, grippers[wanted])
+        answer = PlannerAnswer(wanted, name, plan)
+        return HandChoice(answer, f"trial.gripper = '{wanted}'", (answer,))
+
+    answers = []
+    for name in registry.names("planner"):
+        cls = registry.get("planner", name).cls
+        params = config.params["planner"].get(name, cls.Params())
+        for gripper in cls.grippers:
+            if gripper in grippers:
+                planner = registry.create("planner", name, to_toml(params))
+                plan = planner.plan(cloud, proposal, grippers[gripper])
+                answers.append(PlannerAnswer(gripper, name, plan))
+    feasible = [a for a in answers if a.plan.status == "ok"]
+    if not feasible:
+        return HandChoice(
+            _refusal(answers, cloud, proposal, grippers, table_height_m), "", tuple(answers)
+        )
+    best = max(feasible, key=lambda a: _score(a.plan))
+    others = "; ".join(
+        f"{a.gripper} ({a.planner}) "
+        + (f"scored {_score(a.plan):.2f}" if a.plan.status == "ok" else f"refused: {a.plan.reason}")
+        for a in answers
+        if a is not best
+    )
+    reason = (
+        f"{best.gripper} ({best.planner}) has the best feasible grasp, "
+        f"score {_score(best.plan):.2f}"
+    )
+    return HandChoice(best, reason + (f"; {others}" if others else ""), tuple(answers))
+
+
+def _score(plan: GraspPlan) -> float:
+    return 0.0 if math.isnan(plan.score) else plan.score
+
+
+def _refusal(
+    answers: list[PlannerAnswer],
+    cloud: PointCloud,
+    proposal: SymmetryInit,
+    grippers: Mapping[str, GripperSpec],
+    table_height_m: float,
+) -> PlannerAnswer:
+    """A refused plan whose reason names the object's size and each hand's limit."""
+    points = cloud.points
+    completed = np.concatenate([points, proposal.plane.mirror(points)])
+    width_m, _ = narrowest_width(completed[:, :2])
+    height_m = float(np.percentile(points[:, 2], 98.0)) - table_height_m
+    hands = "; ".join(
+        f"{a.gripper} opens {grippers[a.gripper].max_aperture_m * 1e3:.0f} mm ({a.plan.reason})"
+        for a in answers
+    )
+    reason = (
+        f"no hand can grasp the object, {width_m * 1e3:.0f} mm wide at its narrowest and "
+        f"{height_m * 1e3:.0f} mm tall: {hands or 'no planner plans for an available hand'}"
+    )
+    template = answers[0].plan if answers else None
+    plan = GraspPlan(
+        gripper=AUTO,
+        status="refused",
+        T_robot_hand=np.eye(4) if template is None else template.T_robot_hand,
+        pregrasp_height_m=0.0 if template is None else template.pregrasp_height_m,
+        opening_m=0.0,
+        closing_direction=np.array([1.0, 0.0, 0.0]),
+        reason=reason,
+        score=0.0,
+    )
+    return PlannerAnswer(AUTO, "", plan)
+
+
+def choice_to_json(choice: HandChoice) -> dict[str, Any]:
+    """The ``hand`` entry of ``result.json``: the chosen hand and planner, why, and every
+    planner's answer with its ranked candidates."""
+    return {
+        "gripper": choice.answer.gripper,
+        "planner": choice.answer.planner,
+        "reason": choice.reason or choice.plan.reason,
+        "answers": [
+            {
+                "gripper": a.gripper,
+                "planner": a.planner,
+                "status": a.plan.status,
+                "score": None if math.isnan(a.plan.score) else a.plan.score,
+                "reason": a.plan.reason,
+                "candidates": [candidate_to_json(c) for c in a.plan.candidates],
+            }
+            for a in choice.answers
+        ],
+    }
+
+
+def candidate_to_json(candidate: GraspCandidate) -> dict[str, Any]:
+    """One ranked candidate as JSON (NaN as null)."""
+
+    def number(value: float) -> float | None:
+        return None if math.isnan(value) else round(float(value), 6)
+
+    return {
+        "closing_angle_deg": number(candidate.closing_angle_deg),
+        "height_m": number(candidate.height_m),
+        "spread_deg": number(candidate.spread_deg),
+        "width_m": number(candidate.width_m),
+        "contact_coverage": [number(c) for c in candidate.contact_coverage],
+        "tipping_ratio": number(candidate.tipping_ratio),
+        "score": number(candidate.score),
+        "feasible": candidate.feasible,
+        "reason": candidate.reason,
+    }

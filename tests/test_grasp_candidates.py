@@ -1,0 +1,192 @@
+"""Grasp candidates: SDH-2 pre-shape geometry against the URDF's forward kinematics, pad
+coverage against hand-computed cases, and the ranked planners on synthetic views."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yourdfpy
+from test_planners import _true_plane, _view
+
+from pipeline.perception import sdh_geometry as sdh
+from pipeline.perception.grasp_candidates import (
+    flat_pad_taxels,
+    height_grid,
+    pad_coverage,
+    sdh_distal_taxels,
+)
+from pipeline.perception.synthetic import box_object, cylinder_object
+from pipeline.types import PadLayout
+from plugins.top_parallel import TopParallel
+from plugins.top_three_finger import TopThreeFinger
+from robots import ROOT
+
+PAD = PadLayout("left", "left_pad", 14, 6, 0.0034)
+DISTAL = PadLayout("thumb_distal", "thumb_distal_pad", 13, 6, 0.0034)
+
+
+@pytest.fixture(scope="module")
+def sdh2() -> yourdfpy.URDF:
+    return yourdfpy.URDF.load(str(ROOT / "sdh2.urdf"))
+
+
+def _configure(robot: yourdfpy.URDF, spread: float, alpha: float) -> None:
+    joints = {"f1_base": spread, "f2_base": spread}
+    for finger in sdh.FINGERS:
+        joints[f"{finger}_proximal"] = alpha
+        joints[f"{finger}_distal"] = -alpha
+    robot.update_cfg(np.array([joints[name] for name in robot.actuated_joint_names]))
+
+
+@pytest.mark.parametrize("spread_deg", [0.0, 30.0, 60.0, 90.0])
+@pytest.mark.parametrize("alpha_deg", [-80.0, -25.0, 0.0, 20.0])
+def test_distal_pad_reach_depth_and_facing_match_the_urdf(sdh2, spread_deg, alpha_deg):
+    spread, alpha = math.radians(spread_deg), math.radians(alpha_deg)
+    _configure(sdh2, spread, alpha)
+    facings = sdh.finger_facings(spread)
+    for i, finger in enumerate(sdh.FINGERS):
+        pad = sdh2.get_transform(f"{finger}_distal_pad", "palm")
+        base = sdh2.get_transform(f"{finger}_knuckle", "palm")
+        # The pad frame sits on the pad's flat surface, its normal along the facing.
+        np.testing.assert_allclose(pad[:2, 2], facings[i], atol=1e-6)
+        assert pad[2, 2] == pytest.approx(0.0, abs=1e-6)
+        np.testing.assert_allclose(base[:2, 3], sdh.FINGER_BASES_M[i], atol=1e-5)
+        along = (pad[:2, 3] - base[:2, 3]) @ facings[i]
+        assert along == pytest.approx(sdh.reach_m(alpha), abs=1e-6)
+        assert pad[2, 3] == pytest.approx(sdh.distal_pad_depth_m(alpha), abs=1e-6)
+        # The fingertip: the distal link's end, the profile's deepest point.
+        tip = sdh2.get_transform(f"{finger}_distal", "palm") @ [0.0, 0.0, sdh.DISTAL_LENGTH_M, 1]
+        _, depth = sdh.finger_profile(alpha)
+        assert depth.max() == pytest.approx(tip[2], abs=1e-6)
+    assert sdh.alpha_for_reach(sdh.reach_m(alpha)) == pytest.approx(alpha)
+    assert sdh.alpha_for_opening(sdh.opening_for_alpha(alpha)) == pytest.approx(alpha)
+
+
+def test_finger_profile_covers_the_finger_and_is_exact_behind_the_pad(sdh2):
+    """Dense oracle: sample the finger's collision boxes (links and pads) from the URDF and
+    take the deepest sample per millimetre along the facing. The profile never misses
+    finger material; it is exact except in front of the distal link's body, where it takes
+    the tip's depth for the pad that curves up and away from it."""
+    alpha = math.radians(-30.0)
+    _configure(sdh2, math.radians(60.0), alpha)
+    grid, depth = sdh.finger_profile(alpha)
+    base = sdh2.get_transform("thumb_knuckle", "palm")
+    samples = []
+    for link in ("thumb_proximal", "thumb_distal", "thumb_proximal_pad", "thumb_distal_pad"):
+        T_link = sdh2.get_transform(link, "palm")
+        for collision in sdh2.link_map[link].collisions:
+            size = np.asarray(collision.geometry.box.size)
+            axes = [np.linspace(-s / 2, s / 2, 15) for s in size]
+            local = np.stack(np.meshgrid(*axes), axis=-1).reshape(-1, 3)
+            T = T_link @ collision.origin
+            samples.append(local @ T[:3, :3].T + T[:3, 3])
+    points = np.concatenate(samples)
+    t = points[:, 0] - base[0, 3]  # the thumb faces +x
+    distal_front = sdh.reach_m(alpha) - sdh.DISTAL_PAD_OFFSET_M + 0.005
+    for value in np.linspace(t.min() + 0.003, t.max() - 0.003, 40):
+        deepest = points[np.abs(t - value) < 0.0015, 2].max()
+        profile = depth[int(np.argmin(np.abs(grid - value)))]
+        assert profile >= deepest - 0.0025
+        if value < distal_front:
+            assert profile == pytest.approx(deepest, abs=0.0025)
+
+
+def test_pad_coverage_on_a_flat_face_and_on_a_cylinder():
+    rng = np.random.default_rng(0)
+    # A flat face 30 mm ahead, facing the pad: every taxel touches.
+    face = np.column_stack(
+        [np.full(4000, 0.03), rng.uniform(-0.03, 0.03, 4000), rng.uniform(0.0, 0.1, 4000)]
+    )
+    taxels = flat_pad_taxels(PAD, 0.05)
+    contact = pad_coverage(face, np.zeros(3), np.array([1.0, 0, 0]), taxels, 0.003)
+    assert contact.touch_m == pytest.approx(0.03)
+    assert contact.coverage == 1.0
+    # A vertical cylinder of radius r: a column at lateral u is touched when the surface
+    # there lies within the tolerance, r - sqrt(r^2 - u^2) <= tol.
+    radius, tol = 0.02, 0.003
+    angle = rng.uniform(-np.pi / 2, np.pi / 2, 40000)
+    cylinder = np.column_stack(
+        [0.05 - radius * np.cos(angle), radius * np.sin(angle), rng.uniform(0.0, 0.1, 40000)]
+    )
+    contact = pad_coverage(cylinder, np.zeros(3), np.array([1.0, 0, 0]), taxels, tol)
+    assert contact.touch_m == pytest.approx(0.05 - radius, abs=2e-4)
+    u = (np.arange(6) - 2.5) * 0.0034
+    expected = np.sum(radius - np.sqrt(radius**2 - u**2) <= tol) / 6
+    assert contact.coverage == pytest.approx(expected)
+    # Nothing in front of the pad.
+    assert pad_coverage(face, np.zeros(3), np.array([0, 1.0, 0]), taxels, tol) is None
+
+
+def test_the_distal_pad_tip_curves_away_from_a_flat_face():
+    """The 9 tip rows lie on a 59 mm cylinder: a row s along the curve is recessed
+    r (1 - cos(s / r)); only rows within the tolerance touch a flat face."""
+    taxels = sdh_distal_taxels(DISTAL, 0.05)
+    s = (np.arange(1, 10) - 0.5) * 0.0034
+    np.testing.assert_allclose(taxels.row_recess[4:], 0.059 * (1 - np.cos(s / 0.059)), atol=1e-9)
+    rng = np.random.default_rng(1)
+    face = np.column_stack(
+        [np.full(6000, 0.03), rng.uniform(-0.03, 0.03, 6000), rng.uniform(0.0, 0.1, 6000)]
+    )
+    contact = pad_coverage(face, np.zeros(3), np.array([1.0, 0, 0]), taxels, 0.002)
+    rows = 4 + np.sum(0.059 * (1 - np.cos(s / 0.059)) <= 0.002)
+    assert contact.coverage == pytest.approx(rows / 13)
+
+
+def test_height_grid_runs_from_the_top_down_and_ends_at_the_bottom():
+    np.testing.assert_allclose(height_grid(0.05, 0.08, 0.01), [0.08, 0.07, 0.06, 0.05])
+    np.testing.assert_allclose(height_grid(0.05, 0.085, 0.01), [0.085, 0.075, 0.065, 0.055, 0.05])
+    np.testing.assert_allclose(height_grid(0.05, 0.04, 0.01), [0.05])
+
+
+# ---------------------------------------------------------------- ranked planners
+
+
+def test_sdh_pre_shape_puts_the_pads_on_a_narrow_cylinder_at_the_chosen_height():
+    from pipeline.sim.hands import GRIPPERS
+
+    cloud = _view(cylinder_object(radius_m=0.0225, height_m=0.12))
+    plan = TopThreeFinger().plan(cloud, _true_plane(), GRIPPERS["sdh"])
+    assert plan.status == "ok", plan.reason
+    best = plan.candidates[0]
+    assert best.feasible and min(best.contact_coverage) > 0.15
+    # Pre-shaped around the object with the descent clearance, far from fully open.
+    alpha_open = sdh.alpha_for_opening(plan.opening_m)
+    assert 0.045 + 2 * 0.01 < plan.opening_m < 0.13
+    # Every finger's contact angle is where its pad meets the 22.5 mm radius; at that
+    # angle the distal pad centre is at the planned height.
+    facings = sdh.finger_facings(plan.spread_rad)
+    rotation = plan.T_robot_hand[:2, :2]
+    centre = np.array([0.6, 0.0])
+    for base, facing in zip(sdh.FINGER_BASES_M, facings, strict=True):
+        base_robot = plan.T_robot_hand[:2, 3] + rotation @ base
+        facing_robot = rotation @ facing
+        # distance along the facing to the cylinder's near surface
+        offset = centre - base_robot
+        along = offset @ facing_robot
+        across = offset @ np.array([-facing_robot[1], facing_robot[0]])
+        surface = along - math.sqrt(0.0225**2 - min(across**2, 0.0225**2))
+        alpha = sdh.alpha_for_reach(surface)
+        assert alpha > alpha_open
+        depth = sdh.distal_pad_depth_m(alpha)
+        assert plan.T_robot_hand[2, 3] - depth == pytest.approx(best.height_m, abs=0.004)
+
+
+def test_parallel_candidates_close_across_the_thin_side_of_a_turned_box():
+    from pipeline.sim.hands import GRIPPERS
+
+    yaw = math.radians(50.0)
+    cloud = _view(box_object(thickness_m=0.042, length_m=0.17, height_m=0.146), yaw)
+    # The proposal is the box's other mirror plane, across its length: the paper's rule
+    # would close along the 170 mm length; the candidates turn to the thin side.
+    plane = _true_plane(yaw + math.radians(90.0))
+    paper = TopParallel(TopParallel.Params(strategy="paper")).plan(cloud, plane, GRIPPERS["pg70"])
+    assert paper.status == "refused"
+    plan = TopParallel().plan(cloud, plane, GRIPPERS["pg70"])
+    assert plan.status == "ok", plan.reason
+    thin = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    assert abs(plan.closing_direction @ thin) > math.cos(math.radians(16.0))
+    ranked = [c.score for c in plan.candidates]
+    assert ranked == sorted(ranked, reverse=True)
+    assert plan.score == ranked[0] > 0.0

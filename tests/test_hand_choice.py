@@ -1,0 +1,104 @@
+"""``trial.gripper = "auto"``: the hand is chosen by the planners' best feasible grasps, the
+grasp holds tall and narrow objects from opposing sides without tipping them, and an object
+no hand can hold is refused in one line."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipeline.cli import main
+from pipeline.config import load_config
+from pipeline.evaluation import object_motion, opposing_contacts
+from pipeline.hand_choice import choose_grasp
+from pipeline.registry import load_registry
+from pipeline.sim.hands import GRIPPERS
+from pipeline.sim.world import PybulletWorld
+
+
+@pytest.fixture(scope="module")
+def registry():
+    return load_registry()
+
+
+def _cylinder(name: str, diameter: float, height: float, mass: float) -> SimpleNamespace:
+    mesh = trimesh.creation.cylinder(radius=diameter / 2, height=height, sections=48)
+    mesh.apply_translation((0.0, 0.0, height / 2))
+    return SimpleNamespace(name=name, mesh=mesh, mass_kg=mass, friction=0.6)
+
+
+def _auto_grasp(registry, obj, yaw_deg: float, seed: int = 0, hand: str = "auto"):
+    """Sense, choose the hand (``trial.gripper = hand``), grasp, read the taxels."""
+    overrides = [f"trial.gripper={hand}", f"trial.seed={seed}"]
+    if hand == "sdh":
+        overrides.append("planner.use=top-three-finger")
+    config = load_config(registry, overrides=overrides)
+    stages = {s: config.create(registry, s) for s in ("sensor", "segmenter", "initialiser")}
+    with PybulletWorld.create(obj, None, yaw=np.radians(yaw_deg), seed=seed) as world:
+        observation = stages["sensor"].observe(world)
+        cloud = stages["segmenter"].segment(observation)
+        proposal = stages["initialiser"].propose(cloud, observation)
+        choice = choose_grasp(
+            config, registry, cloud, proposal, GRIPPERS, observation.table_height_m
+        )
+        assert choice.plan.status == "ok", choice.plan.reason
+        world.add_hand(choice.plan.gripper)
+        outcome = world.execute_grasp(choice.plan)
+        assert outcome.executed, outcome.reason
+        contacts = config.create(registry, "tactile").read(world, outcome)
+    shift, tilt = object_motion(obj.mesh, outcome.object_before, outcome.object_after)
+    return choice, contacts, shift, np.degrees(tilt)
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 70.0])
+def test_a_tall_bottle_is_held_from_opposing_sides_without_tipping(registry, yaw_deg):
+    """250 mm tall, 70 mm across, 0.4 kg: wider than the PG-70 opens, so the SDH-2 grasps
+    it, low enough and guarded so that it does not tip."""
+    bottle = _cylinder("bottle", 0.07, 0.25, 0.4)
+    choice, contacts, shift, tilt = _auto_grasp(registry, bottle, yaw_deg)
+    assert choice.plan.gripper == "sdh"
+    assert "pg70" in choice.reason  # why not the other hand
+    assert opposing_contacts(contacts)
+    assert tilt < 5.0 and shift < 0.01
+
+
+def test_a_narrow_cylinder_is_held_from_opposing_sides(registry):
+    """40 mm across: the PG-70 fits it."""
+    narrow = _cylinder("narrow", 0.04, 0.1, 0.2)
+    choice, contacts, shift, tilt = _auto_grasp(registry, narrow, 30.0)
+    assert choice.plan.gripper == "pg70"
+    assert opposing_contacts(contacts)
+    assert tilt < 5.0 and shift < 0.01
+
+
+def test_a_narrow_cylinder_is_held_by_the_sdh_pre_shaped_to_it(registry):
+    narrow = _cylinder("narrow", 0.04, 0.1, 0.2)
+    choice, contacts, _, tilt = _auto_grasp(registry, narrow, 17.0, seed=1, hand="sdh")
+    assert choice.plan.gripper == "sdh"
+    assert opposing_contacts(contacts)
+    assert tilt < 5.0
+
+
+def test_an_object_no_hand_can_hold_is_refused_in_one_line(tmp_path, capsys):
+    mesh = trimesh.creation.box((0.26, 0.26, 0.08))
+    mesh.apply_translation((0.0, 0.0, 0.04))
+    mesh.export(tmp_path / "crate.obj")
+    out = tmp_path / "out"
+    code = main(["trial", "--mesh", str(tmp_path / "crate.obj"), "--gripper", "auto",
+                 "--set", "trial.pictures=false", "--out", str(out)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 3
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith("symfuse: error: no hand can grasp the object, ")
+    # The measured size (a 260 mm square seen once, 80 mm tall) and each hand's limit.
+    width_mm = int(err.split("no hand can grasp the object, ")[1].split(" mm wide")[0])
+    height_mm = int(err.split("narrowest and ")[1].split(" mm tall")[0])
+    assert 240 <= width_mm <= 275 and 70 <= height_mm <= 85
+    assert "pg70 opens 65 mm" in err and "sdh opens 220 mm" in err
+    document = json.loads((out / "result.json").read_text())
+    assert document["status"] == "failed"
+    assert {a["gripper"] for a in document["hand"]["answers"]} == {"pg70", "sdh"}
