@@ -259,9 +259,7 @@ def _simulate(
         if plan.status != "ok":
             if not choice.answer.planner:
                 raise StageFailure(plan.reason)
-            raise StageFailure(
-                f"grasp planner '{choice.answer.planner}' refused: {plan.reason}"
-            )
+            raise StageFailure(f"grasp planner '{choice.answer.planner}' refused: {plan.reason}")
         report(f"grasping with {plan.gripper}")
         with timer.phase("grasp"):
             world.add_hand(plan.gripper)
