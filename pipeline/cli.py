@@ -14,13 +14,14 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
 from . import __version__
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
 from .errors import (
+    EXIT_BAD_INPUT,
     EXIT_ESTIMATE_FAILED,
     EXIT_INTERRUPTED,
     EXIT_OK,
@@ -481,6 +482,14 @@ class _Parser(argparse.ArgumentParser):
         if self._describe is not None:
             self.description = self._describe()
         return super().format_help()
+
+    def error(self, message: str) -> NoReturn:
+        """A command-line mistake as every other error: one line, exit code 2 (argparse
+        would print the usage first and prefix the verb's name differently)."""
+        verb = self.prog.removeprefix("symfuse").strip()
+        where = f"{verb}: " if verb else ""
+        hint = f"symfuse {verb} --help" if verb else "symfuse --help"
+        self.exit(EXIT_BAD_INPUT, f"symfuse: error: {where}{message} (see {hint})\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
