@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .formats import read_camera, require_file
+from .formats import read_camera, read_npy, require_file
 from .types import CameraIntrinsics
 
 #: A median depth above this many metres means the values are millimetres (a depth
@@ -103,7 +103,14 @@ def depth_from_organised(points: np.ndarray, where: str) -> tuple[np.ndarray, Ca
         squared += float(np.mean((design @ np.array([focal, centre]) - pixel) ** 2))
     rms = float(np.sqrt(squared))
     (fx, cx), (fy, cy) = fitted
-    if not rms <= MAX_PINHOLE_RMS_PX or fx <= 0.0 or fy <= 0.0:
+    if rms <= MAX_PINHOLE_RMS_PX and (fx <= 0.0 or fy <= 0.0):
+        flipped = " and ".join(axis for axis, f in (("x", fx), ("y", fy)) if f <= 0.0)
+        raise InputError(
+            f"{where}: the organised points are a mirror image: their {flipped} axis runs "
+            "against the pixel grid; give the cloud in the camera's optical frame (x right, "
+            "y down, z forward)"
+        )
+    if not rms <= MAX_PINHOLE_RMS_PX:
         raise InputError(
             f"{where}: the organised points are not a pinhole image in their frame "
             f"(fit RMS {rms:.2f} px); give the cloud in the camera's optical frame"
@@ -197,10 +204,7 @@ def read_depth_image(path: Path, camera_path: Path | None, colour_path: Path | N
             when there is one.
     """
     if path.suffix.lower() == ".npy":
-        try:
-            depth = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise InputError(f"{path}: cannot read as .npy: {exc}") from None
+        depth = read_npy(path)
         if depth.ndim != 2 or depth.dtype.kind != "f":
             raise InputError(
                 f"{path}: expected an (H, W) float depth image in metres, got shape "

@@ -44,7 +44,7 @@ from .types import (
     StageEstimate,
     SymmetryPlane,
 )
-from .units import check_distance, scale_of
+from .units import UNITS_IN_METRES, check_distance, scale_of
 
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy")
 
@@ -72,10 +72,7 @@ def read_cloud(path: Path, units: str = "m") -> PointCloud:
     if suffix not in CLOUD_SUFFIXES:
         raise InputError(f"{path}: unknown cloud format '{suffix}' (use .ply, .pcd or .npy)")
     if suffix == ".npy":
-        try:
-            points = np.load(path, allow_pickle=False)
-        except (OSError, ValueError, EOFError, UnicodeError) as exc:
-            raise InputError(f"{path}: cannot read as .npy: {_first_line(exc)}") from None
+        points = read_npy(path)
         if points.ndim != 2 or points.shape[1] != 3:
             raise InputError(f"{path}: expected an (N, 3) array, got shape {points.shape}")
         if points.dtype.kind not in "iuf":  # signed, unsigned, floating
@@ -100,6 +97,18 @@ def read_cloud(path: Path, units: str = "m") -> PointCloud:
     points = points * scale
     check_distance(points, str(path))
     return PointCloud(points=points, frame="robot")
+
+
+def read_npy(path: Path) -> np.ndarray:
+    """The array of a ``.npy`` file (never a pickle).
+
+    Raises:
+        InputError: the file is empty, truncated, not ``.npy`` or holds Python objects.
+    """
+    try:
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError, UnicodeError) as exc:
+        raise InputError(f"{path}: cannot read as .npy: {_first_line(exc)}") from None
 
 
 def _first_line(exc: BaseException) -> str:
@@ -423,9 +432,28 @@ def camera_to_json(observation: DepthObservation) -> dict[str, Any]:
 
 
 def _positive(value: Any, where: str, path: Path) -> float:
-    if not isinstance(value, int | float) or isinstance(value, bool) or not value > 0:
-        raise InputError(f"{path}: {where} must be a positive number, got {value!r}")
+    if not isinstance(value, int | float) or isinstance(value, bool) or not 0 < value < math.inf:
+        raise InputError(f"{path}: {where} must be a positive finite number, got {value!r}")
     return float(value)
+
+
+def _rigid_transform(value: Any, where: str, path: Path) -> np.ndarray:
+    """A JSON 4x4 matrix as a rigid transform: a rotation (orthonormal, determinant +1,
+    not a reflection), a finite translation and the bottom row 0 0 0 1."""
+    try:
+        transform = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        transform = np.zeros(0)
+    if transform.shape != (4, 4) or not np.isfinite(transform).all():
+        raise InputError(f"{path}: {where} must be a finite 4x4 matrix")
+    rotation = transform[:3, :3]
+    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
+        raise InputError(f"{path}: {where}'s rotation is not orthonormal")
+    if np.linalg.det(rotation) < 0.0:
+        raise InputError(f"{path}: {where}'s rotation is a reflection (determinant -1)")
+    if not np.allclose(transform[3], [0.0, 0.0, 0.0, 1.0]):
+        raise InputError(f"{path}: {where}'s bottom row must be 0 0 0 1")
+    return transform
 
 
 def read_camera(path: Path) -> CameraFile:
@@ -458,15 +486,8 @@ def read_camera(path: Path) -> CameraFile:
     intrinsics = CameraIntrinsics(*size, *focal, *centre)
     transform = document.get("T_robot_camera")
     if transform is not None:
-        try:
-            transform = np.array(transform, dtype=np.float64)
-        except (TypeError, ValueError):
-            transform = np.zeros(0)
-        if transform.shape != (4, 4) or not np.isfinite(transform).all():
-            raise InputError(f"{path}: T_robot_camera must be a finite 4x4 matrix")
-        rotation = transform[:3, :3]
-        if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
-            raise InputError(f"{path}: T_robot_camera's rotation is not orthonormal")
+        transform = _rigid_transform(transform, "T_robot_camera", path)
+        check_distance(transform[:3, 3], f"{path}: T_robot_camera's translation", UNITS_IN_METRES)
     height = document.get("table_height_m")
     if height is not None and (
         not isinstance(height, int | float) or isinstance(height, bool) or not math.isfinite(height)

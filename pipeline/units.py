@@ -26,6 +26,8 @@ FARTHEST_M = 10.0
 LARGEST_OBJECT_M = 2.0
 
 MILLIMETRES_HINT = "looks like millimetres: pass --units mm"
+#: The hint for a file whose format fixes metres (camera.json): no option converts it.
+UNITS_IN_METRES = "looks like millimetres: the file must be in metres"
 
 
 def scale_of(units: str, source: str) -> float:
@@ -39,8 +41,11 @@ def scale_of(units: str, source: str) -> float:
     return UNIT_SCALE[units]
 
 
-def check_distance(points_m: np.ndarray, source: str) -> None:
+def check_distance(points_m: np.ndarray, source: str, hint: str = MILLIMETRES_HINT) -> None:
     """Refuse points (frame R, metres) farther than :data:`FARTHEST_M` from the robot base.
+
+    Args:
+        hint: what to do about it (``--units mm`` where the command has it).
 
     Raises:
         InputError: ``"<source>: a point lies 512 m from the robot base: looks like
@@ -51,9 +56,7 @@ def check_distance(points_m: np.ndarray, source: str) -> None:
         return
     farthest = float(np.max(np.linalg.norm(points_m, axis=1)))
     if farthest > FARTHEST_M:
-        raise InputError(
-            f"{source}: a point lies {farthest:.3g} m from the robot base: {MILLIMETRES_HINT}"
-        )
+        raise InputError(f"{source}: a point lies {farthest:.3g} m from the robot base: {hint}")
 
 
 def check_extent(extents_m: np.ndarray, source: str, hint: str = MILLIMETRES_HINT) -> None:

@@ -3,10 +3,15 @@
 
 from __future__ import annotations
 
+import json
+
+import numpy as np
 import pytest
 
+from pipeline.captures import depth_from_organised, read_capture
 from pipeline.cli import main
-from pipeline.errors import EXIT_BAD_INPUT
+from pipeline.errors import EXIT_BAD_INPUT, InputError
+from pipeline.formats import read_camera
 
 
 def one_error_line(err: str) -> str:
@@ -32,3 +37,71 @@ def test_command_line_mistakes_are_one_line(capsys, argv, names):
     assert exit_info.value.code == EXIT_BAD_INPUT
     _, err = capsys.readouterr()
     assert names in one_error_line(err)
+
+
+# ------------------------------------------------------------------ recorded captures
+
+
+def camera_document(**changes) -> dict:
+    T = np.eye(4)
+    T[:3, 3] = [-0.5, 0.0, 0.8]
+    document = {
+        "intrinsics": {"width": 4, "height": 3, "fx": 5.0, "fy": 5.0, "cx": 2.0, "cy": 1.5},
+        "T_robot_camera": T.tolist(),
+    }
+    for key, value in changes.items():
+        if key in document["intrinsics"]:
+            document["intrinsics"][key] = value
+        else:
+            document[key] = value
+    return document
+
+
+def reflected() -> list:
+    T = np.eye(4)
+    T[0, 0] = -1.0
+    return T.tolist()
+
+
+def bottom_row() -> list:
+    T = np.eye(4)
+    T[3] = [1.0, 2.0, 3.0, 4.0]
+    return T.tolist()
+
+
+def in_millimetres() -> list:
+    T = np.eye(4)
+    T[:3, 3] = [-500.0, 0.0, 800.0]
+    return T.tolist()
+
+
+@pytest.mark.parametrize(
+    ("text", "names"),
+    [
+        (json.dumps(camera_document(fx=float("inf"))), "intrinsics.fx must be a positive finite"),
+        (json.dumps(camera_document()).replace("-0.5", "1" + "0" * 400), "finite 4x4 matrix"),
+        (json.dumps(camera_document(T_robot_camera=reflected())), "is a reflection"),
+        (json.dumps(camera_document(T_robot_camera=bottom_row())), "bottom row must be 0 0 0 1"),
+        (json.dumps(camera_document(T_robot_camera=in_millimetres())), "looks like millimetres"),
+    ],
+)
+def test_a_camera_file_that_is_no_camera_is_refused(tmp_path, text, names):
+    path = tmp_path / "camera.json"
+    path.write_text(text)
+    with pytest.raises(InputError, match=names):
+        read_camera(path)
+
+
+def test_an_empty_depth_npy_is_an_input_error(tmp_path):
+    (tmp_path / "depth.npy").write_bytes(b"")
+    with pytest.raises(InputError, match=r"depth\.npy: cannot read as \.npy"):
+        read_capture(tmp_path / "depth.npy")
+
+
+def test_a_mirrored_organised_cloud_is_named_as_such():
+    rows, cols = np.mgrid[0:6, 0:8].astype(np.float64)
+    z = np.full_like(rows, 1.0)
+    points = np.stack([(cols - 4.0) / 500.0 * z, (rows - 3.0) / 500.0 * z, z], axis=-1)
+    depth_from_organised(points, "view.pcd")  # a pinhole image: accepted
+    with pytest.raises(InputError, match="mirror image: their x axis"):
+        depth_from_organised(points[:, ::-1], "view.pcd")
