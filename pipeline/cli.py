@@ -85,6 +85,21 @@ def _add_units_option(parser: argparse.ArgumentParser, what: str) -> None:
     )
 
 
+def counting_number(least: int) -> Callable[[str], int]:
+    """An argparse ``type``: an integer of at least ``least`` (a seed >= 0, a count >= 1)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got '{text}'") from None
+        if value < least:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {least}, got {value}")
+        return value
+
+    return parse
+
+
 def _load(args: argparse.Namespace, extra_overrides: Sequence[str] = ()):
     from .config import load_config
     from .registry import load_registry
@@ -446,9 +461,13 @@ def _add_sweep_parser(verbs) -> None:
     )
     sweep.add_argument("--estimator", metavar="NAME", help="estimator to run (default: config)")
     sweep.add_argument("--quick", action="store_true", help="a reduced grid (smoke test)")
-    sweep.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
-    sweep.add_argument("--repeats", type=int, help="trials per grid point (default: paper's)")
-    sweep.add_argument("--workers", type=int, help="local processes (default: all cores)")
+    sweep.add_argument("--seed", type=counting_number(0), default=0, help="base seed (default 0)")
+    sweep.add_argument(
+        "--repeats", type=counting_number(1), help="trials per grid point (default: paper's)"
+    )
+    sweep.add_argument(
+        "--workers", type=counting_number(1), help="local processes (default: all cores)"
+    )
     sweep.add_argument("--executor", choices=["local", "dask"], default="local")
     sweep.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (tcp://...)")
     _add_config_options(sweep)
@@ -564,7 +583,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="hand; also selects its planner (pg70: top-parallel, sdh: top-three-finger)",
     )
     trial.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
-    trial.add_argument("--seed", type=int, help="random seed of the trial")
+    trial.add_argument("--seed", type=counting_number(0), help="random seed of the trial")
     trial.add_argument("--yaw", type=float, metavar="DEG", help="object yaw on the table")
     _add_units_option(trial, "the --mesh file")
     _add_config_options(trial)

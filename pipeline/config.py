@@ -43,7 +43,7 @@ class TrialSettings:
         "cd_drive", "catalogue name, or path of an OBJ/STL/PLY mesh or a URDF (metres)"
     )
     gripper: Literal["pg70", "sdh"] = param("pg70", "hand: Schunk PG-70 or SDH-2")
-    seed: int = param(0, "seed of every random choice in the trial")
+    seed: int = param(0, "seed of every random choice in the trial", at_least=0)
     x_m: float = param(0.0, "object position on the table, robot frame x (m)")
     y_m: float = param(0.0, "object position on the table, robot frame y (m)")
     yaw_deg: float = param(0.0, "object rotation about the table normal (deg)")

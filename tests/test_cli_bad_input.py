@@ -25,7 +25,7 @@ def one_error_line(err: str) -> str:
     ("argv", "names"),
     [
         (["sweep", "nope"], "sweep: argument EXPERIMENT: invalid choice: 'nope'"),
-        (["trial", "--seed", "x"], "trial: argument --seed: invalid int value: 'x'"),
+        (["trial", "--seed", "x"], "trial: argument --seed: expected an integer, got 'x'"),
         (["fuse", "--cloud", "c.ply"], "fuse: the following arguments are required"),
         (["plugins", "--foo"], "unrecognized arguments: --foo"),
         ([], "the following arguments are required: VERB"),
@@ -105,3 +105,37 @@ def test_a_mirrored_organised_cloud_is_named_as_such():
     depth_from_organised(points, "view.pcd")  # a pinhole image: accepted
     with pytest.raises(InputError, match="mirror image: their x axis"):
         depth_from_organised(points[:, ::-1], "view.pcd")
+
+
+# ------------------------------------------------------------------ numbers
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_a_float_setting_is_finite(run, value):
+    code, _, err = run("config", "--set", f"estimator.iekf.noise_along_normal_m={value}")
+    assert code == EXIT_BAD_INPUT
+    assert "'estimator.iekf.noise_along_normal_m': expected a finite number" in one_error_line(err)
+    code, _, err = run("config", "--set", f"trial.yaw_deg={value}")
+    assert "'trial.yaw_deg': expected a finite number" in one_error_line(err)
+
+
+def test_a_negative_seed_is_refused_before_anything_runs(run, capsys, tmp_path):
+    code, _, err = run("config", "--set", "trial.seed=-1")
+    assert code == EXIT_BAD_INPUT
+    assert "'trial.seed': must be >= 0" in one_error_line(err)
+    for argv in (["trial", "--seed", "-1"], ["sweep", "fig10", "--seed", "-1"]):
+        with pytest.raises(SystemExit) as exit_info:
+            main([*argv, "--out", str(tmp_path / "out")])
+        assert exit_info.value.code == EXIT_BAD_INPUT
+        assert "argument --seed: expected an integer >= 0" in one_error_line(capsys.readouterr()[1])
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("option", ["--workers", "--repeats"])
+@pytest.mark.parametrize("value", ["0", "-1"])
+def test_sweep_counts_are_positive(capsys, tmp_path, option, value):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["sweep", "fig10", "--quick", option, value, "--out", str(tmp_path / "out")])
+    assert exit_info.value.code == EXIT_BAD_INPUT
+    assert f"argument {option}: expected an integer >= 1" in one_error_line(capsys.readouterr()[1])
+    assert not (tmp_path / "out").exists()
