@@ -44,7 +44,7 @@ from .types import (
     StageEstimate,
     SymmetryPlane,
 )
-from .units import UNITS_IN_METRES, check_distance, scale_of
+from .units import UNITS_IN_METRES, check_distance, check_not_metres, scale_of
 
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy")
 
@@ -96,6 +96,7 @@ def read_cloud(path: Path, units: str = "m") -> PointCloud:
         )
     points = points * scale
     check_distance(points, str(path))
+    check_not_metres(np.ptp(points, axis=0), units, str(path))
     return PointCloud(points=points, frame="robot")
 
 

@@ -25,6 +25,10 @@ FARTHEST_M = 10.0
 #: Larger than this (m, the largest bounding-box extent), an object is not graspable.
 LARGEST_OBJECT_M = 2.0
 
+#: Smaller than this (m, the largest bounding-box extent), no hand grasps an object: data
+#: read as millimetres that is that small was in metres.
+SMALLEST_OBJECT_M = 0.005
+
 MILLIMETRES_HINT = "looks like millimetres: pass --units mm"
 #: The hint for a file whose format fixes metres (camera.json): no option converts it.
 UNITS_IN_METRES = "looks like millimetres: the file must be in metres"
@@ -72,3 +76,19 @@ def check_extent(extents_m: np.ndarray, source: str, hint: str = MILLIMETRES_HIN
     largest = float(np.max(extents_m))
     if largest > LARGEST_OBJECT_M:
         raise InputError(f"{source}: the object is {largest:.3g} m across: {hint}")
+
+
+def check_not_metres(extents_m: np.ndarray, units: str, source: str) -> None:
+    """Refuse data read as ``units="mm"`` whose object is smaller than
+    :data:`SMALLEST_OBJECT_M`: it was in metres (``--units mm`` given by mistake).
+
+    Raises:
+        InputError: ``"<source>: the object is 0.04 mm across: looks like metres: drop
+            --units mm"``.
+    """
+    largest = float(np.max(extents_m))
+    if units == "mm" and largest < SMALLEST_OBJECT_M:
+        raise InputError(
+            f"{source}: the object is {largest * 1e3:.3g} mm across: looks like metres: "
+            "drop --units mm"
+        )

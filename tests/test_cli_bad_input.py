@@ -7,8 +7,10 @@ import json
 
 import numpy as np
 import pytest
+import trimesh
 
 from pipeline.captures import depth_from_organised, read_capture
+from pipeline.catalogue import load_object
 from pipeline.cli import main
 from pipeline.errors import EXIT_BAD_INPUT, InputError
 from pipeline.formats import read_camera
@@ -139,3 +141,31 @@ def test_sweep_counts_are_positive(capsys, tmp_path, option, value):
     assert exit_info.value.code == EXIT_BAD_INPUT
     assert f"argument {option}: expected an integer >= 1" in one_error_line(capsys.readouterr()[1])
     assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------------------ units
+
+
+def test_units_mm_on_metres_is_refused(run, recording, tmp_path):
+    folder, _, plane = recording
+    code, _, err = run("fuse", "--cloud", folder / "cloud.ply", "--contacts",
+                       folder / "contacts.json", f"--plane={plane}", "--units", "mm",
+                       "--out", tmp_path / "out")  # fmt: skip
+    assert code == EXIT_BAD_INPUT
+    assert "cloud.ply: the object is" in one_error_line(err)
+    assert "looks like metres: drop --units mm" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_units_mm_on_a_metre_mesh_is_refused(tmp_path):
+    trimesh.creation.box((0.04, 0.05, 0.1)).export(tmp_path / "box.stl")
+    assert load_object(tmp_path / "box.stl").mesh.extents.max() == pytest.approx(0.1)
+    with pytest.raises(InputError, match=r"box\.stl: the object is 0\.1 mm across: looks like"):
+        load_object(tmp_path / "box.stl", units="mm")
+
+
+def test_units_do_not_apply_to_a_catalogue_object(run, tmp_path):
+    code, _, err = run("trial", "--object", "cd_drive", "--units", "mm", "--out", tmp_path / "o")
+    assert code == EXIT_BAD_INPUT
+    assert "'cd_drive' is a catalogue object" in one_error_line(err)
+    assert not (tmp_path / "o").exists()
