@@ -243,6 +243,17 @@ def read_depth_image(path: Path, camera_path: Path | None, colour_path: Path | N
     )
 
 
+def _refuse_unused(path: Path, applies_to: str, **options: object) -> None:
+    """Refuse an option given for another kind of capture than ``path`` (it would be
+    ignored): ``options`` maps ``sensor.recorded`` parameter names to their values."""
+    for name, value in options.items():
+        if value:
+            raise InputError(
+                f"{path}: sensor.recorded.{name} (--{name}) applies to {applies_to}, "
+                "not to this capture"
+            )
+
+
 def read_capture(
     path: Path,
     *,
@@ -265,10 +276,14 @@ def read_capture(
     if path.is_dir() or suffix in (".bag", ".db3", ".mcap"):
         from .bags import read_bag
 
+        _refuse_unused(path, "a depth image", camera=camera, colour=colour)
         return read_bag(path, topic=topic, robot_frame=robot_frame)
     if suffix in PCD_SUFFIXES:
+        _refuse_unused(path, "a depth image", camera=camera, colour=colour)
+        _refuse_unused(path, "a ROS bag", topic=topic, robot_frame=robot_frame)
         return read_organised_pcd(path)
     if suffix in DEPTH_IMAGE_SUFFIXES:
+        _refuse_unused(path, "a ROS bag", topic=topic, robot_frame=robot_frame)
         return read_depth_image(path, camera, colour)
     raise InputError(
         f"{path}: unknown capture format '{suffix}' (use an organised .pcd, a depth .png or "

@@ -100,13 +100,53 @@ def counting_number(least: int) -> Callable[[str], int]:
     return parse
 
 
-def _load(args: argparse.Namespace, extra_overrides: Sequence[str] = ()):
+def _load(
+    args: argparse.Namespace,
+    extra_overrides: Sequence[str] = (),
+    reads: Sequence[str] | None = None,
+):
+    """The registry and the config of ``--config``, ``--set`` and ``extra_overrides`` (what
+    the verb's own options stand for, applied last).
+
+    Args:
+        reads: the config sections the verb reads (None: all); see :func:`check_overrides`.
+    """
     from .config import load_config
     from .registry import load_registry
 
     registry = load_registry()
     config = load_config(registry, args.config, [*args.overrides, *extra_overrides])
+    check_overrides(args.verb, args.overrides, extra_overrides, reads)
     return registry, config
+
+
+def check_overrides(
+    verb: str, overrides: Sequence[str], options: Sequence[str], reads: Sequence[str] | None
+) -> None:
+    """Refuse a ``--set`` that would be ignored without a word: one in a section ``verb``
+    does not read, or one whose key the verb's own options also set (they win).
+
+    Args:
+        overrides: the user's ``--set`` texts (``section.key=value``), already valid.
+        options: the overrides the verb's options stand for.
+        reads: the sections ``verb`` reads (None: all).
+
+    Raises:
+        ConfigError: naming the ``--set`` and why it would be ignored.
+    """
+    taken = {text.partition("=")[0].strip() for text in options}
+    for text in overrides:
+        key = text.partition("=")[0].strip()
+        section = key.split(".")[0]
+        if reads is not None and section not in reads:
+            raise ConfigError(
+                f"--set {text}: symfuse {verb} does not read [{section}] (it reads "
+                f"[{'], ['.join(reads)}])"
+            )
+        if key in taken:
+            raise ConfigError(
+                f"--set {text}: symfuse {verb} sets {key} from its arguments; drop this --set"
+            )
 
 
 # --- symfuse plugins -------------------------------------------------------------------
@@ -193,12 +233,16 @@ def stage_summary(result) -> str:
     return format_table(header, rows)
 
 
+#: The config sections ``fuse`` reads.
+FUSE_READS = ("initialiser", "estimator")
+
+
 def _cmd_fuse(args: argparse.Namespace) -> int:
     from .formats import read_cloud, read_contacts
 
     check_rerun(args)
     overrides = [f"initialiser.use={args.init}"] if args.init else []
-    registry, config = _load(args, overrides)
+    registry, config = _load(args, overrides, reads=FUSE_READS)
     plane = parse_plane(args.plane) if args.plane else None
     inputs = [args.cloud, args.contacts, *args.config]
     with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:

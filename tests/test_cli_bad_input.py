@@ -12,8 +12,9 @@ import trimesh
 from pipeline.captures import depth_from_organised, read_capture
 from pipeline.catalogue import load_object
 from pipeline.cli import main
-from pipeline.errors import EXIT_BAD_INPUT, InputError
-from pipeline.formats import read_camera
+from pipeline.completion import select_objects
+from pipeline.errors import EXIT_BAD_INPUT, ConfigError, InputError
+from pipeline.formats import read_camera, write_cloud
 
 
 def one_error_line(err: str) -> str:
@@ -169,3 +170,55 @@ def test_units_do_not_apply_to_a_catalogue_object(run, tmp_path):
     assert code == EXIT_BAD_INPUT
     assert "'cd_drive' is a catalogue object" in one_error_line(err)
     assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------ settings a verb ignores
+
+
+def test_a_set_the_verb_does_not_read_is_refused(run, recording, tmp_path):
+    folder, _, plane = recording
+    fuse = ["fuse", "--cloud", folder / "cloud.ply", "--contacts", folder / "contacts.json",
+            f"--plane={plane}", "--out", tmp_path / "out"]  # fmt: skip
+    code, _, err = run(*fuse, "--set", "trial.seed=3")
+    assert code == EXIT_BAD_INPUT
+    assert "--set trial.seed=3: symfuse fuse does not read [trial]" in one_error_line(err)
+    code, _, err = run("complete", folder / "cloud.npy", "--set", "planner.use=top-three-finger",
+                       "--out", tmp_path / "out")  # fmt: skip
+    assert "symfuse complete does not read [planner]" in one_error_line(err)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["complete", "view.npy", "--set", "sensor.use=pybullet-kinect"],
+        ["complete", "view.npy", "--set", "sensor.recorded.path=other.npy"],
+        ["trial", "--seed", "2", "--set", "trial.seed=3"],
+    ],
+)
+def test_a_set_that_an_option_overrides_is_refused(run, tmp_path, argv):
+    code, _, err = run(*argv, "--out", tmp_path / "out")
+    assert code == EXIT_BAD_INPUT
+    assert "from its arguments; drop this --set" in one_error_line(err)
+
+
+@pytest.mark.parametrize(
+    ("option", "applies_to"),
+    [(["--topic", "/camera/depth"], "a ROS bag"), (["--camera", "camera.json"], "a depth image")],
+)
+def test_a_capture_option_for_another_kind_of_capture_is_refused(tmp_path, option, applies_to):
+    rows, cols = np.mgrid[0:6, 0:8].astype(np.float64)
+    points = np.stack([(cols - 4.0) / 500.0, (rows - 3.0) / 500.0, np.ones_like(rows)], -1)
+    capture = tmp_path / ("view.npy" if option[0] == "--topic" else "view.pcd")
+    if option[0] == "--topic":
+        np.save(capture, points[..., 2].astype(np.float32))
+    else:
+        write_cloud(capture, points.reshape(-1, 3))
+    name = option[0].removeprefix("--")
+    with pytest.raises(InputError, match=f"sensor.recorded.{name} .--{name}. applies to"):
+        read_capture(capture, **{name: option[1]})
+
+
+def test_object_choice_is_an_ascii_number(run, tmp_path):
+    with pytest.raises(ConfigError, match="--object ²: expected all, largest, nearest"):
+        select_objects("²", [], None, fusing=False)
