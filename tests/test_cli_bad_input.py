@@ -13,7 +13,7 @@ from pipeline.captures import depth_from_organised, read_capture
 from pipeline.catalogue import load_object
 from pipeline.cli import main
 from pipeline.completion import select_objects
-from pipeline.errors import EXIT_BAD_INPUT, ConfigError, InputError
+from pipeline.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, ConfigError, InputError
 from pipeline.formats import read_camera, write_cloud
 
 
@@ -222,3 +222,19 @@ def test_a_capture_option_for_another_kind_of_capture_is_refused(tmp_path, optio
 def test_object_choice_is_an_ascii_number(run, tmp_path):
     with pytest.raises(ConfigError, match="--object ²: expected all, largest, nearest"):
         select_objects("²", [], None, fusing=False)
+
+
+# ------------------------------------------------------------------ Ctrl-C
+
+
+def test_ctrl_c_while_an_extension_initialises_is_an_interruption(run, monkeypatch, tmp_path):
+    def import_interrupted(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise ImportError("initialization failed") from exc
+
+    monkeypatch.setattr("pipeline.cli._cmd_config", import_interrupted)
+    code, _, err = run("config")
+    assert code == EXIT_INTERRUPTED
+    assert err.strip() == "symfuse: interrupted"
