@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -238,3 +240,34 @@ def test_ctrl_c_while_an_extension_initialises_is_an_interruption(run, monkeypat
     code, _, err = run("config")
     assert code == EXIT_INTERRUPTED
     assert err.strip() == "symfuse: interrupted"
+
+
+# ------------------------------------------------------------------ view --out, pipes
+
+
+@pytest.mark.parametrize(
+    ("name", "names"),
+    [
+        ("cloud.ply", "a Rerun recording is a .rrd file"),
+        ("old.rrd", "exists; pass --overwrite to replace it"),
+        ("missing/new.rrd", "does not exist"),
+    ],
+)
+def test_view_never_writes_over_a_file_it_was_not_given(run, tmp_path, name, names):
+    (tmp_path / "cloud.ply").write_text("a run's own cloud")
+    (tmp_path / "old.rrd").write_text("an earlier recording")
+    code, _, err = run("view", tmp_path, "--no-open", "--out", tmp_path / name)
+    assert code == EXIT_BAD_INPUT
+    assert names in one_error_line(err)
+    assert (tmp_path / "cloud.ply").read_text() == "a run's own cloud"
+    assert (tmp_path / "old.rrd").read_text() == "an earlier recording"
+
+
+def test_a_closed_pipe_ends_the_output_quietly():
+    command = [sys.executable, "-c", "import sys; from pipeline.cli import main; "
+               "sys.exit(main(['plugins', '--params']))"]  # fmt: skip
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()  # before the first line: like `symfuse plugins --params | head -1`
+    _, err = process.communicate(timeout=120)
+    assert err.decode() == ""
+    assert process.returncode == 0
