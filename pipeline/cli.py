@@ -427,6 +427,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from .experiments import EXPERIMENTS, ExperimentOptions
     from .sweep import prepare_sweep_folder, run_sweep, settings_section
 
+    if args.scheduler and args.executor != "dask":
+        raise ConfigError("--scheduler applies to --executor dask")
     registry, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
     experiment = importlib.import_module(EXPERIMENTS[args.experiment])
     estimator = config.choices["estimator"]

@@ -271,3 +271,19 @@ def test_a_closed_pipe_ends_the_output_quietly():
     _, err = process.communicate(timeout=120)
     assert err.decode() == ""
     assert process.returncode == 0
+
+
+@pytest.mark.parametrize(
+    ("argv", "names"),
+    [
+        (["objects", "--overwrite"], "--overwrite applies to --export DIR"),
+        (["objects", "--format", "stl"], "--format applies to --export DIR"),
+        (["sweep", "fig10", "--quick", "--scheduler", "tcp://host:8786"],
+         "--scheduler applies to --executor dask"),
+    ],
+)  # fmt: skip
+def test_an_option_that_would_be_ignored_is_refused(run, tmp_path, argv, names):
+    out = ["--out", tmp_path / "out"] if argv[0] == "sweep" else []
+    code, _, err = run(*argv, *out)
+    assert code == EXIT_BAD_INPUT
+    assert names in one_error_line(err)
