@@ -160,7 +160,9 @@ def read_organised_pcd(path: Path) -> Capture:
     try:
         width, height = int(header["WIDTH"][0]), int(header["HEIGHT"][0])
     except (KeyError, IndexError, ValueError):
-        raise InputError(f"{path}: the PCD header has no valid WIDTH/HEIGHT") from None
+        width = height = -1
+    if width < 0 or height < 0:
+        raise InputError(f"{path}: the PCD header has no valid WIDTH/HEIGHT")
     check_organised(width, height, str(path))
     o3d = open3d()
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):

@@ -287,3 +287,13 @@ def test_an_option_that_would_be_ignored_is_refused(run, tmp_path, argv, names):
     code, _, err = run(*argv, *out)
     assert code == EXIT_BAD_INPUT
     assert names in one_error_line(err)
+
+
+def test_a_pcd_with_negative_width_and_height_is_an_input_error(tmp_path):
+    header = (
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH -2\n"
+        "HEIGHT -2\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 4\nDATA ascii\n"
+    )
+    (tmp_path / "view.pcd").write_text(header + "0 0 1\n" * 4)
+    with pytest.raises(InputError, match="no valid WIDTH/HEIGHT"):
+        read_capture(tmp_path / "view.pcd")
