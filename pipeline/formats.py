@@ -457,6 +457,11 @@ def _rigid_transform(value: Any, where: str, path: Path) -> np.ndarray:
     return transform
 
 
+#: The keys of a ``camera.json`` (:func:`camera_to_json`) and of its ``intrinsics``.
+CAMERA_KEYS = ("intrinsics", "T_robot_camera", "frame", "table_height_m")
+INTRINSICS_KEYS = ("width", "height", "fx", "fy", "cx", "cy")
+
+
 def read_camera(path: Path) -> CameraFile:
     """Read a ``camera.json`` as :func:`camera_to_json` writes it.
 
@@ -468,6 +473,16 @@ def read_camera(path: Path) -> CameraFile:
     k = document.get("intrinsics") if isinstance(document, dict) else None
     if not isinstance(k, dict):
         raise InputError(f"{path}: 'intrinsics' must be an object with width, height, fx, ...")
+    # A misspelt key would silently drop the camera pose (and build a frame on the table).
+    for keys, known, where in (
+        (document, CAMERA_KEYS, ""),
+        (k, INTRINSICS_KEYS, "intrinsics."),
+    ):
+        unknown = sorted(set(keys) - set(known))
+        if unknown:
+            raise InputError(
+                f"{path}: unknown key '{where}{unknown[0]}' (known: {', '.join(known)})"
+            )
     size = []
     for key in ("width", "height"):
         if not isinstance(k.get(key), int) or isinstance(k.get(key), bool) or k[key] < 1:

@@ -297,3 +297,23 @@ def test_a_pcd_with_negative_width_and_height_is_an_input_error(tmp_path):
     (tmp_path / "view.pcd").write_text(header + "0 0 1\n" * 4)
     with pytest.raises(InputError, match="no valid WIDTH/HEIGHT"):
         read_capture(tmp_path / "view.pcd")
+
+
+@pytest.mark.parametrize(
+    ("changes", "names"),
+    [
+        ({"T_robot_cam": np.eye(4).tolist()}, "unknown key 'T_robot_cam'"),
+        ({"distortion": [0.0] * 5}, "unknown key 'distortion'"),
+    ],
+)
+def test_a_misspelt_camera_key_is_refused(tmp_path, changes, names):
+    document = camera_document()
+    document.update(changes)
+    (tmp_path / "camera.json").write_text(json.dumps(document))
+    with pytest.raises(InputError, match=names):
+        read_camera(tmp_path / "camera.json")
+    document = camera_document()
+    document["intrinsics"]["f_x"] = 5.0
+    (tmp_path / "camera.json").write_text(json.dumps(document))
+    with pytest.raises(InputError, match=r"unknown key 'intrinsics\.f_x'"):
+        read_camera(tmp_path / "camera.json")
