@@ -112,6 +112,15 @@ def read_npy(path: Path) -> np.ndarray:
         raise InputError(f"{path}: cannot read as .npy: {_first_line(exc)}") from None
 
 
+def check_keys(document: dict, known: Sequence[str], where: str, path: Path) -> None:
+    """Refuse a key of a JSON object that is not ``known``: a misspelt optional key would
+    be ignored without a word. ``where`` prefixes the key in the message (``intrinsics.``).
+    """
+    unknown = sorted(set(document) - set(known))
+    if unknown:
+        raise InputError(f"{path}: unknown key '{where}{unknown[0]}' (known: {', '.join(known)})")
+
+
 def _first_line(exc: BaseException) -> str:
     lines = str(exc).strip().splitlines()
     return lines[0] if lines else type(exc).__name__
@@ -155,6 +164,10 @@ class RecordedGrasps:
     plans: tuple[GraspPlan | None, ...]
 
 
+#: The keys of one taxel in a contacts file.
+TAXEL_KEYS = ("position", "normal", "pad", "index")
+
+
 def contacts_from_json(document: Any, path: Path, units: str | None = None) -> RecordedGrasps:
     """Validate a parsed contacts document (see the module docstring), in metres.
 
@@ -163,6 +176,7 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
     """
     if not isinstance(document, dict):
         raise InputError(f"{path}: the top level must be a JSON object")
+    check_keys(document, ("frame", "units", "grasps"), "", path)
     if document.get("frame", "robot") != "robot":
         raise InputError(f'{path}: frame must be "robot", got {document.get("frame")!r}')
     if document.get("units") not in ("m", "mm"):
@@ -178,11 +192,13 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
         taxels = grasp.get("taxels") if isinstance(grasp, dict) else None
         if not isinstance(taxels, list) or not taxels:
             raise InputError(f"{path}: grasps[{g}].taxels must be a non-empty list")
+        check_keys(grasp, ("taxels", "plan"), f"grasps[{g}].", path)
         positions, normals, pads, indices = [], [], [], []
         for t, taxel in enumerate(taxels):
             where = f"grasps[{g}].taxels[{t}]"
             if not isinstance(taxel, dict):
                 raise InputError(f"{path}: {where} must be an object")
+            check_keys(taxel, TAXEL_KEYS, f"{where}.", path)
             positions.append(_vector(taxel.get("position"), f"{where}.position", path))
             normal = _vector(taxel.get("normal"), f"{where}.normal", path)
             length = float(np.linalg.norm(normal))
@@ -474,15 +490,8 @@ def read_camera(path: Path) -> CameraFile:
     if not isinstance(k, dict):
         raise InputError(f"{path}: 'intrinsics' must be an object with width, height, fx, ...")
     # A misspelt key would silently drop the camera pose (and build a frame on the table).
-    for keys, known, where in (
-        (document, CAMERA_KEYS, ""),
-        (k, INTRINSICS_KEYS, "intrinsics."),
-    ):
-        unknown = sorted(set(keys) - set(known))
-        if unknown:
-            raise InputError(
-                f"{path}: unknown key '{where}{unknown[0]}' (known: {', '.join(known)})"
-            )
+    check_keys(document, CAMERA_KEYS, "", path)
+    check_keys(k, INTRINSICS_KEYS, "intrinsics.", path)
     size = []
     for key in ("width", "height"):
         if not isinstance(k.get(key), int) or isinstance(k.get(key), bool) or k[key] < 1:

@@ -16,7 +16,7 @@ from pipeline.catalogue import load_object
 from pipeline.cli import main
 from pipeline.completion import select_objects
 from pipeline.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, ConfigError, InputError
-from pipeline.formats import read_camera, write_cloud
+from pipeline.formats import read_camera, read_contacts, write_cloud
 
 
 def one_error_line(err: str) -> str:
@@ -317,3 +317,22 @@ def test_a_misspelt_camera_key_is_refused(tmp_path, changes, names):
     (tmp_path / "camera.json").write_text(json.dumps(document))
     with pytest.raises(InputError, match=r"unknown key 'intrinsics\.f_x'"):
         read_camera(tmp_path / "camera.json")
+
+
+@pytest.mark.parametrize(
+    ("change", "names"),
+    [
+        (lambda d: d.update(unit="mm"), "unknown key 'unit'"),
+        (lambda d: d["grasps"][0].update(plna={}), r"unknown key 'grasps\[0\]\.plna'"),
+        (lambda d: d["grasps"][0]["taxels"][0].update(idx=3), r"taxels\[0\]\.idx'"),
+    ],
+)
+def test_a_misspelt_contacts_key_is_refused(tmp_path, change, names):
+    taxel = {"position": [0.5, 0.0, 0.1], "normal": [0.0, 1.0, 0.0], "pad": "left"}
+    document = {"frame": "robot", "units": "m", "grasps": [{"taxels": [taxel]}]}
+    (tmp_path / "contacts.json").write_text(json.dumps(document))
+    read_contacts(tmp_path / "contacts.json")
+    change(document)
+    (tmp_path / "contacts.json").write_text(json.dumps(document))
+    with pytest.raises(InputError, match=names):
+        read_contacts(tmp_path / "contacts.json")
