@@ -111,7 +111,7 @@ def image_depth(message: Any, where: str) -> np.ndarray:
 def camera_intrinsics(info: Any, where: str) -> CameraIntrinsics:
     """Pinhole intrinsics from a CameraInfo's ``K`` (ROS 1) or ``k`` (ROS 2)."""
     k = np.asarray(getattr(info, "k", None) if hasattr(info, "k") else info.K, dtype=np.float64)
-    if k.shape != (9,) or not (k[0] > 0 and k[4] > 0):
+    if k.shape != (9,) or not (np.isfinite(k).all() and k[0] > 0 and k[4] > 0):
         raise InputError(f"{where}: the CameraInfo has no valid K matrix")
     return CameraIntrinsics(int(info.width), int(info.height), k[0], k[4], k[2], k[5])
 

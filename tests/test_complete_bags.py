@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import types
 from pathlib import Path
 
 import numpy as np
@@ -14,8 +15,10 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from scipy.spatial.transform import Rotation
 
+from pipeline.bags import camera_intrinsics
 from pipeline.captures import read_organised_pcd
 from pipeline.cli import main
+from pipeline.errors import InputError
 from pipeline.open3d_loader import open3d
 
 KINECT = Path(__file__).parent / "data" / "kinect_laptop_box_floor.pcd"
@@ -265,3 +268,11 @@ def test_a_broken_ros2_metadata_file_is_one_line(tmp_path, capsys):
     (tmp_path / "bag" / "metadata.yaml").write_text("rosbag2_bagfile_information: [\n")
     assert main(["complete", str(tmp_path / "bag"), "--out", str(tmp_path / "out")]) == 2
     assert "cannot read as a ROS bag: Could not load YAML" in one_error(capsys)
+
+
+@pytest.mark.parametrize("focal", [0.0, float("inf"), float("nan")])
+def test_a_camera_info_without_a_finite_focal_length_is_refused(focal):
+    k = [focal, 0.0, 320.0, 0.0, 525.0, 240.0, 0.0, 0.0, 1.0]
+    info = types.SimpleNamespace(k=np.array(k), width=640, height=480)
+    with pytest.raises(InputError, match="no valid K matrix"):
+        camera_intrinsics(info, "scene.bag [/camera_info]")
