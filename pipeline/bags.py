@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 from .captures import Capture, check_organised, checked_depth, depth_from_organised
 from .errors import InputError
 from .types import CameraIntrinsics
+from .units import UNITS_IN_METRES, check_distance
 
 CLOUD = "sensor_msgs/msg/PointCloud2"
 IMAGE = "sensor_msgs/msg/Image"
@@ -66,7 +67,7 @@ def cloud_points(message: Any, where: str) -> tuple[np.ndarray, np.ndarray | Non
     )
     height, width = int(message.height), int(message.width)
     check_organised(width, height, where)
-    data = np.frombuffer(bytes(message.data), dtype=np.uint8).reshape(height, message.row_step)
+    data = _rows(message.data, height, message.row_step, width * message.point_step, where)
     rows = data[:, : width * message.point_step].copy().view(dtype).reshape(height, width)
     points = np.stack([rows[name].astype(np.float64) for name in "xyz"], axis=-1)
     colour = next((name for name in ("rgb", "rgba") if name in names), None)
@@ -75,6 +76,18 @@ def cloud_points(message: Any, where: str) -> tuple[np.ndarray, np.ndarray | Non
     packed = rows[colour]
     rgb = np.stack([(packed >> shift) & 0xFF for shift in (16, 8, 0)], axis=-1)
     return points, rgb.astype(np.uint8)
+
+
+def _rows(data: Any, height: int, step: int, row_bytes: int, where: str) -> np.ndarray:
+    """A message's data as ``(height, step)`` bytes, refused unless each row of ``step``
+    bytes holds the ``row_bytes`` its pixels need."""
+    buffer = np.frombuffer(bytes(data), dtype=np.uint8)
+    if step < row_bytes or len(buffer) != height * step:
+        raise InputError(
+            f"{where}: the message holds {len(buffer)} bytes; its header says {height} rows "
+            f"of {step} bytes, each needing {row_bytes}"
+        )
+    return buffer.reshape(height, step)
 
 
 def image_depth(message: Any, where: str) -> np.ndarray:
@@ -90,7 +103,7 @@ def image_depth(message: Any, where: str) -> np.ndarray:
     height, width = int(message.height), int(message.width)
     if height * width == 0:
         raise InputError(f"{where}: the capture is empty (Image of {width}x{height})")
-    rows = np.frombuffer(bytes(message.data), dtype=np.uint8).reshape(height, message.step)
+    rows = _rows(message.data, height, message.step, width * dtype.itemsize, where)
     depth = rows[:, : width * dtype.itemsize].copy().view(dtype).astype(np.float64) * scale
     return depth
 
@@ -98,7 +111,7 @@ def image_depth(message: Any, where: str) -> np.ndarray:
 def camera_intrinsics(info: Any, where: str) -> CameraIntrinsics:
     """Pinhole intrinsics from a CameraInfo's ``K`` (ROS 1) or ``k`` (ROS 2)."""
     k = np.asarray(getattr(info, "k", None) if hasattr(info, "k") else info.K, dtype=np.float64)
-    if k.shape != (9,) or not (k[0] > 0 and k[4] > 0):
+    if k.shape != (9,) or not (np.isfinite(k).all() and k[0] > 0 and k[4] > 0):
         raise InputError(f"{where}: the CameraInfo has no valid K matrix")
     return CameraIntrinsics(int(info.width), int(info.height), k[0], k[4], k[2], k[5])
 
@@ -129,7 +142,8 @@ def read_bag(path: Path, *, topic: str = "", robot_frame: str = "") -> Capture:
     except InputError:
         raise
     except Exception as exc:  # rosbags raises many kinds on a corrupt or foreign file
-        raise InputError(f"{path}: cannot read as a ROS bag: {exc}") from None
+        detail = " ".join(str(exc).split()) or type(exc).__name__  # YAML errors span lines
+        raise InputError(f"{path}: cannot read as a ROS bag: {detail}") from None
 
 
 def _first(bag: Any, connection: Any) -> Any:
@@ -185,4 +199,6 @@ def _read(bag: Any, path: Path, topic: str, robot_frame: str) -> Capture:
     T_robot_camera = chain(links, frame, robot_frame) if frame else None
     if robot_frame and T_robot_camera is None:
         raise InputError(f"{where}: /tf does not link frame '{frame}' to '{robot_frame}'")
+    if T_robot_camera is not None:
+        check_distance(T_robot_camera[:3, 3], f"{where}: the camera in /tf", UNITS_IN_METRES)
     return Capture(depth, rgb, intrinsics, T_robot_camera, None, f"{where}: {kind}")

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .formats import read_camera, require_file
+from .formats import read_camera, read_npy, require_file
 from .types import CameraIntrinsics
 
 #: A median depth above this many metres means the values are millimetres (a depth
@@ -103,7 +103,14 @@ def depth_from_organised(points: np.ndarray, where: str) -> tuple[np.ndarray, Ca
         squared += float(np.mean((design @ np.array([focal, centre]) - pixel) ** 2))
     rms = float(np.sqrt(squared))
     (fx, cx), (fy, cy) = fitted
-    if not rms <= MAX_PINHOLE_RMS_PX or fx <= 0.0 or fy <= 0.0:
+    if rms <= MAX_PINHOLE_RMS_PX and (fx <= 0.0 or fy <= 0.0):
+        flipped = " and ".join(axis for axis, f in (("x", fx), ("y", fy)) if f <= 0.0)
+        raise InputError(
+            f"{where}: the organised points are a mirror image: their {flipped} axis runs "
+            "against the pixel grid; give the cloud in the camera's optical frame (x right, "
+            "y down, z forward)"
+        )
+    if not rms <= MAX_PINHOLE_RMS_PX:
         raise InputError(
             f"{where}: the organised points are not a pinhole image in their frame "
             f"(fit RMS {rms:.2f} px); give the cloud in the camera's optical frame"
@@ -153,7 +160,9 @@ def read_organised_pcd(path: Path) -> Capture:
     try:
         width, height = int(header["WIDTH"][0]), int(header["HEIGHT"][0])
     except (KeyError, IndexError, ValueError):
-        raise InputError(f"{path}: the PCD header has no valid WIDTH/HEIGHT") from None
+        width = height = -1
+    if width < 0 or height < 0:
+        raise InputError(f"{path}: the PCD header has no valid WIDTH/HEIGHT")
     check_organised(width, height, str(path))
     o3d = open3d()
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
@@ -197,10 +206,7 @@ def read_depth_image(path: Path, camera_path: Path | None, colour_path: Path | N
             when there is one.
     """
     if path.suffix.lower() == ".npy":
-        try:
-            depth = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise InputError(f"{path}: cannot read as .npy: {exc}") from None
+        depth = read_npy(path)
         if depth.ndim != 2 or depth.dtype.kind != "f":
             raise InputError(
                 f"{path}: expected an (H, W) float depth image in metres, got shape "
@@ -239,6 +245,17 @@ def read_depth_image(path: Path, camera_path: Path | None, colour_path: Path | N
     )
 
 
+def _refuse_unused(path: Path, applies_to: str, **options: object) -> None:
+    """Refuse an option given for another kind of capture than ``path`` (it would be
+    ignored): ``options`` maps ``sensor.recorded`` parameter names to their values."""
+    for name, value in options.items():
+        if value:
+            raise InputError(
+                f"{path}: sensor.recorded.{name} (--{name}) applies to {applies_to}, "
+                "not to this capture"
+            )
+
+
 def read_capture(
     path: Path,
     *,
@@ -261,10 +278,14 @@ def read_capture(
     if path.is_dir() or suffix in (".bag", ".db3", ".mcap"):
         from .bags import read_bag
 
+        _refuse_unused(path, "a depth image", camera=camera, colour=colour)
         return read_bag(path, topic=topic, robot_frame=robot_frame)
     if suffix in PCD_SUFFIXES:
+        _refuse_unused(path, "a depth image", camera=camera, colour=colour)
+        _refuse_unused(path, "a ROS bag", topic=topic, robot_frame=robot_frame)
         return read_organised_pcd(path)
     if suffix in DEPTH_IMAGE_SUFFIXES:
+        _refuse_unused(path, "a ROS bag", topic=topic, robot_frame=robot_frame)
         return read_depth_image(path, camera, colour)
     raise InputError(
         f"{path}: unknown capture format '{suffix}' (use an organised .pcd, a depth .png or "

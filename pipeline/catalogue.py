@@ -56,7 +56,7 @@ from objects import ROOT as OBJECTS_ROOT
 
 from .errors import ConfigError, InputError
 from .types import SymmetryPlane
-from .units import MILLIMETRES_HINT, check_extent, scale_of
+from .units import MILLIMETRES_HINT, check_extent, check_not_metres, scale_of
 
 _log = logging.getLogger(__name__)
 
@@ -217,6 +217,10 @@ def load_object(
     text = os.fspath(name_or_path)
     catalogue = _specification()
     if text in catalogue:
+        if units != "m":
+            raise InputError(
+                f"'{text}' is a catalogue object (in metres); --units applies to mesh files"
+            )
         info = catalogue[text]
         return CatalogueObject(
             name=info.name,
@@ -240,7 +244,7 @@ def load_object(
             )
         return _load_urdf(path)
     if path.suffix.lower() in MESH_SUFFIXES or path.exists() or os.sep in text:
-        return _load_mesh_file(path, recentre=recentre, scale=scale_of(units, str(path)))
+        return _load_mesh_file(path, recentre=recentre, units=units)
     raise InputError(f"unknown object '{text}'; catalogue objects: {', '.join(catalogue)}")
 
 
@@ -256,7 +260,7 @@ def _checked_mesh(
     return mesh
 
 
-def _load_mesh_file(path: Path, *, recentre: bool, scale: float = 1.0) -> CatalogueObject:
+def _load_mesh_file(path: Path, *, recentre: bool, units: str = "m") -> CatalogueObject:
     if not path.is_file():
         raise InputError(f"{path}: no such mesh file")
     if path.suffix.lower() not in MESH_SUFFIXES:
@@ -266,9 +270,11 @@ def _load_mesh_file(path: Path, *, recentre: bool, scale: float = 1.0) -> Catalo
     except Exception as exc:  # trimesh raises many types for malformed files
         detail = (str(exc).splitlines() or [""])[0]
         raise InputError(f"{path}: cannot read mesh ({type(exc).__name__}: {detail})") from exc
+    scale = scale_of(units, str(path))
     if isinstance(mesh, trimesh.Trimesh) and scale != 1.0:
         mesh.apply_scale(scale)
     mesh = _checked_mesh(mesh, path, "contains no triangles")
+    check_not_metres(mesh.extents, units, str(path))
     if recentre:
         mesh = place_on_table(mesh)
     watertight = bool(mesh.is_watertight)

@@ -10,17 +10,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
 from . import __version__
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
 from .errors import (
+    EXIT_BAD_INPUT,
     EXIT_ESTIMATE_FAILED,
     EXIT_INTERRUPTED,
     EXIT_OK,
@@ -84,13 +86,68 @@ def _add_units_option(parser: argparse.ArgumentParser, what: str) -> None:
     )
 
 
-def _load(args: argparse.Namespace, extra_overrides: Sequence[str] = ()):
+def counting_number(least: int) -> Callable[[str], int]:
+    """An argparse ``type``: an integer of at least ``least`` (a seed >= 0, a count >= 1)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got '{text}'") from None
+        if value < least:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {least}, got {value}")
+        return value
+
+    return parse
+
+
+def _load(
+    args: argparse.Namespace,
+    extra_overrides: Sequence[str] = (),
+    reads: Sequence[str] | None = None,
+):
+    """The registry and the config of ``--config``, ``--set`` and ``extra_overrides`` (what
+    the verb's own options stand for, applied last).
+
+    Args:
+        reads: the config sections the verb reads (None: all); see :func:`check_overrides`.
+    """
     from .config import load_config
     from .registry import load_registry
 
     registry = load_registry()
     config = load_config(registry, args.config, [*args.overrides, *extra_overrides])
+    check_overrides(args.verb, args.overrides, extra_overrides, reads)
     return registry, config
+
+
+def check_overrides(
+    verb: str, overrides: Sequence[str], options: Sequence[str], reads: Sequence[str] | None
+) -> None:
+    """Refuse a ``--set`` that would be ignored without a word: one in a section ``verb``
+    does not read, or one whose key the verb's own options also set (they win).
+
+    Args:
+        overrides: the user's ``--set`` texts (``section.key=value``), already valid.
+        options: the overrides the verb's options stand for.
+        reads: the sections ``verb`` reads (None: all).
+
+    Raises:
+        ConfigError: naming the ``--set`` and why it would be ignored.
+    """
+    taken = {text.partition("=")[0].strip() for text in options}
+    for text in overrides:
+        key = text.partition("=")[0].strip()
+        section = key.split(".")[0]
+        if reads is not None and section not in reads:
+            raise ConfigError(
+                f"--set {text}: symfuse {verb} does not read [{section}] (it reads "
+                f"[{'], ['.join(reads)}])"
+            )
+        if key in taken:
+            raise ConfigError(
+                f"--set {text}: symfuse {verb} sets {key} from its arguments; drop this --set"
+            )
 
 
 # --- symfuse plugins -------------------------------------------------------------------
@@ -177,12 +234,16 @@ def stage_summary(result) -> str:
     return format_table(header, rows)
 
 
+#: The config sections ``fuse`` reads.
+FUSE_READS = ("initialiser", "estimator")
+
+
 def _cmd_fuse(args: argparse.Namespace) -> int:
     from .formats import read_cloud, read_contacts
 
     check_rerun(args)
     overrides = [f"initialiser.use={args.init}"] if args.init else []
-    registry, config = _load(args, overrides)
+    registry, config = _load(args, overrides, reads=FUSE_READS)
     plane = parse_plane(args.plane) if args.plane else None
     inputs = [args.cloud, args.contacts, *args.config]
     with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
@@ -371,6 +432,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from .experiments import EXPERIMENTS, ExperimentOptions
     from .sweep import prepare_sweep_folder, run_sweep, settings_section
 
+    if args.scheduler and args.executor != "dask":
+        raise ConfigError("--scheduler applies to --executor dask")
     registry, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
     experiment = importlib.import_module(EXPERIMENTS[args.experiment])
     estimator = config.choices["estimator"]
@@ -450,9 +513,13 @@ def _add_sweep_parser(verbs) -> None:
     )
     sweep.add_argument("--estimator", metavar="NAME", help="estimator to run (default: config)")
     sweep.add_argument("--quick", action="store_true", help="a reduced grid (smoke test)")
-    sweep.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
-    sweep.add_argument("--repeats", type=int, help="trials per grid point (default: paper's)")
-    sweep.add_argument("--workers", type=int, help="local processes (default: all cores)")
+    sweep.add_argument("--seed", type=counting_number(0), default=0, help="base seed (default 0)")
+    sweep.add_argument(
+        "--repeats", type=counting_number(1), help="trials per grid point (default: paper's)"
+    )
+    sweep.add_argument(
+        "--workers", type=counting_number(1), help="local processes (default: all cores)"
+    )
     sweep.add_argument("--executor", choices=["local", "dask"], default="local")
     sweep.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (tcp://...)")
     _add_config_options(sweep)
@@ -486,6 +553,14 @@ class _Parser(argparse.ArgumentParser):
         if self._describe is not None:
             self.description = self._describe()
         return super().format_help()
+
+    def error(self, message: str) -> NoReturn:
+        """A command-line mistake as every other error: one line, exit code 2 (argparse
+        would print the usage first and prefix the verb's name differently)."""
+        verb = self.prog.removeprefix("symfuse").strip()
+        where = f"{verb}: " if verb else ""
+        hint = f"symfuse {verb} --help" if verb else "symfuse --help"
+        self.exit(EXIT_BAD_INPUT, f"symfuse: error: {where}{message} (see {hint})\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -561,7 +636,7 @@ def build_parser() -> argparse.ArgumentParser:
         "top-three-finger); auto (the default): the hand with the best feasible grasp",
     )
     trial.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
-    trial.add_argument("--seed", type=int, help="random seed of the trial")
+    trial.add_argument("--seed", type=counting_number(0), help="random seed of the trial")
     trial.add_argument("--yaw", type=float, metavar="DEG", help="object yaw on the table")
     _add_units_option(trial, "the --mesh file")
     _add_config_options(trial)
@@ -608,6 +683,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("symfuse: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        # The reader of stdout left (`symfuse objects | head`): nothing more to say, and
+        # Python must not fail again flushing stdout at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
+    except Exception as exc:
+        if not interrupted(exc):
+            raise
+        print("symfuse: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def interrupted(exc: BaseException) -> bool:
+    """Whether ``exc`` was caused by Ctrl-C: a compiled extension interrupted while it
+    initialises (open3d's pybind11 module) raises ImportError from the KeyboardInterrupt."""
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False
 
 
 if __name__ == "__main__":

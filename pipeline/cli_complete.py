@@ -59,6 +59,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
+#: The config sections ``complete`` reads.
+READS = ("sensor", "segmenter", "initialiser", "estimator")
+
+
 def overrides(args: argparse.Namespace) -> list[str]:
     """The config overrides ``complete``'s options stand for (after the user's ``--set``)."""
     settings = {
@@ -83,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from .outdir import staged_output
 
     check_rerun(args)
-    registry, config = _load(args, overrides(args))
+    registry, config = _load(args, overrides(args), reads=READS)
     inputs = [p for p in (args.scan, args.camera, args.contacts, *args.config) if p is not None]
     with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
         recorded = read_contacts(args.contacts) if args.contacts else None

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .errors import InputError
+from .errors import ConfigError, InputError
 from .tables import format_table
 
 EXPORT_FORMATS = ("obj", "stl")
@@ -53,6 +53,9 @@ def run(args: argparse.Namespace) -> int:
         for path in written:
             print(args.export / path.name)
         return 0
+    for option, given in (("--overwrite", args.overwrite), ("--format", args.format)):
+        if given:
+            raise ConfigError(f"{option} applies to --export DIR")
     print(catalogue_table())
     return 0
 

@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from .errors import ConfigError
+
 
 def add_rerun_option(parser: argparse.ArgumentParser) -> None:
     """``--rerun`` for a verb that writes a run folder."""
@@ -51,7 +53,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         ),
     )
     parser.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="a trial/fuse output folder")
-    parser.add_argument("--out", type=Path, metavar="FILE", help="write the recording here instead")
+    parser.add_argument(
+        "--out", type=Path, metavar="FILE", help="write the recording here instead (.rrd)"
+    )
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace an existing --out recording"
+    )
     parser.add_argument(
         "--no-open", action="store_true", help="only write the recording, do not open the viewer"
     )
@@ -66,9 +73,28 @@ def has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
+def check_recording_target(path: Path, *, overwrite: bool) -> None:
+    """Refuse a ``--out`` recording that is not a ``.rrd`` file in an existing folder, or
+    that exists (another file, perhaps one of the run's own) without ``overwrite``.
+
+    Raises:
+        ConfigError: naming ``--out`` and what is wrong with it.
+    """
+    if path.suffix.lower() != ".rrd":
+        raise ConfigError(f"--out {path}: a Rerun recording is a .rrd file")
+    if path.is_dir():
+        raise ConfigError(f"--out {path}: is a folder; give a .rrd file")
+    if path.exists() and not overwrite:
+        raise ConfigError(f"--out {path}: exists; pass --overwrite to replace it")
+    if not path.parent.is_dir():
+        raise ConfigError(f"--out {path}: the folder {path.parent} does not exist")
+
+
 def run(args: argparse.Namespace) -> int:
     from .viz.recording import write_recording
 
+    if args.out is not None:
+        check_recording_target(args.out, overwrite=args.overwrite)
     path = write_recording(args.run_dir, args.out)
     print(f"wrote {path}")
     if args.no_open or not has_display():

@@ -132,7 +132,7 @@ def select_objects(
         camera = np.asarray(observation.T_robot_camera)[:3, 3]
         distances = [np.linalg.norm(c.points.mean(axis=0) - camera) for c in objects]
         return [int(np.argmin(distances))]
-    if not which.isdigit():
+    if not (which.isascii() and which.isdigit()):
         raise ConfigError(f"--object {which}: expected {', '.join(OBJECT_CHOICES)} or a number")
     if int(which) >= len(objects):
         raise ConfigError(f"--object {which}: only {len(objects)} objects were found (0-based)")

@@ -47,7 +47,7 @@ class TrialSettings:
         "hand: Schunk PG-70 or SDH-2, or auto: the hand whose planner finds the best "
         "feasible grasp on this object",
     )
-    seed: int = param(0, "seed of every random choice in the trial")
+    seed: int = param(0, "seed of every random choice in the trial", at_least=0)
     x_m: float = param(0.0, "object position on the table, robot frame x (m)")
     y_m: float = param(0.0, "object position on the table, robot frame y (m)")
     yaw_deg: float = param(0.0, "object rotation about the table normal (deg)")

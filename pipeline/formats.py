@@ -44,7 +44,7 @@ from .types import (
     StageEstimate,
     SymmetryPlane,
 )
-from .units import check_distance, scale_of
+from .units import UNITS_IN_METRES, check_distance, check_not_metres, scale_of
 
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy")
 
@@ -72,10 +72,7 @@ def read_cloud(path: Path, units: str = "m") -> PointCloud:
     if suffix not in CLOUD_SUFFIXES:
         raise InputError(f"{path}: unknown cloud format '{suffix}' (use .ply, .pcd or .npy)")
     if suffix == ".npy":
-        try:
-            points = np.load(path, allow_pickle=False)
-        except (OSError, ValueError, EOFError, UnicodeError) as exc:
-            raise InputError(f"{path}: cannot read as .npy: {_first_line(exc)}") from None
+        points = read_npy(path)
         if points.ndim != 2 or points.shape[1] != 3:
             raise InputError(f"{path}: expected an (N, 3) array, got shape {points.shape}")
         if points.dtype.kind not in "iuf":  # signed, unsigned, floating
@@ -99,7 +96,29 @@ def read_cloud(path: Path, units: str = "m") -> PointCloud:
         )
     points = points * scale
     check_distance(points, str(path))
+    check_not_metres(np.ptp(points, axis=0), units, str(path))
     return PointCloud(points=points, frame="robot")
+
+
+def read_npy(path: Path) -> np.ndarray:
+    """The array of a ``.npy`` file (never a pickle).
+
+    Raises:
+        InputError: the file is empty, truncated, not ``.npy`` or holds Python objects.
+    """
+    try:
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError, UnicodeError) as exc:
+        raise InputError(f"{path}: cannot read as .npy: {_first_line(exc)}") from None
+
+
+def check_keys(document: dict, known: Sequence[str], where: str, path: Path) -> None:
+    """Refuse a key of a JSON object that is not ``known``: a misspelt optional key would
+    be ignored without a word. ``where`` prefixes the key in the message (``intrinsics.``).
+    """
+    unknown = sorted(set(document) - set(known))
+    if unknown:
+        raise InputError(f"{path}: unknown key '{where}{unknown[0]}' (known: {', '.join(known)})")
 
 
 def _first_line(exc: BaseException) -> str:
@@ -145,6 +164,10 @@ class RecordedGrasps:
     plans: tuple[GraspPlan | None, ...]
 
 
+#: The keys of one taxel in a contacts file.
+TAXEL_KEYS = ("position", "normal", "pad", "index")
+
+
 def contacts_from_json(document: Any, path: Path, units: str | None = None) -> RecordedGrasps:
     """Validate a parsed contacts document (see the module docstring), in metres.
 
@@ -153,6 +176,7 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
     """
     if not isinstance(document, dict):
         raise InputError(f"{path}: the top level must be a JSON object")
+    check_keys(document, ("frame", "units", "grasps"), "", path)
     if document.get("frame", "robot") != "robot":
         raise InputError(f'{path}: frame must be "robot", got {document.get("frame")!r}')
     if document.get("units") not in ("m", "mm"):
@@ -168,11 +192,13 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
         taxels = grasp.get("taxels") if isinstance(grasp, dict) else None
         if not isinstance(taxels, list) or not taxels:
             raise InputError(f"{path}: grasps[{g}].taxels must be a non-empty list")
+        check_keys(grasp, ("taxels", "plan"), f"grasps[{g}].", path)
         positions, normals, pads, indices = [], [], [], []
         for t, taxel in enumerate(taxels):
             where = f"grasps[{g}].taxels[{t}]"
             if not isinstance(taxel, dict):
                 raise InputError(f"{path}: {where} must be an object")
+            check_keys(taxel, TAXEL_KEYS, f"{where}.", path)
             positions.append(_vector(taxel.get("position"), f"{where}.position", path))
             normal = _vector(taxel.get("normal"), f"{where}.normal", path)
             length = float(np.linalg.norm(normal))
@@ -423,9 +449,33 @@ def camera_to_json(observation: DepthObservation) -> dict[str, Any]:
 
 
 def _positive(value: Any, where: str, path: Path) -> float:
-    if not isinstance(value, int | float) or isinstance(value, bool) or not value > 0:
-        raise InputError(f"{path}: {where} must be a positive number, got {value!r}")
+    if not isinstance(value, int | float) or isinstance(value, bool) or not 0 < value < math.inf:
+        raise InputError(f"{path}: {where} must be a positive finite number, got {value!r}")
     return float(value)
+
+
+def _rigid_transform(value: Any, where: str, path: Path) -> np.ndarray:
+    """A JSON 4x4 matrix as a rigid transform: a rotation (orthonormal, determinant +1,
+    not a reflection), a finite translation and the bottom row 0 0 0 1."""
+    try:
+        transform = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        transform = np.zeros(0)
+    if transform.shape != (4, 4) or not np.isfinite(transform).all():
+        raise InputError(f"{path}: {where} must be a finite 4x4 matrix")
+    rotation = transform[:3, :3]
+    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
+        raise InputError(f"{path}: {where}'s rotation is not orthonormal")
+    if np.linalg.det(rotation) < 0.0:
+        raise InputError(f"{path}: {where}'s rotation is a reflection (determinant -1)")
+    if not np.allclose(transform[3], [0.0, 0.0, 0.0, 1.0]):
+        raise InputError(f"{path}: {where}'s bottom row must be 0 0 0 1")
+    return transform
+
+
+#: The keys of a ``camera.json`` (:func:`camera_to_json`) and of its ``intrinsics``.
+CAMERA_KEYS = ("intrinsics", "T_robot_camera", "frame", "table_height_m")
+INTRINSICS_KEYS = ("width", "height", "fx", "fy", "cx", "cy")
 
 
 def read_camera(path: Path) -> CameraFile:
@@ -439,6 +489,9 @@ def read_camera(path: Path) -> CameraFile:
     k = document.get("intrinsics") if isinstance(document, dict) else None
     if not isinstance(k, dict):
         raise InputError(f"{path}: 'intrinsics' must be an object with width, height, fx, ...")
+    # A misspelt key would silently drop the camera pose (and build a frame on the table).
+    check_keys(document, CAMERA_KEYS, "", path)
+    check_keys(k, INTRINSICS_KEYS, "intrinsics.", path)
     size = []
     for key in ("width", "height"):
         if not isinstance(k.get(key), int) or isinstance(k.get(key), bool) or k[key] < 1:
@@ -458,15 +511,8 @@ def read_camera(path: Path) -> CameraFile:
     intrinsics = CameraIntrinsics(*size, *focal, *centre)
     transform = document.get("T_robot_camera")
     if transform is not None:
-        try:
-            transform = np.array(transform, dtype=np.float64)
-        except (TypeError, ValueError):
-            transform = np.zeros(0)
-        if transform.shape != (4, 4) or not np.isfinite(transform).all():
-            raise InputError(f"{path}: T_robot_camera must be a finite 4x4 matrix")
-        rotation = transform[:3, :3]
-        if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
-            raise InputError(f"{path}: T_robot_camera's rotation is not orthonormal")
+        transform = _rigid_transform(transform, "T_robot_camera", path)
+        check_distance(transform[:3, 3], f"{path}: T_robot_camera's translation", UNITS_IN_METRES)
     height = document.get("table_height_m")
     if height is not None and (
         not isinstance(height, int | float) or isinstance(height, bool) or not math.isfinite(height)

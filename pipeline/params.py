@@ -9,7 +9,8 @@ A stage implementation declares its parameters as a frozen dataclass named ``Par
 
 Supported field types: ``bool``, ``int``, ``float``, ``str``, ``Literal[...]`` of str/int,
 and ``tuple[float, ...]`` / ``tuple[int, ...]`` / ``tuple[str, ...]``. An ``int`` is accepted
-where a ``float`` is declared; nothing else is converted silently. Numbers may declare a
+where a ``float`` is declared; nothing else is converted silently; a ``float`` is finite
+(TOML's ``nan`` and ``inf`` are refused). Numbers may declare a
 bound, ``param(0.001, "...", above=0.0)`` or ``at_least=1``, which :func:`build` enforces
 with an error naming the dotted key.
 """
@@ -17,6 +18,7 @@ with an error naming the dotted key.
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from collections.abc import Mapping
 from typing import Any, Literal, get_args, get_origin
@@ -125,6 +127,8 @@ def _convert(value: Any, annotation: Any, key: str) -> Any:
     if annotation is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ConfigError(f"config key '{key}': expected float, got {type(value).__name__}")
+        if not math.isfinite(value):  # TOML's nan and inf: no setting means either
+            raise ConfigError(f"config key '{key}': expected a finite number, got {value!r}")
         return float(value)
     if annotation is int:
         if isinstance(value, bool) or not isinstance(value, int):

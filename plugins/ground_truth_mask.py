@@ -8,7 +8,7 @@ from typing import Literal
 import numpy as np
 
 from pipeline import hookimpl
-from pipeline.errors import StageFailure
+from pipeline.errors import PluginError, StageFailure
 from pipeline.params import param
 from pipeline.perception.depth import backproject_depth
 from pipeline.perception.table import resolve_table
@@ -42,8 +42,8 @@ class GroundTruthMask(Segmenter):
 
     def segment(self, observation: DepthObservation) -> PointCloud:
         p = self.params
-        if observation.object_mask is None:
-            raise StageFailure(
+        if observation.object_mask is None:  # a configuration that cannot work: exit 2
+            raise PluginError(
                 "segmenter 'ground-truth-mask': the sensor source gives no object mask "
                 "(only simulated sources do); use segmenter 'table-cluster'"
             )

@@ -3,7 +3,9 @@ completes exactly as the files it was made from."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import types
 from pathlib import Path
 
 import numpy as np
@@ -13,8 +15,10 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from scipy.spatial.transform import Rotation
 
+from pipeline.bags import camera_intrinsics
 from pipeline.captures import read_organised_pcd
 from pipeline.cli import main
+from pipeline.errors import InputError
 from pipeline.open3d_loader import open3d
 
 KINECT = Path(__file__).parent / "data" / "kinect_laptop_box_floor.pcd"
@@ -217,3 +221,58 @@ def test_a_bag_without_a_depth_topic_is_one_line_exit_2(tmp_path, capsys):
     code = main(["complete", str(bag), "--topic", "/nope", "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "no topic '/nope'" in err
+
+
+def image_bag(path: Path, source, image=None, T_robot_camera=None) -> Path:
+    """A ROS 1 bag of the capture's depth Image (or ``image``), its CameraInfo and, given
+    ``T_robot_camera``, a /tf_static to base_link."""
+    capture, _ = source
+    factory = Messages(True)
+    messages = [
+        ("/camera/depth/image", "sensor_msgs/msg/Image", image or factory.image(capture.depth_m)),
+        ("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo",
+         factory.camera_info(capture.intrinsics)),
+    ]  # fmt: skip
+    if T_robot_camera is not None:
+        tf = factory.tf(T_robot_camera, "base_link", FRAME)
+        messages.append(("/tf_static", "tf2_msgs/msg/TFMessage", tf))
+    return write_bag(path, True, messages)
+
+
+def one_error(capsys) -> str:
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("symfuse: error: "), lines
+    return lines[0]
+
+
+def test_a_bag_image_shorter_than_its_header_says_is_named(source, tmp_path, capsys):
+    capture, _ = source
+    image = dataclasses.replace(
+        Messages(True).image(capture.depth_m), data=np.zeros(100, dtype=np.uint8)
+    )
+    bag = image_bag(tmp_path / "short.bag", source, image=image)
+    assert main(["complete", str(bag), "--out", str(tmp_path / "out")]) == 2
+    assert "the message holds 100 bytes; its header says 480 rows of 2560" in one_error(capsys)
+
+
+def test_a_camera_in_millimetres_in_tf_is_refused(source, tmp_path, capsys):
+    T = np.eye(4)
+    T[:3, 3] = [0.0, 0.0, 1500.0]
+    bag = image_bag(tmp_path / "tf_mm.bag", source, T_robot_camera=T)
+    assert main(["complete", str(bag), "--out", str(tmp_path / "out")]) == 2
+    assert "the camera in /tf: a point lies 1.5e+03 m" in one_error(capsys)
+
+
+def test_a_broken_ros2_metadata_file_is_one_line(tmp_path, capsys):
+    (tmp_path / "bag").mkdir()
+    (tmp_path / "bag" / "metadata.yaml").write_text("rosbag2_bagfile_information: [\n")
+    assert main(["complete", str(tmp_path / "bag"), "--out", str(tmp_path / "out")]) == 2
+    assert "cannot read as a ROS bag: Could not load YAML" in one_error(capsys)
+
+
+@pytest.mark.parametrize("focal", [0.0, float("inf"), float("nan")])
+def test_a_camera_info_without_a_finite_focal_length_is_refused(focal):
+    k = [focal, 0.0, 320.0, 0.0, 525.0, 240.0, 0.0, 0.0, 1.0]
+    info = types.SimpleNamespace(k=np.array(k), width=640, height=480)
+    with pytest.raises(InputError, match="no valid K matrix"):
+        camera_intrinsics(info, "scene.bag [/camera_info]")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.errors import StageFailure
+from pipeline.errors import EXIT_BAD_INPUT, PluginError, StageFailure
 from pipeline.open3d_loader import open3d
 from pipeline.perception.clustering import (
     dbscan_labels,
@@ -155,5 +155,6 @@ def test_ground_truth_mask_drops_near_table_points_and_needs_a_mask(box_scene):
     without = DepthObservation(
         box_scene.depth_m, box_scene.rgb, box_scene.intrinsics, box_scene.T_robot_camera, 0.7
     )
-    with pytest.raises(StageFailure, match="no object mask"):
+    with pytest.raises(PluginError, match="no object mask") as error:  # not a failed run
         GroundTruthMask().segment(without)
+    assert error.value.exit_code == EXIT_BAD_INPUT

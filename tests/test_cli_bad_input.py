@@ -1,0 +1,338 @@
+"""Bad input met by a new user, one verb at a time: every mistake is one line
+``symfuse: error: ...`` naming what is wrong, with exit code 2, and no traceback."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipeline.captures import depth_from_organised, read_capture
+from pipeline.catalogue import load_object
+from pipeline.cli import main
+from pipeline.completion import select_objects
+from pipeline.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, ConfigError, InputError
+from pipeline.formats import read_camera, read_contacts, write_cloud
+
+
+def one_error_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("symfuse: error: "), err
+    return lines[0]
+
+
+@pytest.mark.parametrize(
+    ("argv", "names"),
+    [
+        (["sweep", "nope"], "sweep: argument EXPERIMENT: invalid choice: 'nope'"),
+        (["trial", "--seed", "x"], "trial: argument --seed: expected an integer, got 'x'"),
+        (["fuse", "--cloud", "c.ply"], "fuse: the following arguments are required"),
+        (["plugins", "--foo"], "unrecognized arguments: --foo"),
+        ([], "the following arguments are required: VERB"),
+    ],
+)
+def test_command_line_mistakes_are_one_line(capsys, argv, names):
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == EXIT_BAD_INPUT
+    _, err = capsys.readouterr()
+    assert names in one_error_line(err)
+
+
+# ------------------------------------------------------------------ recorded captures
+
+
+def camera_document(**changes) -> dict:
+    T = np.eye(4)
+    T[:3, 3] = [-0.5, 0.0, 0.8]
+    document = {
+        "intrinsics": {"width": 4, "height": 3, "fx": 5.0, "fy": 5.0, "cx": 2.0, "cy": 1.5},
+        "T_robot_camera": T.tolist(),
+    }
+    for key, value in changes.items():
+        if key in document["intrinsics"]:
+            document["intrinsics"][key] = value
+        else:
+            document[key] = value
+    return document
+
+
+def reflected() -> list:
+    T = np.eye(4)
+    T[0, 0] = -1.0
+    return T.tolist()
+
+
+def bottom_row() -> list:
+    T = np.eye(4)
+    T[3] = [1.0, 2.0, 3.0, 4.0]
+    return T.tolist()
+
+
+def in_millimetres() -> list:
+    T = np.eye(4)
+    T[:3, 3] = [-500.0, 0.0, 800.0]
+    return T.tolist()
+
+
+@pytest.mark.parametrize(
+    ("text", "names"),
+    [
+        (json.dumps(camera_document(fx=float("inf"))), "intrinsics.fx must be a positive finite"),
+        (json.dumps(camera_document()).replace("-0.5", "1" + "0" * 400), "finite 4x4 matrix"),
+        (json.dumps(camera_document(T_robot_camera=reflected())), "is a reflection"),
+        (json.dumps(camera_document(T_robot_camera=bottom_row())), "bottom row must be 0 0 0 1"),
+        (json.dumps(camera_document(T_robot_camera=in_millimetres())), "looks like millimetres"),
+    ],
+)
+def test_a_camera_file_that_is_no_camera_is_refused(tmp_path, text, names):
+    path = tmp_path / "camera.json"
+    path.write_text(text)
+    with pytest.raises(InputError, match=names):
+        read_camera(path)
+
+
+def test_an_empty_depth_npy_is_an_input_error(tmp_path):
+    (tmp_path / "depth.npy").write_bytes(b"")
+    with pytest.raises(InputError, match=r"depth\.npy: cannot read as \.npy"):
+        read_capture(tmp_path / "depth.npy")
+
+
+def test_a_mirrored_organised_cloud_is_named_as_such():
+    rows, cols = np.mgrid[0:6, 0:8].astype(np.float64)
+    z = np.full_like(rows, 1.0)
+    points = np.stack([(cols - 4.0) / 500.0 * z, (rows - 3.0) / 500.0 * z, z], axis=-1)
+    depth_from_organised(points, "view.pcd")  # a pinhole image: accepted
+    with pytest.raises(InputError, match="mirror image: their x axis"):
+        depth_from_organised(points[:, ::-1], "view.pcd")
+
+
+# ------------------------------------------------------------------ numbers
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_a_float_setting_is_finite(run, value):
+    code, _, err = run("config", "--set", f"estimator.iekf.noise_along_normal_m={value}")
+    assert code == EXIT_BAD_INPUT
+    assert "'estimator.iekf.noise_along_normal_m': expected a finite number" in one_error_line(err)
+    code, _, err = run("config", "--set", f"trial.yaw_deg={value}")
+    assert "'trial.yaw_deg': expected a finite number" in one_error_line(err)
+
+
+def test_a_negative_seed_is_refused_before_anything_runs(run, capsys, tmp_path):
+    code, _, err = run("config", "--set", "trial.seed=-1")
+    assert code == EXIT_BAD_INPUT
+    assert "'trial.seed': must be >= 0" in one_error_line(err)
+    for argv in (["trial", "--seed", "-1"], ["sweep", "fig10", "--seed", "-1"]):
+        with pytest.raises(SystemExit) as exit_info:
+            main([*argv, "--out", str(tmp_path / "out")])
+        assert exit_info.value.code == EXIT_BAD_INPUT
+        assert "argument --seed: expected an integer >= 0" in one_error_line(capsys.readouterr()[1])
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("option", ["--workers", "--repeats"])
+@pytest.mark.parametrize("value", ["0", "-1"])
+def test_sweep_counts_are_positive(capsys, tmp_path, option, value):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["sweep", "fig10", "--quick", option, value, "--out", str(tmp_path / "out")])
+    assert exit_info.value.code == EXIT_BAD_INPUT
+    assert f"argument {option}: expected an integer >= 1" in one_error_line(capsys.readouterr()[1])
+    assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------------------ units
+
+
+def test_units_mm_on_metres_is_refused(run, recording, tmp_path):
+    folder, _, plane = recording
+    code, _, err = run("fuse", "--cloud", folder / "cloud.ply", "--contacts",
+                       folder / "contacts.json", f"--plane={plane}", "--units", "mm",
+                       "--out", tmp_path / "out")  # fmt: skip
+    assert code == EXIT_BAD_INPUT
+    assert "cloud.ply: the object is" in one_error_line(err)
+    assert "looks like metres: drop --units mm" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_units_mm_on_a_metre_mesh_is_refused(tmp_path):
+    trimesh.creation.box((0.04, 0.05, 0.1)).export(tmp_path / "box.stl")
+    assert load_object(tmp_path / "box.stl").mesh.extents.max() == pytest.approx(0.1)
+    with pytest.raises(InputError, match=r"box\.stl: the object is 0\.1 mm across: looks like"):
+        load_object(tmp_path / "box.stl", units="mm")
+
+
+def test_units_do_not_apply_to_a_catalogue_object(run, tmp_path):
+    code, _, err = run("trial", "--object", "cd_drive", "--units", "mm", "--out", tmp_path / "o")
+    assert code == EXIT_BAD_INPUT
+    assert "'cd_drive' is a catalogue object" in one_error_line(err)
+    assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------ settings a verb ignores
+
+
+def test_a_set_the_verb_does_not_read_is_refused(run, recording, tmp_path):
+    folder, _, plane = recording
+    fuse = ["fuse", "--cloud", folder / "cloud.ply", "--contacts", folder / "contacts.json",
+            f"--plane={plane}", "--out", tmp_path / "out"]  # fmt: skip
+    code, _, err = run(*fuse, "--set", "trial.seed=3")
+    assert code == EXIT_BAD_INPUT
+    assert "--set trial.seed=3: symfuse fuse does not read [trial]" in one_error_line(err)
+    code, _, err = run("complete", folder / "cloud.npy", "--set", "planner.use=top-three-finger",
+                       "--out", tmp_path / "out")  # fmt: skip
+    assert "symfuse complete does not read [planner]" in one_error_line(err)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["complete", "view.npy", "--set", "sensor.use=pybullet-kinect"],
+        ["complete", "view.npy", "--set", "sensor.recorded.path=other.npy"],
+        ["trial", "--seed", "2", "--set", "trial.seed=3"],
+    ],
+)
+def test_a_set_that_an_option_overrides_is_refused(run, tmp_path, argv):
+    code, _, err = run(*argv, "--out", tmp_path / "out")
+    assert code == EXIT_BAD_INPUT
+    assert "from its arguments; drop this --set" in one_error_line(err)
+
+
+@pytest.mark.parametrize(
+    ("option", "applies_to"),
+    [(["--topic", "/camera/depth"], "a ROS bag"), (["--camera", "camera.json"], "a depth image")],
+)
+def test_a_capture_option_for_another_kind_of_capture_is_refused(tmp_path, option, applies_to):
+    rows, cols = np.mgrid[0:6, 0:8].astype(np.float64)
+    points = np.stack([(cols - 4.0) / 500.0, (rows - 3.0) / 500.0, np.ones_like(rows)], -1)
+    capture = tmp_path / ("view.npy" if option[0] == "--topic" else "view.pcd")
+    if option[0] == "--topic":
+        np.save(capture, points[..., 2].astype(np.float32))
+    else:
+        write_cloud(capture, points.reshape(-1, 3))
+    name = option[0].removeprefix("--")
+    with pytest.raises(InputError, match=f"sensor.recorded.{name} .--{name}. applies to"):
+        read_capture(capture, **{name: option[1]})
+
+
+def test_object_choice_is_an_ascii_number(run, tmp_path):
+    with pytest.raises(ConfigError, match="--object ²: expected all, largest, nearest"):
+        select_objects("²", [], None, fusing=False)
+
+
+# ------------------------------------------------------------------ Ctrl-C
+
+
+def test_ctrl_c_while_an_extension_initialises_is_an_interruption(run, monkeypatch, tmp_path):
+    def import_interrupted(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise ImportError("initialization failed") from exc
+
+    monkeypatch.setattr("pipeline.cli._cmd_config", import_interrupted)
+    code, _, err = run("config")
+    assert code == EXIT_INTERRUPTED
+    assert err.strip() == "symfuse: interrupted"
+
+
+# ------------------------------------------------------------------ view --out, pipes
+
+
+@pytest.mark.parametrize(
+    ("name", "names"),
+    [
+        ("cloud.ply", "a Rerun recording is a .rrd file"),
+        ("old.rrd", "exists; pass --overwrite to replace it"),
+        ("missing/new.rrd", "does not exist"),
+    ],
+)
+def test_view_never_writes_over_a_file_it_was_not_given(run, tmp_path, name, names):
+    (tmp_path / "cloud.ply").write_text("a run's own cloud")
+    (tmp_path / "old.rrd").write_text("an earlier recording")
+    code, _, err = run("view", tmp_path, "--no-open", "--out", tmp_path / name)
+    assert code == EXIT_BAD_INPUT
+    assert names in one_error_line(err)
+    assert (tmp_path / "cloud.ply").read_text() == "a run's own cloud"
+    assert (tmp_path / "old.rrd").read_text() == "an earlier recording"
+
+
+def test_a_closed_pipe_ends_the_output_quietly():
+    command = [sys.executable, "-c", "import sys; from pipeline.cli import main; "
+               "sys.exit(main(['plugins', '--params']))"]  # fmt: skip
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()  # before the first line: like `symfuse plugins --params | head -1`
+    _, err = process.communicate(timeout=120)
+    assert err.decode() == ""
+    assert process.returncode == 0
+
+
+@pytest.mark.parametrize(
+    ("argv", "names"),
+    [
+        (["objects", "--overwrite"], "--overwrite applies to --export DIR"),
+        (["objects", "--format", "stl"], "--format applies to --export DIR"),
+        (["sweep", "fig10", "--quick", "--scheduler", "tcp://host:8786"],
+         "--scheduler applies to --executor dask"),
+    ],
+)  # fmt: skip
+def test_an_option_that_would_be_ignored_is_refused(run, tmp_path, argv, names):
+    out = ["--out", tmp_path / "out"] if argv[0] == "sweep" else []
+    code, _, err = run(*argv, *out)
+    assert code == EXIT_BAD_INPUT
+    assert names in one_error_line(err)
+
+
+def test_a_pcd_with_negative_width_and_height_is_an_input_error(tmp_path):
+    header = (
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH -2\n"
+        "HEIGHT -2\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 4\nDATA ascii\n"
+    )
+    (tmp_path / "view.pcd").write_text(header + "0 0 1\n" * 4)
+    with pytest.raises(InputError, match="no valid WIDTH/HEIGHT"):
+        read_capture(tmp_path / "view.pcd")
+
+
+@pytest.mark.parametrize(
+    ("changes", "names"),
+    [
+        ({"T_robot_cam": np.eye(4).tolist()}, "unknown key 'T_robot_cam'"),
+        ({"distortion": [0.0] * 5}, "unknown key 'distortion'"),
+    ],
+)
+def test_a_misspelt_camera_key_is_refused(tmp_path, changes, names):
+    document = camera_document()
+    document.update(changes)
+    (tmp_path / "camera.json").write_text(json.dumps(document))
+    with pytest.raises(InputError, match=names):
+        read_camera(tmp_path / "camera.json")
+    document = camera_document()
+    document["intrinsics"]["f_x"] = 5.0
+    (tmp_path / "camera.json").write_text(json.dumps(document))
+    with pytest.raises(InputError, match=r"unknown key 'intrinsics\.f_x'"):
+        read_camera(tmp_path / "camera.json")
+
+
+@pytest.mark.parametrize(
+    ("change", "names"),
+    [
+        (lambda d: d.update(unit="mm"), "unknown key 'unit'"),
+        (lambda d: d["grasps"][0].update(plna={}), r"unknown key 'grasps\[0\]\.plna'"),
+        (lambda d: d["grasps"][0]["taxels"][0].update(idx=3), r"taxels\[0\]\.idx'"),
+    ],
+)
+def test_a_misspelt_contacts_key_is_refused(tmp_path, change, names):
+    taxel = {"position": [0.5, 0.0, 0.1], "normal": [0.0, 1.0, 0.0], "pad": "left"}
+    document = {"frame": "robot", "units": "m", "grasps": [{"taxels": [taxel]}]}
+    (tmp_path / "contacts.json").write_text(json.dumps(document))
+    read_contacts(tmp_path / "contacts.json")
+    change(document)
+    (tmp_path / "contacts.json").write_text(json.dumps(document))
+    with pytest.raises(InputError, match=names):
+        read_contacts(tmp_path / "contacts.json")
