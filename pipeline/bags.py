@@ -17,7 +17,13 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .captures import Capture, check_organised, checked_depth, depth_from_organised
+from .captures import (
+    Capture,
+    check_not_empty,
+    checked_depth,
+    depth_from_organised,
+    depth_from_points,
+)
 from .errors import InputError
 from .types import CameraIntrinsics
 from .units import UNITS_IN_METRES, check_distance
@@ -66,7 +72,7 @@ def cloud_points(message: Any, where: str) -> tuple[np.ndarray, np.ndarray | Non
         {"names": names, "formats": formats, "offsets": offsets, "itemsize": message.point_step}
     )
     height, width = int(message.height), int(message.width)
-    check_organised(width, height, where)
+    check_not_empty(width, height, where)
     data = _rows(message.data, height, message.row_step, width * message.point_step, where)
     rows = data[:, : width * message.point_step].copy().view(dtype).reshape(height, width)
     points = np.stack([rows[name].astype(np.float64) for name in "xyz"], axis=-1)
@@ -173,8 +179,13 @@ def _read(bag: Any, path: Path, topic: str, robot_frame: str) -> Capture:
     frame = _frame(message.header.frame_id)
     if connection.msgtype == CLOUD:
         points, rgb = cloud_points(message, where)
-        depth, intrinsics = depth_from_organised(points, where)
-        kind = f"PointCloud2 {intrinsics.width}x{intrinsics.height}"
+        if points.shape[0] == 1:
+            depth, rgb, intrinsics = depth_from_points(points, rgb, where)
+            size = f"{intrinsics.width}x{intrinsics.height}"
+            kind = f"unorganised PointCloud2, re-projected into a virtual {size} camera"
+        else:
+            depth, intrinsics = depth_from_organised(points, where)
+            kind = f"PointCloud2 {intrinsics.width}x{intrinsics.height}"
     else:
         infos = [c for c in bag.connections if c.msgtype == CAMERA_INFO]
         namespace = connection.topic.rsplit("/", 1)[0]

@@ -5,11 +5,13 @@ optical frame (x right, y down, z forward; metres, NaN = no return), its pinhole
 intrinsics, a colour image when the recording has one, and the camera pose in a robot
 frame when the recording knows it.
 
-* **Organised PCD** (``x y z`` and optionally ``rgb``/``rgba``; ASCII, binary or
-  binary_compressed; NaN = no return), points in the camera frame. The depth image is the
-  points' z; the intrinsics are fitted to the points (``u = fx x / z + cx``, ``v = fy y / z
-  + cy`` over every valid pixel) and the fit must be sub-pixel, else the points are not a
-  pinhole image in their frame.
+* **PCD** (``x y z`` and optionally ``rgb``/``rgba``; ASCII, binary or binary_compressed;
+  NaN = no return), points in the camera frame. For an organised cloud the depth image is
+  the points' z and the intrinsics are fitted to the points (``u = fx x / z + cx``, ``v =
+  fy y / z + cy`` over every valid pixel); the fit must be sub-pixel, else the points are
+  not a pinhole image in their frame. An unorganised cloud (one row) is re-projected into
+  a virtual pinhole camera at the frame's origin looking along +z
+  (:func:`depth_from_points`).
 * **Depth image**: a 16-bit PNG in millimetres (0 = no return) or a ``.npy`` float array in
   metres (NaN = no return), with a ``camera.json`` (:func:`pipeline.formats.read_camera`)
   and optionally a colour PNG of the same size (by default ``rgb.png`` beside it).
@@ -32,6 +34,8 @@ from .types import CameraIntrinsics
 MILLIMETRE_MEDIAN_M = 20.0
 #: Largest RMS error (px) of the pinhole fit to an organised cloud.
 MAX_PINHOLE_RMS_PX = 0.5
+#: Largest side (px) of the virtual camera an unorganised cloud is re-projected into.
+MAX_VIRTUAL_SIDE_PX = 1280
 PCD_SUFFIXES = (".pcd",)
 DEPTH_IMAGE_SUFFIXES = (".png", ".npy")
 
@@ -118,16 +122,63 @@ def depth_from_organised(points: np.ndarray, where: str) -> tuple[np.ndarray, Ca
     return depth, CameraIntrinsics(width, height, fx, fy, cx, cy)
 
 
-def check_organised(width: int, height: int, where: str) -> None:
-    """Reject an empty or unorganised (one-row) cloud of ``width x height`` points."""
+def check_not_empty(width: int, height: int, where: str) -> None:
+    """Reject a cloud of ``width x height`` points that has none."""
     if width * height == 0:
         raise InputError(f"{where}: the capture is empty ({width}x{height} points)")
-    if height == 1:
+
+
+def depth_from_points(
+    points: np.ndarray, colours: np.ndarray | None, where: str
+) -> tuple[np.ndarray, np.ndarray | None, CameraIntrinsics]:
+    """Depth image, colour image and intrinsics of a virtual pinhole camera at the origin of
+    the points' frame (the camera's optical frame), looking along +z, that sees them all.
+
+    The focal length puts neighbouring points about one pixel apart (the median distance
+    from a point to its nearest neighbour in ``x / z, y / z``), capped so that the image
+    is at most :data:`MAX_VIRTUAL_SIDE_PX` on a side; each pixel keeps its nearest point.
+    A point moves by at most half a pixel across its ray, so the re-projection blurs the
+    cloud by half its own spacing; pixels no point falls in have no return (NaN).
+
+    Args:
+        points: ``(N, 3)`` camera frame, metres (non-finite rows are no return).
+        colours: ``(N, 3) uint8`` per point, or None.
+
+    Raises:
+        InputError: fewer than 3 valid points, millimetres, or points behind the camera.
+    """
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    valid = np.isfinite(points).all(axis=1)
+    if valid.sum() < 3:
+        raise InputError(f"{where}: fewer than 3 valid points")
+    if (points[valid, 2] <= 0.0).any():
         raise InputError(
-            f"{where}: the cloud is not organised (height 1, {width} points); completion "
-            "needs a depth image: an organised cloud (width x height pixels), a depth image "
-            "with camera.json, or a bag's Image or organised PointCloud2"
+            f"{where}: {int((points[valid, 2] <= 0.0).sum())} points have z <= 0; the cloud "
+            "must be in the camera's optical frame (x right, y down, z forward)"
         )
+    checked_depth(points[valid, 2], where)
+    kept = points[valid]
+    tangents = kept[:, :2] / kept[:, 2:3]
+    spacing, _ = cKDTree(tangents).query(tangents, k=2)
+    low, high = tangents.min(axis=0), tangents.max(axis=0)
+    focal = 1.0 / max(float(np.median(spacing[:, 1])), 1e-9)
+    focal = min(focal, (MAX_VIRTUAL_SIDE_PX - 1) / max(float((high - low).max()), 1e-9))
+    width, height = (np.floor(focal * (high - low)).astype(int) + 1).tolist()
+    cx, cy = -focal * low
+    u = np.rint(focal * tangents[:, 0] + cx).astype(np.int64)
+    v = np.rint(focal * tangents[:, 1] + cy).astype(np.int64)
+    # Nearest point per pixel: write far to near, so the nearest write lands last.
+    order = np.argsort(-kept[:, 2], kind="stable")
+    depth = np.full((height, width), np.nan, dtype=np.float32)
+    depth[v[order], u[order]] = kept[order, 2]
+    rgb = None
+    if colours is not None:
+        rgb = np.zeros((height, width, 3), dtype=np.uint8)
+        rgb[v[order], u[order]] = np.asarray(colours).reshape(-1, 3)[valid][order]
+    intrinsics = CameraIntrinsics(width, height, float(focal), float(focal), float(cx), float(cy))
+    return depth, rgb, intrinsics
 
 
 def _pcd_header(path: Path) -> dict[str, list[str]]:
@@ -148,9 +199,10 @@ def _pcd_header(path: Path) -> dict[str, list[str]]:
     raise InputError(f"{path}: not a PCD file (no DATA line in its header)")
 
 
-def read_organised_pcd(path: Path) -> Capture:
-    """An organised PCD cloud (camera frame, metres) as a capture; open3d reads the data
-    (every point in order, NaN kept), the header gives the organisation."""
+def read_pcd(path: Path) -> Capture:
+    """A PCD cloud (camera frame, metres) as a capture; open3d reads the data (every point
+    in order, NaN kept), the header gives the organisation. An unorganised cloud is
+    re-projected into a virtual camera (:func:`depth_from_points`)."""
     from .open3d_loader import open3d
 
     header = _pcd_header(path)
@@ -163,7 +215,7 @@ def read_organised_pcd(path: Path) -> Capture:
         width = height = -1
     if width < 0 or height < 0:
         raise InputError(f"{path}: the PCD header has no valid WIDTH/HEIGHT")
-    check_organised(width, height, str(path))
+    check_not_empty(width, height, str(path))
     o3d = open3d()
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         cloud = o3d.io.read_point_cloud(
@@ -175,12 +227,19 @@ def read_organised_pcd(path: Path) -> Capture:
             f"{path}: cannot read the PCD data ({len(points)} points read, the header says "
             f"{width} x {height})"
         )
-    depth, intrinsics = depth_from_organised(points.reshape(height, width, 3), str(path))
-    rgb = None
+    colours = None
     if cloud.has_colors():
-        colours = np.asarray(cloud.colors).reshape(height, width, 3)
-        rgb = np.clip(np.rint(colours * 255.0), 0, 255).astype(np.uint8)
+        colours = np.clip(np.rint(np.asarray(cloud.colors) * 255.0), 0, 255).astype(np.uint8)
     encoding = header.get("DATA", ["?"])[0]
+    if height == 1:
+        depth, rgb, intrinsics = depth_from_points(points, colours, str(path))
+        source = (
+            f"{path}: unorganised PCD ({width} points, {encoding}) re-projected into a "
+            f"virtual {intrinsics.width}x{intrinsics.height} camera"
+        )
+        return Capture(depth, rgb, intrinsics, None, None, source)
+    depth, intrinsics = depth_from_organised(points.reshape(height, width, 3), str(path))
+    rgb = None if colours is None else colours.reshape(height, width, 3)
     return Capture(
         depth, rgb, intrinsics, None, None, f"{path}: organised PCD {width}x{height}, {encoding}"
     )
@@ -283,7 +342,7 @@ def read_capture(
     if suffix in PCD_SUFFIXES:
         _refuse_unused(path, "a depth image", camera=camera, colour=colour)
         _refuse_unused(path, "a ROS bag", topic=topic, robot_frame=robot_frame)
-        return read_organised_pcd(path)
+        return read_pcd(path)
     if suffix in DEPTH_IMAGE_SUFFIXES:
         _refuse_unused(path, "a ROS bag", topic=topic, robot_frame=robot_frame)
         return read_depth_image(path, camera, colour)

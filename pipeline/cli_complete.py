@@ -23,7 +23,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "complete",
         help="complete every object of a recorded depth view (PCD, depth image, ROS bag)",
         description=(
-            "Read a recorded depth view (an organised PCD in the camera frame, a depth PNG "
+            "Read a recorded depth view (a PCD in the camera frame, a depth PNG "
             "in mm or NPY in m with camera.json, or a ROS 1/2 bag), find the support plane "
             "and every object standing on it, initialise each one's symmetry plane and "
             "complete it; with --contacts, fuse them with one object. Writes objects.json, "

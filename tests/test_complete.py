@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from shapely import MultiPoint
 
-from pipeline.captures import read_organised_pcd
+from pipeline.captures import read_pcd
 from pipeline.cli import main
 from pipeline.formats import read_cloud
 
@@ -25,7 +25,7 @@ def kinect_run(tmp_path_factory):
 
 
 def test_kinect_capture_is_read_as_an_organised_pinhole_image():
-    capture = read_organised_pcd(KINECT)
+    capture = read_pcd(KINECT)
     k = capture.intrinsics
     # PCL's OpenNI grabber writes points with the Kinect's nominal 525 px focal length and
     # the principal point at the image centre; a scrambled organisation could not fit them.
@@ -65,14 +65,14 @@ def write_pcd(path: Path, points: np.ndarray, rgb: np.ndarray, encoding: str) ->
 def test_every_pcd_encoding_gives_the_same_capture(tmp_path, encoding):
     """Every 4th pixel of the Kinect capture (still a pinhole image, f / 4) written as
     ASCII and binary reads back as the binary_compressed original does."""
-    original = read_organised_pcd(KINECT)
+    original = read_pcd(KINECT)
     k = original.intrinsics
     rows, cols = np.mgrid[0:480:4, 0:640:4]
     z = original.depth_m[rows, cols].astype(np.float64)
     points = np.stack([(cols - k.cx) * z / k.fx, (rows - k.cy) * z / k.fy, z], axis=-1)
     path = tmp_path / f"sub_{encoding}.pcd"
     write_pcd(path, points, original.rgb[rows, cols], encoding)
-    capture = read_organised_pcd(path)
+    capture = read_pcd(path)
     np.testing.assert_array_equal(np.isnan(capture.depth_m), np.isnan(z))
     np.testing.assert_allclose(capture.depth_m, z, rtol=1e-6)
     np.testing.assert_array_equal(capture.rgb, original.rgb[rows, cols])
@@ -119,6 +119,30 @@ def test_kinect_box_completes_to_its_true_rectangle(kinect_run):
     assert min(halves) == pytest.approx(visible, rel=0.10)
     footprint = MultiPoint(completed[:, :2])
     assert footprint.convex_hull.area / footprint.minimum_rotated_rectangle.area > 0.9
+
+
+def test_an_unorganised_cloud_completes_like_the_organised_one(kinect_run, tmp_path):
+    """The capture's valid points, shuffled into one row, lose their pixel grid: they are
+    re-projected into a virtual camera and must give the same two objects, with the box's
+    completed footprint within 5 % of the organised capture's."""
+    capture = read_pcd(KINECT)
+    depth, k = capture.depth_m, capture.intrinsics
+    rows, cols = np.nonzero(np.isfinite(depth))
+    z = depth[rows, cols].astype(np.float64)
+    points = np.column_stack([(cols - k.cx) * z / k.fx, (rows - k.cy) * z / k.fy, z])
+    order = np.random.default_rng(0).permutation(len(points))
+    path = tmp_path / "unorganised.pcd"
+    write_pcd(path, points[order][None], capture.rgb[rows, cols][order][None], "binary")
+    out = tmp_path / "out"
+    assert main(["complete", str(path), "--out", str(out)]) == 0
+    ours = json.loads((out / "objects.json").read_text())["objects"]
+    theirs = json.loads((kinect_run / "objects.json").read_text())["objects"]
+    assert len(ours) == len(theirs) == 2
+    for mine, reference in zip(ours, theirs, strict=True):
+        assert mine["points"] == pytest.approx(reference["points"], rel=0.1)
+        assert mine["completed_extents_m"] == pytest.approx(
+            reference["completed_extents_m"], rel=0.05
+        )
 
 
 @pytest.fixture(scope="module")
@@ -185,9 +209,9 @@ def test_bad_captures_are_one_line_exit_2(tmp_path, run):
     millimetres = tmp_path / "mm.npy"
     np.save(millimetres, np.full((48, 64), 850.0, dtype=np.float32))
     assert "millimetres" in bad(run, tmp_path, millimetres)
-    unorganised = tmp_path / "unorganised.pcd"
-    write_pcd(unorganised, np.ones((1, 5, 3)), np.zeros((1, 5, 3), np.uint8), "ascii")
-    assert "not organised" in bad(run, tmp_path, unorganised)
+    behind = tmp_path / "behind.pcd"
+    write_pcd(behind, -np.ones((1, 5, 3)), np.zeros((1, 5, 3), np.uint8), "ascii")
+    assert "optical frame" in bad(run, tmp_path, behind)
     scatter = tmp_path / "scatter.npy"
     np.save(scatter, np.random.default_rng(0).uniform(0.5, 3.0, (48, 64)).astype(np.float32))
     assert "no support plane" in bad(run, tmp_path, scatter)

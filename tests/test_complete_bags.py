@@ -16,7 +16,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from scipy.spatial.transform import Rotation
 
 from pipeline.bags import camera_intrinsics
-from pipeline.captures import read_organised_pcd
+from pipeline.captures import read_pcd
 from pipeline.cli import main
 from pipeline.errors import InputError
 from pipeline.open3d_loader import open3d
@@ -28,7 +28,7 @@ FRAME = "kinect_rgb_optical_frame"
 @pytest.fixture(scope="module")
 def source():
     """The capture, its points as the PCD stores them (float32) and the PCD's own run."""
-    capture = read_organised_pcd(KINECT)
+    capture = read_pcd(KINECT)
     points = np.asarray(open3d().io.read_point_cloud(str(KINECT)).points).reshape(480, 640, 3)
     return capture, points.astype(np.float32)
 
