@@ -105,8 +105,32 @@ def _parse_plane(text: str):
         raise ConfigError(f"--plane '{text}': expected NX,NY,D with a non-zero normal") from exc
 
 
+#: Columns of the self-diagnosis in the stage tables.
+CONSISTENCY_HEADER = ["taxel rms mm", "NIS / bound", "free space / limit", "consistent"]
+
+
+def consistency_cells(stage) -> list[str]:
+    """A stage's self-diagnosis as table cells ('-' where a check did not run)."""
+    c = stage.consistency
+    if c is None:
+        return ["-"] * len(CONSISTENCY_HEADER)
+    free = (
+        "-"
+        if c.free_space_violations is None
+        else f"{c.free_space_violations} / {c.free_space_limit}"
+    )
+    rms = "-" if not np.isfinite(c.taxel_rms_m) else f"{c.taxel_rms_m * 1e3:.1f}"
+    nis = "-" if not np.isfinite(c.nis) else f"{c.nis:.2f} / {c.nis_threshold:.2f}"
+    return [rms, nis, free, "yes" if c.consistent else "NO"]
+
+
+def selection_line(result) -> str:
+    """Which stage the estimator stands behind, and why."""
+    return f"selected: Stage {result.selected.stage} ({result.selection_reason})"
+
+
 def stage_summary(result) -> str:
-    """A small table of Stage 0/1/2: status, plane, bias, iterations, time."""
+    """A small table of Stage 0/1/2: status, plane, bias, iterations, time, self-diagnosis."""
     rows = []
     for stage in result.stages:
         rows.append(
@@ -119,13 +143,14 @@ def stage_summary(result) -> str:
                 " ".join(f"{v * 1e3:.1f}" for v in stage.bias.translation_m),
                 stage.iterations,
                 f"{stage.seconds * 1e3:.0f}",
+                *consistency_cells(stage),
             ]
         )
     header = ["stage", "status", "plane θ°", "offset mm", "yaw°", "bias t (mm)", "iter", "ms"]
-    return format_table(header, rows)
+    return format_table(header + CONSISTENCY_HEADER, rows)
 
 
-FAILED_STATUSES = ("no_correspondence", "diverged")
+FAILED_STATUSES = ("no_correspondence", "diverged", "inconsistent")
 
 
 def _cmd_fuse(args: argparse.Namespace) -> int:
@@ -135,6 +160,7 @@ def _cmd_fuse(args: argparse.Namespace) -> int:
         plane_to_json,
         read_cloud,
         read_contacts,
+        selection_to_json,
         write_completed_clouds,
         write_json,
     )
@@ -166,12 +192,14 @@ def _cmd_fuse(args: argparse.Namespace) -> int:
                 "bias": bias_to_json(run.init.bias),
             },
             "stages": estimate_to_json(run.result),
+            **selection_to_json(run.result),
             "status": final_status,
             "seconds": time.perf_counter() - started,
             "config": config.to_dict(),
         },
     )
     print(stage_summary(run.result))
+    print(selection_line(run.result))
     print(f"wrote {out}/result.json, config.toml, completed_stage{{0,1,2}}.ply")
     if final_status in FAILED_STATUSES:
         print(f"symfuse: error: estimate {final_status} (see {out}/result.json)", file=sys.stderr)
@@ -227,6 +255,7 @@ def trial_summary(record) -> str:
                 measure,
                 "-" if angle is None else f"{angle:.1f}",
                 f"{metrics['plane_offset_error_mm']:.1f}",
+                *consistency_cells(stage),
             ]
         )
     header = [
@@ -239,7 +268,7 @@ def trial_summary(record) -> str:
         "plane err °",
         "offset err mm",
     ]
-    return format_table(header, rows)
+    return format_table(header + CONSISTENCY_HEADER, rows)
 
 
 def _cmd_trial(args: argparse.Namespace) -> int:
@@ -251,6 +280,7 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     record = run_trial(config, registry, out, report=lambda m: print(f"... {m}", flush=True))
     print(trial_summary(record))
+    print(selection_line(record.result))
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())
     print(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s")
     print(f"wrote {out}/ (result.json, clouds, contacts.json, pictures)")

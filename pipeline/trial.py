@@ -29,6 +29,7 @@ from .formats import (
     estimate_to_json,
     plan_to_json,
     plane_to_json,
+    selection_to_json,
     write_cloud,
     write_completed_clouds,
     write_json,
@@ -280,7 +281,7 @@ def run_trial(
     if init.status != "ok":
         raise fail(f"initialiser '{config.choices['initialiser']}' rejected: {init.reason}")
     with timer.phase("estimator"):
-        result = estimate(config, registry, cloud, init, [contacts])
+        result = estimate(config, registry, cloud, init, [contacts], observation)
 
     report("evaluating")
     with timer.phase("evaluation"):
@@ -298,6 +299,7 @@ def run_trial(
             {**stage_json, "metrics": stage_metrics}
             for stage_json, stage_metrics in zip(estimate_to_json(result), metrics, strict=True)
         ],
+        **selection_to_json(result),
         timings=timer.seconds,
     )
     write_json(out_dir / "result.json", document)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -11,12 +12,14 @@ from ..errors import StageFailure
 from ..types import (
     Bias,
     Contacts,
+    DepthObservation,
     EstimateResult,
     EstimateStatus,
     EstimationProblem,
     StageEstimate,
     SymmetryPlane,
 )
+from .consistency import ConsistencySettings, assess, select_stage
 from .covariances import normal_ellipsoids
 from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
 from .iekf import FusionProblem, GraspContacts, StageOutcome
@@ -83,10 +86,19 @@ def stage_estimate(
 
 
 def estimate_result(
-    fusion: FusionProblem, outcomes: Sequence[StageOutcome], started_s: float
+    fusion: FusionProblem,
+    outcomes: Sequence[StageOutcome],
+    started_s: float,
+    view: DepthObservation | None = None,
+    consistency: ConsistencySettings | None = None,
 ) -> EstimateResult:
     """Stage 0 (the initial state, timed from ``started_s``, a ``time.perf_counter()``
-    reading) followed by the fused stages ``outcomes`` (1, then 2)."""
+    reading) followed by the fused stages ``outcomes`` (1, then 2).
+
+    With ``consistency`` every stage is diagnosed against the taxels (and ``view``, when
+    given), a fused stage whose model contradicts the evidence gets the status
+    ``inconsistent`` (unless it already failed), and the best-supported stage is selected.
+    """
     initial = stage_estimate(
         0,
         fusion.g_init,
@@ -112,7 +124,23 @@ def estimate_result(
         )
         for stage, o in enumerate(outcomes, start=1)
     ]
-    return EstimateResult(stages=(initial, *fused))
+    if consistency is None:
+        return EstimateResult(stages=(initial, *fused))
+    states = [fusion.g_init, *(o.g for o in outcomes)]
+    grasp_states = [[fusion.g_init] * len(fusion.grasps)] + [list(o.grasp_g) for o in outcomes]
+    diagnosed = []
+    for stage, g, per_grasp in zip((initial, *fused), states, grasp_states, strict=True):
+        started = time.perf_counter()
+        verdict = assess(
+            stage.points, g, per_grasp, fusion.pivot_m, fusion.grasps, view, consistency
+        )
+        status = stage.status
+        if not verdict.consistent and status in ("converged", "max_iterations"):
+            status = "inconsistent"
+        seconds = stage.seconds + time.perf_counter() - started
+        diagnosed.append(replace(stage, consistency=verdict, status=status, seconds=seconds))
+    selected, reason = select_stage(diagnosed)
+    return EstimateResult(stages=tuple(diagnosed), selected_stage=selected, selection_reason=reason)
 
 
 def diagonal_covariance(stds: tuple[float, ...]) -> np.ndarray:
