@@ -334,14 +334,8 @@ def estimate_to_json(result: EstimateResult) -> list[dict[str, Any]]:
 
 
 def selection_to_json(result: EstimateResult) -> dict[str, Any]:
-    """``{"selected_stage": k, "selection_reason": ..., "hypothesis": ...}``: the
-    best-supported stage and whether touch corrected the plane (see
-    :class:`~pipeline.types.EstimateResult`)."""
-    return {
-        "selected_stage": result.selected.stage,
-        "selection_reason": result.selection_reason,
-        "hypothesis": result.hypothesis,
-    }
+    """``{"selected_stage": k, "selection_reason": ...}``: the best-supported stage."""
+    return {"selected_stage": result.selected.stage, "selection_reason": result.selection_reason}
 
 
 def write_completed_clouds(out_dir: Path, result: EstimateResult) -> list[Path]:

@@ -379,15 +379,11 @@ class EstimateResult:
         selected_stage: the stage the evidence supports best (see
             :func:`pipeline.estimation.consistency.select_stage`); None means the last.
         selection_reason: why that stage was selected.
-        hypothesis: ``"free_plane"`` when touch corrected the symmetry plane too,
-            ``"held_plane"`` when the estimator kept the initialiser's plane because
-            correcting it contradicted the evidence.
     """
 
     stages: tuple[StageEstimate, ...]
     selected_stage: int | None = None
     selection_reason: str = ""
-    hypothesis: Literal["free_plane", "held_plane"] = "free_plane"
 
     def stage(self, index: int) -> StageEstimate:
         return self.stages[index]

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Literal
 
 from pipeline import hookimpl
 from pipeline.estimation.icp import IcpSettings, icp_fuse
+from pipeline.estimation.problem import estimate_result
 from pipeline.params import param, project
 from pipeline.types import EstimateResult, EstimationProblem
 
@@ -32,8 +34,11 @@ class IcpEstimator(IekfEstimator):
         last_stage: Literal[1, 2] = param(2, "1: bias + plane only; 2: also the points")
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
-        settings, last_stage = project(IcpSettings, self.params), self.params.last_stage
-        return self.best_hypothesis(problem, lambda f: icp_fuse(f, settings, last_stage=last_stage))
+        started = time.perf_counter()
+        fusion = self.fusion_problem(problem)
+        settings = project(IcpSettings, self.params)
+        outcomes = icp_fuse(fusion, settings, last_stage=self.params.last_stage)
+        return estimate_result(fusion, outcomes, started, problem.view, self.consistency_settings())
 
 
 @hookimpl

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
 from pipeline import hookimpl
 from pipeline.estimation.consistency import ConsistencySettings
-from pipeline.estimation.iekf import FusionProblem, IekfSettings, StageOutcome, fuse
+from pipeline.estimation.iekf import FusionProblem, IekfSettings, fuse
 from pipeline.estimation.problem import (
     bias_plane_covariance,
     checked_points,
@@ -23,11 +22,6 @@ from pipeline.estimation.problem import (
 from pipeline.params import param, project
 from pipeline.stages import Estimator
 from pipeline.types import EstimateResult, EstimationProblem
-
-#: Prior stds of the plane's offset (m) and normal angle (rad) when it is held at the
-#: initialiser's: zero, so the gain has no plane rows and the plane stays exactly where it
-#: was (any positive std would also let the divergence bound, ten stds, trip on it).
-HELD_PLANE_STDS = (0.0, 0.0)
 
 
 class IekfEstimator(Estimator):
@@ -147,12 +141,6 @@ class IekfEstimator(Estimator):
             above=0.0,
             below=1.0,
         )
-        hold_plane_on_inconsistency: bool = param(
-            True,
-            "when the fused model contradicts the evidence, fuse again with the symmetry "
-            "plane held at the initialiser's (touch corrects the bias and the points only) "
-            "and keep whichever model contradicts the evidence less",
-        )
         free_space_fraction: float = param(
             0.02,
             "self-diagnosis: largest share of the model's points allowed in space the camera "
@@ -161,10 +149,8 @@ class IekfEstimator(Estimator):
             below=1.0,
         )
 
-    def fusion_problem(self, problem: EstimationProblem, hold_plane: bool = False) -> FusionProblem:
-        """The kernel's view of ``problem`` under these parameters; with ``hold_plane`` the
-        plane's prior is narrowed to :data:`HELD_PLANE_STDS` so touch corrects only the bias
-        (and the points)."""
+    def fusion_problem(self, problem: EstimationProblem) -> FusionProblem:
+        """The kernel's view of ``problem`` under these parameters."""
         p = self.params
         points = checked_points(problem, self.name)
         pivot = points.mean(axis=0)
@@ -172,8 +158,7 @@ class IekfEstimator(Estimator):
         noise = (p.noise_along_normal_m, p.noise_across_normal_m)
         xy, q_xyz = p.prior_b_xy_m, p.regrasp_b_xyz_m
         g_init = initial_state(problem, pivot)
-        plane = HELD_PLANE_STDS if hold_plane else (p.prior_m_r_m, p.prior_m_theta_rad)
-        stds = (p.prior_b_theta_rad, xy, xy, p.prior_b_z_m, *plane)
+        stds = (p.prior_b_theta_rad, xy, xy, p.prior_b_z_m, p.prior_m_r_m, p.prior_m_theta_rad)
         return FusionProblem(
             points_m=points,
             pivot_m=pivot,
@@ -198,38 +183,10 @@ class IekfEstimator(Estimator):
         return project(IekfSettings, self.params)
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
-        settings, last_stage = self.settings(), self.params.last_stage
-        return self.best_hypothesis(problem, lambda f: fuse(f, settings, last_stage=last_stage))
-
-    def best_hypothesis(
-        self,
-        problem: EstimationProblem,
-        kernel: Callable[[FusionProblem], Sequence[StageOutcome]],
-    ) -> EstimateResult:
-        """Fuse with ``kernel``; when the result contradicts the evidence and
-        ``hold_plane_on_inconsistency`` is on, fuse again with the plane held at the
-        initialiser's and keep the hypothesis whose last stage contradicts the evidence
-        less (the free plane on a tie)."""
         started = time.perf_counter()
-        consistency = self.consistency_settings()
         fusion = self.fusion_problem(problem)
-        result = estimate_result(fusion, kernel(fusion), started, problem.view, consistency)
-        final = result.final.consistency
-        if final.consistent or not self.params.hold_plane_on_inconsistency:
-            return result
-        held = self.fusion_problem(problem, hold_plane=True)
-        alternative = estimate_result(held, kernel(held), started, problem.view, consistency)
-        if not alternative.final.consistency.excess < final.excess:
-            return result
-        return replace(
-            alternative,
-            hypothesis="held_plane",
-            selection_reason=(
-                f"with the plane free, Stage {result.final.stage} contradicted the evidence "
-                f"({final.reason}); with the plane held at the initialiser's: "
-                f"{alternative.selection_reason}"
-            ),
-        )
+        outcomes = fuse(fusion, self.settings(), last_stage=self.params.last_stage)
+        return estimate_result(fusion, outcomes, started, problem.view, self.consistency_settings())
 
 
 @hookimpl

@@ -20,7 +20,6 @@ from pipeline.estimation.consistency import (
     surface_residuals,
 )
 from pipeline.estimation.covariances import normal_ellipsoids
-from pipeline.estimation.iekf import StageOutcome
 from pipeline.experiments.synthetic_study import make_estimator
 from pipeline.metrics import diameter_error
 from pipeline.perception.visibility import free_space_depths, visibility_violations
@@ -244,34 +243,3 @@ def test_without_a_camera_image_only_the_taxels_are_checked():
     for estimate in result.stages:
         assert estimate.consistency.checks == ("taxels",)
         assert estimate.consistency.free_space_violations is None
-
-
-def test_a_plane_fit_that_contradicts_the_evidence_falls_back_to_the_held_plane():
-    """A kernel that, with the plane free, moves it 25 mm toward the camera (the mirrored
-    back then fills the space in front of the visible surface): the estimator fuses again
-    with the initialiser's (here the true) plane held, and keeps that hypothesis."""
-    case = make_case(np.random.default_rng(1), gripper="three_finger")
-    estimator = make_estimator("iekf", {})
-
-    def kernel(fusion):
-        g = fusion.g_init.copy()
-        if fusion.covariance_init[4, 4] > 0.0:
-            g[4] += 0.025
-        outcome = StageOutcome(
-            g=g,
-            covariance=fusion.covariance_init,
-            points=fusion.points_m,
-            status="converged",
-            iterations=1,
-            active_points=0,
-            seconds=0.0,
-            grasp_g=(g,),
-            grasp_covariance=(fusion.covariance_init,),
-        )
-        return (outcome, outcome)
-
-    result = estimator.best_hypothesis(case.problem, kernel)
-    assert result.hypothesis == "held_plane"
-    assert result.final.status == "converged" and result.final.consistency.consistent
-    assert result.final.plane.offset_m == pytest.approx(case.init_plane.offset_m)
-    assert "plane free" in result.selection_reason

@@ -37,13 +37,13 @@ from scipy.stats import chi2, norm
 
 from ..perception.visibility import free_space_depths
 from ..types import Consistency, DepthObservation, StageEstimate
-from .geometry import apply_bias, apply_mirror_bias, mirror
+from .geometry import invert_side, mirror, side_linear_part
 from .iekf import GraspContacts
 
 #: Model points around a taxel that define the local surface it is compared with.
 SURFACE_NEIGHBOURS = 8
-#: Margin around the taxels within which their surface patches are searched first (m).
-PATCH_SEARCH_M = 0.02
+#: A side's patch further than this from a taxel's pre-image is not searched for (m).
+SIDE_SEARCH_M = 0.03
 #: A patch whose second principal spread is below this fraction of its first is a line.
 FLAT_PATCH_RATIO = 0.1
 
@@ -69,7 +69,10 @@ class ConsistencySettings:
 
 
 def surface_residuals(
-    taxels_m: np.ndarray, model_m: np.ndarray, neighbours: int = SURFACE_NEIGHBOURS
+    taxels_m: np.ndarray,
+    model_m: np.ndarray,
+    neighbours: int = SURFACE_NEIGHBOURS,
+    tree: cKDTree | None = None,
 ) -> np.ndarray:
     """Vector from each taxel to the local surface of a model point cloud, (M, 3) metres.
 
@@ -85,12 +88,19 @@ def surface_residuals(
         taxels_m: ``(M, 3)`` taxel positions.
         model_m: ``(N, 3)`` model points, ``N >= 3``.
         neighbours: patch size (at most ``N``).
+        tree: a KD-tree over ``model_m`` when the caller has one.
     """
     taxels = np.asarray(taxels_m, dtype=float)
     model = np.asarray(model_m, dtype=float)
     if len(taxels) == 0:
         return np.zeros((0, 3))
-    patch = _nearest_patches(taxels, model, min(neighbours, len(model)))
+    k = min(neighbours, len(model))
+    _, nearest = (cKDTree(model, balanced_tree=False) if tree is None else tree).query(taxels, k=k)
+    return _patch_residuals(taxels, model[nearest.reshape(len(taxels), k)])
+
+
+def _patch_residuals(taxels: np.ndarray, patch: np.ndarray) -> np.ndarray:
+    """:func:`surface_residuals` of taxels ``(M, 3)`` from their patches ``(M, k, 3)``."""
     centroid = patch.mean(axis=1)
     spread = patch - centroid[:, None, :]
     variances, vectors = np.linalg.eigh(np.einsum("mki,mkj->mij", spread, spread))
@@ -105,25 +115,56 @@ def surface_residuals(
     return offset - tangential + beyond[:, None] * tangential
 
 
-def _nearest_patches(taxels: np.ndarray, model: np.ndarray, k: int) -> np.ndarray:
-    """The ``k`` nearest model points of every taxel, (M, k, 3).
+def model_residuals(
+    taxels_m: np.ndarray,
+    points_m: np.ndarray,
+    g: np.ndarray,
+    pivot_m: np.ndarray,
+    tree: cKDTree | None = None,
+) -> np.ndarray:
+    """:func:`surface_residuals` against the completed model ``{f_b(p)} u {f_mb(p)}``
+    without building it, (M, 3) in the hand's frame.
 
-    Only the model points within :data:`PATCH_SEARCH_M` of the taxels' bounding box are
-    put in the tree (the model is mostly far from the hand); a taxel whose patch reaches
-    beyond that margin is searched again among all points.
+    Both maps are isometries, so each taxel is compared with the points ``p`` at its
+    pre-image under either side and the residual is mapped back by the side's linear part;
+    the nearer side's residual counts.
+
+    Args:
+        taxels_m: ``(M, 3)`` taxel positions, frame R.
+        points_m: ``(N, 3)`` the model's points ``p`` (unbiased).
+        g: ``(b_theta, b_x, b_y, b_z, m_r, m_theta)``.
+        pivot_m: the bias pivot.
+        tree: a KD-tree over ``points_m``, or over positions each within millimetres of
+            them (the patches are picked by index and take ``points_m``'s coordinates).
     """
-    low, high = taxels.min(axis=0) - PATCH_SEARCH_M, taxels.max(axis=0) + PATCH_SEARCH_M
-    near = model[np.all((model >= low) & (model <= high), axis=1)]
-    patches = np.empty((len(taxels), k, 3))
-    far = np.ones(len(taxels), dtype=bool)
-    if len(near) >= k:
-        distance, nearest = cKDTree(near).query(taxels, k=k)
-        patches = near[nearest.reshape(len(taxels), k)]
-        far = distance.reshape(len(taxels), k)[:, -1] > PATCH_SEARCH_M
-    if far.any():
-        _, nearest = cKDTree(model).query(taxels[far], k=k)
-        patches[far] = model[nearest.reshape(-1, k)]
-    return patches
+    points = np.asarray(points_m, dtype=float)
+    tree = cKDTree(points, balanced_tree=False) if tree is None else tree
+    k = min(SURFACE_NEIGHBOURS, len(points))
+    sides = [
+        (invert_side(taxels_m, g, pivot_m, back), side_linear_part(g, back))
+        for back in (False, True)
+    ]
+    # A side whose patch lies beyond the bound is not the taxel's side (bounded queries are
+    # cheap; far ones would visit most of the tree); a taxel far from both is searched fully.
+    found = [
+        tree.query(preimages, k=k, distance_upper_bound=SIDE_SEARCH_M) for preimages, _ in sides
+    ]
+    reach = np.stack([distance[:, -1] if k > 1 else distance for distance, _ in found])
+    lost = ~np.isfinite(reach).any(axis=0)
+    if lost.any():
+        for (preimages, _), (distance, nearest) in zip(sides, found, strict=True):
+            distance[lost], nearest[lost] = tree.query(preimages[lost], k=k)
+    best = np.full((len(taxels_m), 3), np.inf)
+    for (preimages, linear), (_, nearest) in zip(sides, found, strict=True):
+        usable = nearest.reshape(len(taxels_m), k)[:, -1] < len(points)
+        if not usable.any():
+            continue
+        residual = np.full_like(best, np.inf)
+        patch = points[nearest.reshape(len(taxels_m), k)[usable]]
+        residual[usable] = _patch_residuals(preimages[usable], patch) @ linear.T
+        nearer = np.linalg.norm(residual, axis=1) < np.linalg.norm(best, axis=1)
+        best[nearer] = residual[nearer]
+    return best
 
 
 def normalised_innovations(
@@ -175,6 +216,7 @@ def assess(
     grasps: Sequence[GraspContacts],
     view: DepthObservation | None,
     settings: ConsistencySettings,
+    tree: cKDTree | None = None,
 ) -> Consistency:
     """Both checks on one stage's model.
 
@@ -187,15 +229,13 @@ def assess(
         grasps: the taxels in contact, with their noise ``R``.
         view: the camera's depth image, or None to skip the free-space check.
         settings: the thresholds.
+        tree: as for :func:`model_residuals` (every stage can share one tree).
     """
     residuals, nis, groups = [], [], []
     for k, (g_k, contacts) in enumerate(zip(grasp_g, grasps, strict=True)):
         if len(contacts.positions_m) == 0:
             continue
-        model = np.vstack(
-            [apply_bias(points_m, g_k, pivot_m), apply_mirror_bias(points_m, g_k, pivot_m)]
-        )
-        d = surface_residuals(contacts.positions_m, model)
+        d = model_residuals(contacts.positions_m, points_m, g_k, pivot_m, tree)
         residuals.append(d)
         nis.append(normalised_innovations(d, contacts.noise, settings.surface_std_m))
         groups.append(np.char.add(f"{k}:", np.asarray(contacts.pads, dtype=str)))

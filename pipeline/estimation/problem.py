@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..errors import StageFailure
 from ..types import (
@@ -128,11 +129,15 @@ def estimate_result(
         return EstimateResult(stages=(initial, *fused))
     states = [fusion.g_init, *(o.g for o in outcomes)]
     grasp_states = [[fusion.g_init] * len(fusion.grasps)] + [list(o.grasp_g) for o in outcomes]
+    # One tree over the unfused points serves every stage: Stage 1 holds them fixed and
+    # Stage 2 moves them by millimetres, so their nearest neighbours by index barely change
+    # (the patches take the stage's own coordinates).
+    tree = cKDTree(fusion.points_m, balanced_tree=False)
     diagnosed = []
     for stage, g, per_grasp in zip((initial, *fused), states, grasp_states, strict=True):
         started = time.perf_counter()
         verdict = assess(
-            stage.points, g, per_grasp, fusion.pivot_m, fusion.grasps, view, consistency
+            stage.points, g, per_grasp, fusion.pivot_m, fusion.grasps, view, consistency, tree
         )
         status = stage.status
         if not verdict.consistent and status in ("converged", "max_iterations"):
