@@ -67,7 +67,7 @@ def _bound(field: dataclasses.Field) -> str:
     elif field.metadata.get("at_least") is not None:
         text = f" >= {field.metadata['at_least']:g}"
     if field.metadata.get("below") is not None:
-        text += f" < {field.metadata['below']:g}"
+        text += f"{',' if text else ''} < {field.metadata['below']:g}"
     return text
 
 
