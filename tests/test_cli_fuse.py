@@ -65,6 +65,16 @@ def test_fuse_writes_results_and_improves_the_diameter(recording, tmp_path, caps
     ]
     assert errors[2] < 0.004 < errors[0]
     assert "stage" in out and "wrote" in out
+    # A bare cloud has no depth image: only the taxel check runs, and says so.
+    for stage in document["stages"]:
+        consistency = stage["consistency"]
+        assert consistency["checks"] == ["taxels"]
+        assert consistency["free_space_violations"] is None
+        assert set(consistency) >= {"taxel_rms_mm", "nis", "nis_threshold", "consistent"}
+    final = document["stages"][2]["consistency"]
+    assert final["consistent"] and final["taxel_rms_mm"] < 2.0
+    assert document["selected_stage"] == 2 and document["selection_reason"]
+    assert "taxel rms mm" in out and "selected: Stage 2" in out
 
 
 def test_npy_cloud_gives_the_same_estimate(recording, tmp_path, capsys):
@@ -242,33 +252,6 @@ def test_bad_plane_and_bad_override(recording, tmp_path, capsys):
     code, _, err = run(capsys, *base, "--plane", "1,0,0", "--set", "estimator.iekf.bogus=1")
     assert code == 2
     assert err.startswith("symfuse: error: unknown config key 'estimator.iekf.bogus'")
-
-
-def test_every_stage_reports_its_self_diagnosis_and_a_selected_stage(recording, tmp_path, capsys):
-    """A bare cloud has no depth image: only the taxel check runs, and says so."""
-    folder, _, plane = recording
-    code, out, err = run(
-        capsys,
-        "fuse",
-        "--cloud",
-        folder / "cloud.ply",
-        "--contacts",
-        folder / "contacts.json",
-        f"--plane={plane}",
-        "--out",
-        tmp_path,
-    )
-    assert code == 0, err
-    document = json.loads((tmp_path / "result.json").read_text())
-    for stage in document["stages"]:
-        consistency = stage["consistency"]
-        assert consistency["checks"] == ["taxels"]
-        assert consistency["free_space_violations"] is None
-        assert set(consistency) >= {"taxel_rms_mm", "nis", "nis_threshold", "consistent"}
-    final = document["stages"][2]["consistency"]
-    assert final["consistent"] and final["taxel_rms_mm"] < 2.0
-    assert document["selected_stage"] == 2 and document["selection_reason"]
-    assert "taxel rms mm" in out and "selected: Stage 2" in out
 
 
 def test_contacts_of_another_object_exit_3_as_inconsistent(tmp_path, capsys):
