@@ -214,8 +214,32 @@ def parse_plane(text: str):
     return SymmetryPlane.from_normal(np.array([nx, ny]), d)
 
 
+#: Columns of the self-diagnosis in the stage tables.
+CONSISTENCY_HEADER = ["taxel rms mm", "NIS / bound", "free space / limit", "consistent"]
+
+
+def consistency_cells(stage) -> list[str]:
+    """A stage's self-diagnosis as table cells ('-' where a check did not run)."""
+    c = stage.consistency
+    if c is None:
+        return ["-"] * len(CONSISTENCY_HEADER)
+    free = (
+        "-"
+        if c.free_space_violations is None
+        else f"{c.free_space_violations} / {c.free_space_limit}"
+    )
+    rms = "-" if not np.isfinite(c.taxel_rms_m) else f"{c.taxel_rms_m * 1e3:.1f}"
+    nis = "-" if not np.isfinite(c.nis) else f"{c.nis:.2f} / {c.nis_threshold:.2f}"
+    return [rms, nis, free, "yes" if c.consistent else "NO"]
+
+
+def selection_line(result) -> str:
+    """Which stage the estimator stands behind, and why."""
+    return f"selected: Stage {result.selected.stage} ({result.selection_reason})"
+
+
 def stage_summary(result) -> str:
-    """A small table of Stage 0/1/2: status, plane, bias, iterations, time."""
+    """A small table of Stage 0/1/2: status, plane, bias, iterations, time, self-diagnosis."""
     rows = []
     for stage in result.stages:
         rows.append(
@@ -228,10 +252,11 @@ def stage_summary(result) -> str:
                 " ".join(f"{v * 1e3:.1f}" for v in stage.bias.translation_m),
                 stage.iterations,
                 f"{stage.seconds * 1e3:.0f}",
+                *consistency_cells(stage),
             ]
         )
     header = ["stage", "status", "plane θ°", "offset mm", "yaw°", "bias t (mm)", "iter", "ms"]
-    return format_table(header, rows)
+    return format_table(header + CONSISTENCY_HEADER, rows)
 
 
 #: The config sections ``fuse`` reads.
@@ -275,6 +300,7 @@ def _fuse_into(
         bias_to_json,
         estimate_to_json,
         plane_to_json,
+        selection_to_json,
         write_completed_clouds,
         write_json,
     )
@@ -304,11 +330,13 @@ def _fuse_into(
             "bias": bias_to_json(run.init.bias),
         },
         stages=estimate_to_json(run.result),
+        **selection_to_json(run.result),
         status=run.result.final.status,
         seconds=time.perf_counter() - started,
     )
     write_json(out / "result.json", document)
     print(stage_summary(run.result))
+    print(selection_line(run.result))
     return run.result.final.status
 
 
@@ -363,6 +391,7 @@ def trial_summary(record) -> str:
                 f"{metrics['chamfer_mm']:.1f}",
                 f"{metrics['fscore_5mm']:.2f}",
                 f"{metrics['iou']:.2f}",
+                *consistency_cells(stage),
             ]
         )
     header = [
@@ -378,7 +407,7 @@ def trial_summary(record) -> str:
         "F@5mm",
         "IoU",
     ]
-    return format_table(header, rows)
+    return format_table(header + CONSISTENCY_HEADER, rows)
 
 
 def _progress(message: str) -> None:
@@ -404,6 +433,7 @@ def _cmd_trial(args: argparse.Namespace) -> int:
             config, registry, staging, report=lambda m: print(f"... {m}", flush=True)
         )
     print(trial_summary(record))
+    print(selection_line(record.result))
     grasp = record.document["grasp"]
     print(
         f"grasp: {record.document['hand']['reason']}; the object moved "

@@ -36,6 +36,7 @@ from .errors import InputError
 from .types import (
     Bias,
     CameraIntrinsics,
+    Consistency,
     Contacts,
     DepthObservation,
     EstimateResult,
@@ -404,12 +405,48 @@ def stage_to_json(stage: StageEstimate) -> dict[str, Any]:
             }
             for state in stage.trace
         ],
+        "consistency": consistency_to_json(stage.consistency),
     }
+
+
+def consistency_to_json(consistency: Consistency | None) -> dict[str, Any] | None:
+    """A stage's self-diagnosis (None when it was not assessed): the checks that ran, the
+    taxels' RMS distance from the model (mm) and NIS with its bound, the model points in
+    seen free space with their limit (None when no camera image was given), the verdict."""
+    if consistency is None:
+        return None
+    return _jsonable(
+        {
+            "checks": list(consistency.checks),
+            "taxel_rms_mm": consistency.taxel_rms_m * 1e3,
+            "nis": consistency.nis,
+            "nis_threshold": consistency.nis_threshold,
+            "free_space_violations": consistency.free_space_violations,
+            "free_space_limit": consistency.free_space_limit,
+            "consistent": consistency.consistent,
+            "reason": consistency.reason,
+        }
+    )
+
+
+def consistency_fields(prefix: str, consistency_json: dict[str, Any] | None) -> dict[str, Any]:
+    """A stage's self-diagnosis as flat sweep-row fields ``{prefix}_consistent``,
+    ``{prefix}_taxel_rms_mm``, ``{prefix}_nis``, ``{prefix}_free_space_violations`` (empty
+    when it was not assessed)."""
+    if consistency_json is None:
+        return {}
+    names = ("consistent", "taxel_rms_mm", "nis", "free_space_violations")
+    return {f"{prefix}_{name}": consistency_json[name] for name in names}
 
 
 def estimate_to_json(result: EstimateResult) -> list[dict[str, Any]]:
     """The per-stage list that ``result.json`` holds under ``"stages"``."""
     return [stage_to_json(stage) for stage in result.stages]
+
+
+def selection_to_json(result: EstimateResult) -> dict[str, Any]:
+    """``{"selected_stage": k, "selection_reason": ...}``: the best-supported stage."""
+    return {"selected_stage": result.selected.stage, "selection_reason": result.selection_reason}
 
 
 def write_completed_clouds(out_dir: Path, result: EstimateResult) -> list[Path]:

@@ -10,9 +10,9 @@ A stage implementation declares its parameters as a frozen dataclass named ``Par
 Supported field types: ``bool``, ``int``, ``float``, ``str``, ``Literal[...]`` of str/int,
 and ``tuple[float, ...]`` / ``tuple[int, ...]`` / ``tuple[str, ...]``. An ``int`` is accepted
 where a ``float`` is declared; nothing else is converted silently; a ``float`` is finite
-(TOML's ``nan`` and ``inf`` are refused). Numbers may declare a
-bound, ``param(0.001, "...", above=0.0)`` or ``at_least=1``, which :func:`build` enforces
-with an error naming the dotted key.
+(TOML's ``nan`` and ``inf`` are refused). Numbers may declare a bound, ``param(0.001,
+"...", above=0.0)`` or ``at_least=1``, and a strict upper bound ``below=1.0``, which
+:func:`build` enforces with an error naming the dotted key.
 """
 
 from __future__ import annotations
@@ -27,12 +27,19 @@ from .errors import ConfigError
 
 
 def param(
-    default: Any, doc: str, *, above: float | None = None, at_least: float | None = None
+    default: Any,
+    doc: str,
+    *,
+    above: float | None = None,
+    at_least: float | None = None,
+    below: float | None = None,
 ) -> Any:
     """Declare a parameter with its default, a one-line description (with units) and,
-    for numbers, an optional strict (``above``) or inclusive (``at_least``) lower bound."""
+    for numbers, an optional strict (``above``) or inclusive (``at_least``) lower bound and
+    a strict upper bound (``below``)."""
     return dataclasses.field(
-        default=default, metadata={"doc": doc, "above": above, "at_least": at_least}
+        default=default,
+        metadata={"doc": doc, "above": above, "at_least": at_least, "below": below},
     )
 
 
@@ -56,11 +63,14 @@ def _field_types(params_cls: type) -> dict[str, Any]:
 
 
 def _bound(field: dataclasses.Field) -> str:
+    text = ""
     if field.metadata.get("above") is not None:
-        return f" > {field.metadata['above']:g}"
-    if field.metadata.get("at_least") is not None:
-        return f" >= {field.metadata['at_least']:g}"
-    return ""
+        text = f" > {field.metadata['above']:g}"
+    elif field.metadata.get("at_least") is not None:
+        text = f" >= {field.metadata['at_least']:g}"
+    if field.metadata.get("below") is not None:
+        text += f"{',' if text else ''} < {field.metadata['below']:g}"
+    return text
 
 
 def _check_bound(field: dataclasses.Field, value: Any, key: str) -> None:
@@ -69,6 +79,9 @@ def _check_bound(field: dataclasses.Field, value: Any, key: str) -> None:
         raise ConfigError(f"config key '{key}': must be > {above:g}, got {value!r}")
     if at_least is not None and not value >= at_least:
         raise ConfigError(f"config key '{key}': must be >= {at_least:g}, got {value!r}")
+    below = field.metadata.get("below")
+    if below is not None and not value < below:
+        raise ConfigError(f"config key '{key}': must be < {below:g}, got {value!r}")
 
 
 def _type_name(annotation: Any) -> str:

@@ -22,6 +22,7 @@ from .stages import Estimator
 from .types import (
     Bias,
     Contacts,
+    DepthObservation,
     EstimateResult,
     EstimationProblem,
     GraspPlan,
@@ -73,8 +74,11 @@ def estimate(
     cloud: PointCloud,
     init: SymmetryInit,
     grasps: Sequence[Contacts],
+    view: DepthObservation | None = None,
 ) -> EstimateResult:
-    """Run the configured estimator from ``init`` over ``grasps`` (in order).
+    """Run the configured estimator from ``init`` over ``grasps`` (in order); ``view``, the
+    depth image the cloud came from, lets the estimator check its model against the space
+    the camera saw empty.
 
     Raises:
         StageFailure: the initialiser rejected every hypothesis.
@@ -82,7 +86,7 @@ def estimate(
     if init.status != "ok":
         raise StageFailure(f"initialiser gave no usable symmetry plane: {init.reason}")
     estimator = config.create(registry, "estimator")
-    problem = EstimationProblem(cloud=cloud, init=init, grasps=tuple(grasps))
+    problem = EstimationProblem(cloud=cloud, init=init, grasps=tuple(grasps), view=view)
     return run_estimator(estimator, problem)
 
 

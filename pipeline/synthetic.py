@@ -40,6 +40,7 @@ from .types import (
     Bias,
     CameraIntrinsics,
     Contacts,
+    DepthObservation,
     EstimationProblem,
     PointCloud,
     SymmetryInit,
@@ -418,10 +419,29 @@ class SyntheticCase:
         return self.true_bias.pivot_m
 
     @property
+    def view(self) -> DepthObservation:
+        """The depth image the cloud came from: each cloud pixel holds its point's depth
+        along the optical axis; every other pixel is unknown (NaN: the scene has no table
+        or background, so rays that miss the cylinder return nothing)."""
+        intrinsics = self.viewpoint.intrinsics
+        depth = np.full((intrinsics.height, intrinsics.width), np.nan, dtype=np.float32)
+        camera = (self.cloud.points - self.T_robot_camera[:3, 3]) @ self.T_robot_camera[:3, :3]
+        rows, cols = self.cloud.pixels.T
+        depth[rows, cols] = camera[:, 2]
+        return DepthObservation(
+            depth_m=depth,
+            rgb=np.zeros((*depth.shape, 3), dtype=np.uint8),
+            intrinsics=intrinsics,
+            T_robot_camera=self.T_robot_camera,
+        )
+
+    @property
     def problem(self) -> EstimationProblem:
-        """The estimation problem: cloud, init plane with zero bias, one grasp."""
+        """The estimation problem: cloud, init plane with zero bias, one grasp, the view."""
         init = SymmetryInit(plane=self.init_plane, bias=Bias(pivot_m=self.pivot_m))
-        return EstimationProblem(cloud=self.cloud, init=init, grasps=(self.contacts,))
+        return EstimationProblem(
+            cloud=self.cloud, init=init, grasps=(self.contacts,), view=self.view
+        )
 
 
 def make_case(

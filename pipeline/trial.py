@@ -33,6 +33,7 @@ from .formats import (
     estimate_to_json,
     plan_to_json,
     plane_to_json,
+    selection_to_json,
     write_cloud,
     write_completed_clouds,
     write_json,
@@ -301,7 +302,7 @@ def _simulate(
     if init.status != "ok":
         raise StageFailure(f"initialiser '{config.choices['initialiser']}' rejected: {init.reason}")
     with timer.phase("estimator"):
-        result = estimate(config, registry, cloud, init, [contacts])
+        result = estimate(config, registry, cloud, init, [contacts], observation)
 
     report("evaluating")
     with timer.phase("evaluation"):
@@ -319,6 +320,7 @@ def _simulate(
             {**stage_json, "metrics": stage_metrics}
             for stage_json, stage_metrics in zip(estimate_to_json(result), metrics, strict=True)
         ],
+        **selection_to_json(result),
         timings=timer.seconds,
     )
     write_json(out_dir / "result.json", document)

@@ -25,7 +25,9 @@ import numpy as np
 #: Parameter names of the 6x6 bias-and-plane covariance, in order.
 BIAS_PLANE_PARAMETERS = ("b_theta", "b_x", "b_y", "b_z", "m_r", "m_theta")
 
-EstimateStatus = Literal["initial", "converged", "max_iterations", "no_correspondence", "diverged"]
+EstimateStatus = Literal[
+    "initial", "converged", "max_iterations", "no_correspondence", "diverged", "inconsistent"
+]
 PlanStatus = Literal["ok", "refused"]
 
 
@@ -361,6 +363,45 @@ class IterationState:
 
 
 @dataclass(frozen=True)
+class Consistency:
+    """How well a stage's completed model explains the evidence (self-diagnosis, see
+    :mod:`pipeline.estimation.consistency`).
+
+    Attributes:
+        checks: the checks that ran: ``"taxels"`` (always, when there were contacts) and
+            ``"free_space"`` (only when the problem carried the camera's depth image).
+        taxel_rms_m: RMS distance of the taxels in contact from the model's surface (m),
+            NaN without taxels.
+        nis: pad-averaged normalised innovation squared of those residuals against the
+            taxel noise and the model surface's std (about 1 when consistent).
+        nis_threshold: its bound at the configured false-alarm probability.
+        free_space_violations: model points lying in space the camera saw empty, None when
+            that check did not run.
+        free_space_limit: the most such points allowed, None when that check did not run.
+        consistent: every check that ran passed.
+        reason: which check failed and by how much; empty when consistent.
+    """
+
+    checks: tuple[str, ...]
+    taxel_rms_m: float
+    nis: float
+    nis_threshold: float
+    free_space_violations: int | None
+    free_space_limit: int | None
+    consistent: bool
+    reason: str = ""
+
+    @property
+    def excess(self) -> float:
+        """The largest ratio of a statistic to its bound (<= 1 when consistent): how far the
+        evidence contradicts the model, comparable between stages."""
+        ratios = [self.nis / self.nis_threshold if np.isfinite(self.nis) else 0.0]
+        if self.free_space_violations is not None and self.free_space_limit is not None:
+            ratios.append(self.free_space_violations / max(self.free_space_limit, 1))
+        return float(max(ratios))
+
+
+@dataclass(frozen=True)
 class StageEstimate:
     """The estimate after one stage: 0 (initial), 1 (bias + plane), 2 (+ points).
 
@@ -376,6 +417,7 @@ class StageEstimate:
         active_points: number of points inside some taxel's gate at the end.
         trace: the state after every iteration, in order (empty for Stage 0 and estimators
             that do not iterate).
+        consistency: the self-diagnosis of this stage's model, None when not assessed.
     """
 
     stage: int
@@ -389,13 +431,23 @@ class StageEstimate:
     seconds: float
     active_points: int = 0
     trace: tuple[IterationState, ...] = ()
+    consistency: Consistency | None = None
 
 
 @dataclass(frozen=True)
 class EstimateResult:
-    """Stages 0, 1 and 2 of one estimation run, in that order."""
+    """Stages 0, 1 and 2 of one estimation run, in that order.
+
+    Attributes:
+        stages: the stages.
+        selected_stage: the stage the evidence supports best (see
+            :func:`pipeline.estimation.consistency.select_stage`); None means the last.
+        selection_reason: why that stage was selected.
+    """
 
     stages: tuple[StageEstimate, ...]
+    selected_stage: int | None = None
+    selection_reason: str = ""
 
     def stage(self, index: int) -> StageEstimate:
         return self.stages[index]
@@ -403,6 +455,11 @@ class EstimateResult:
     @property
     def final(self) -> StageEstimate:
         return self.stages[-1]
+
+    @property
+    def selected(self) -> StageEstimate:
+        """The best-supported stage (the last when no selection was made)."""
+        return self.final if self.selected_stage is None else self.stages[self.selected_stage]
 
 
 @dataclass(frozen=True)
@@ -413,11 +470,15 @@ class EstimationProblem:
         cloud: the segmented object cloud in frame ``R``.
         init: the Stage 0 state from the symmetry initialiser.
         grasps: one :class:`Contacts` per grasp, in the order they happened.
+        view: the depth image the cloud was segmented from, when known (a trial has it,
+            recorded data may not); the self-diagnosis then also checks the model against
+            the space the camera saw empty.
     """
 
     cloud: PointCloud
     init: SymmetryInit
     grasps: tuple[Contacts, ...]
+    view: DepthObservation | None = None
 
 
 @dataclass(frozen=True)

@@ -37,9 +37,9 @@ class IcpEstimator(IekfEstimator):
 
         started = time.perf_counter()
         fusion = self.fusion_problem(problem)
-        p = self.params
-        settings = project(IcpSettings, p)
-        return estimate_result(fusion, icp_fuse(fusion, settings, last_stage=p.last_stage), started)
+        settings = project(IcpSettings, self.params)
+        outcomes = icp_fuse(fusion, settings, last_stage=self.params.last_stage)
+        return estimate_result(fusion, outcomes, started, problem.view, self.consistency_settings())
 
 
 @hookimpl

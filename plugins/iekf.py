@@ -9,6 +9,7 @@ from typing import Literal
 import numpy as np
 
 from pipeline import hookimpl
+from pipeline.estimation.consistency import ConsistencySettings
 from pipeline.estimation.iekf import FusionProblem, IekfSettings, fuse
 from pipeline.estimation.problem import (
     bias_plane_covariance,
@@ -132,6 +133,21 @@ class IekfEstimator(Estimator):
         last_stage: Literal[1, 2] = param(
             2, "1: bias + plane only (result holds stages 0, 1); 2: also the points"
         )
+        consistency_alpha: float = param(
+            0.001,
+            "self-diagnosis: false-alarm probability of each consistency test (taxel NIS "
+            "against chi-square, model points in the camera's free space against the depth "
+            "noise); a stage failing one is 'inconsistent'",
+            above=0.0,
+            below=1.0,
+        )
+        free_space_fraction: float = param(
+            0.02,
+            "self-diagnosis: largest share of the model's points allowed in space the camera "
+            "saw empty (beyond the depth noise), for the completion near the silhouette",
+            at_least=0.0,
+            below=1.0,
+        )
 
     def fusion_problem(self, problem: EstimationProblem) -> FusionProblem:
         """The kernel's view of ``problem`` under these parameters."""
@@ -153,6 +169,15 @@ class IekfEstimator(Estimator):
             regrasp_noise=diagonal_covariance((p.regrasp_b_theta_rad, q_xyz, q_xyz, q_xyz, 0, 0)),
         )
 
+    def consistency_settings(self) -> ConsistencySettings:
+        """The self-diagnosis thresholds: the model surface is as uncertain as one point."""
+        p = self.params
+        return ConsistencySettings(
+            alpha=p.consistency_alpha,
+            surface_std_m=p.point_std_m,
+            free_space_fraction=p.free_space_fraction,
+        )
+
     def settings(self) -> IekfSettings:
         """The kernel's iteration control under these parameters."""
         return project(IekfSettings, self.params)
@@ -160,9 +185,8 @@ class IekfEstimator(Estimator):
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         started = time.perf_counter()
         fusion = self.fusion_problem(problem)
-        p = self.params
-        settings = self.settings()
-        return estimate_result(fusion, fuse(fusion, settings, last_stage=p.last_stage), started)
+        outcomes = fuse(fusion, self.settings(), last_stage=self.params.last_stage)
+        return estimate_result(fusion, outcomes, started, problem.view, self.consistency_settings())
 
 
 @hookimpl

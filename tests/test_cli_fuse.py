@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
-from pipeline.formats import contacts_to_json, read_cloud, write_json
+from pipeline.formats import contacts_to_json, read_cloud, write_cloud, write_json
 from pipeline.metrics import fit_circle_taubin
+from pipeline.synthetic import make_case
 
 
 def test_fuse_writes_results_and_improves_the_diameter(recording, tmp_path, run):
@@ -42,6 +44,16 @@ def test_fuse_writes_results_and_improves_the_diameter(recording, tmp_path, run)
     ]
     assert errors[2] < 0.004 < errors[0]
     assert "stage" in out and "wrote" in out
+    # A bare cloud has no depth image: only the taxel check runs, and says so.
+    for stage in document["stages"]:
+        consistency = stage["consistency"]
+        assert consistency["checks"] == ["taxels"]
+        assert consistency["free_space_violations"] is None
+        assert set(consistency) >= {"taxel_rms_mm", "nis", "nis_threshold", "consistent"}
+    final = document["stages"][2]["consistency"]
+    assert final["consistent"] and final["taxel_rms_mm"] < 2.0
+    assert document["selected_stage"] == 2 and document["selection_reason"]
+    assert "taxel rms mm" in out and "selected: Stage 2" in out
 
 
 def test_npy_cloud_gives_the_same_estimate(recording, tmp_path, run):
@@ -220,3 +232,36 @@ def test_bad_plane_and_bad_override(recording, tmp_path, run):
     code, _, err = run(*base, "--plane", "1,0,0", "--set", "estimator.iekf.bogus=1")
     assert code == 2
     assert err.startswith("symfuse: error: unknown config key 'estimator.iekf.bogus'")
+
+
+def test_contacts_of_another_object_exit_3_as_inconsistent(tmp_path, run):
+    """Three pads that touched the same cylinder scaled 1.4x: results written, exit 3."""
+    case = make_case(np.random.default_rng(3), gripper="three_finger")
+    big = make_case(
+        np.random.default_rng(3),
+        gripper="three_finger",
+        cylinder=dataclasses.replace(case.cylinder, radius_m=1.4 * case.cylinder.radius_m),
+    )
+    write_cloud(tmp_path / "cloud.ply", case.cloud.points)
+    write_json(tmp_path / "contacts.json", contacts_to_json([big.contacts]))
+    plane = case.init_plane
+    text = ",".join(repr(float(v)) for v in (*plane.normal[:2], plane.offset_m))
+    code, out, err = run(
+        "fuse",
+        "--cloud",
+        tmp_path / "cloud.ply",
+        "--contacts",
+        tmp_path / "contacts.json",
+        f"--plane={text}",
+        "--out",
+        tmp_path / "out",
+    )
+    assert code == 3
+    assert err.strip() == (
+        f"symfuse: error: estimate inconsistent (see {tmp_path / 'out'}/result.json)"
+    )
+    document = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert document["status"] == "inconsistent"
+    assert not document["stages"][2]["consistency"]["consistent"]
+    assert "taxels" in document["stages"][2]["consistency"]["reason"]
+    assert "NO" in out

@@ -148,3 +148,8 @@ def test_declared_bounds_are_enforced_with_the_dotted_key(registry):
     with pytest.raises(ConfigError) as error:
         load_config(registry, overrides=["estimator.iekf.max_iterations=0"])
     assert str(error.value) == "config key 'estimator.iekf.max_iterations': must be >= 1, got 0"
+    with pytest.raises(ConfigError) as error:
+        load_config(registry, overrides=["estimator.iekf.consistency_alpha=1.0"])
+    assert str(error.value) == (
+        "config key 'estimator.iekf.consistency_alpha': must be < 1, got 1.0"
+    )

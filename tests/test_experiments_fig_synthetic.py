@@ -179,3 +179,22 @@ def test_fig10_report_medians_and_reach(tmp_path):
     assert "up to 0 mm bias (paper: 15 mm)" in markdown
     assert "up to 15 mm bias (paper: 50 mm)" in markdown
     assert imread(tmp_path / "fig10.png").shape[0] > 100
+
+
+def test_diagnosis_section_counts_false_alarms_and_misses():
+    from pipeline.experiments.synthetic_study import diagnosis_section
+
+    def row(error_mm, status):
+        return {"stage2_diameter_error_mm": error_mm, "stage2_status": status}
+
+    rows = [
+        row(1.0, "converged"),
+        row(2.0, "inconsistent"),
+        row(3.0, "max_iterations"),
+        row(9.0, "converged"),
+        row(9.0, "diverged"),
+        row(None, "inconsistent"),
+    ]
+    (_, line) = diagnosis_section(rows)
+    assert "1 of 3 correct results flagged (false alarms (33.3 %))" in line
+    assert "1 of 3 wrong results not flagged" in line

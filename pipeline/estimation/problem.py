@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..errors import StageFailure
 from ..types import (
     Bias,
     Contacts,
+    DepthObservation,
     EstimateResult,
     EstimateStatus,
     EstimationProblem,
@@ -18,6 +21,7 @@ from ..types import (
     StageEstimate,
     SymmetryPlane,
 )
+from .consistency import ConsistencySettings, assess, select_stage
 from .covariances import normal_ellipsoids
 from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
 from .iekf import FusionProblem, GraspContacts, IterationRecord, StageOutcome
@@ -99,13 +103,21 @@ def _bias(g: np.ndarray, pivot_m: np.ndarray) -> Bias:
 
 
 def estimate_result(
-    fusion: FusionProblem, outcomes: Sequence[StageOutcome], started_s: float
+    fusion: FusionProblem,
+    outcomes: Sequence[StageOutcome],
+    started_s: float,
+    view: DepthObservation | None = None,
+    consistency: ConsistencySettings | None = None,
 ) -> EstimateResult:
     """Stage 0 (the initial state) followed by the fused stages ``outcomes`` (1, then 2).
 
     Stage 0's time is the setup: the time since ``started_s`` (a ``time.perf_counter()``
     reading taken when the estimator started) less the fused stages' own times, so the
     stages' times add up to the estimator's.
+
+    With ``consistency`` every stage is diagnosed against the taxels (and ``view``, when
+    given), a fused stage whose model contradicts the evidence gets the status
+    ``inconsistent`` (unless it already failed), and the best-supported stage is selected.
     """
     setup_seconds = time.perf_counter() - started_s - sum(o.seconds for o in outcomes)
     initial = stage_estimate(
@@ -134,7 +146,27 @@ def estimate_result(
         )
         for stage, o in enumerate(outcomes, start=1)
     ]
-    return EstimateResult(stages=(initial, *fused))
+    if consistency is None:
+        return EstimateResult(stages=(initial, *fused))
+    states = [fusion.g_init, *(o.g for o in outcomes)]
+    grasp_states = [[fusion.g_init] * len(fusion.grasps)] + [list(o.grasp_g) for o in outcomes]
+    # One tree over the unfused points serves every stage: Stage 1 holds them fixed and
+    # Stage 2 moves them by millimetres, so their nearest neighbours by index barely change
+    # (the patches take the stage's own coordinates).
+    tree = cKDTree(fusion.points_m, balanced_tree=False)
+    diagnosed = []
+    for stage, g, per_grasp in zip((initial, *fused), states, grasp_states, strict=True):
+        started = time.perf_counter()
+        verdict = assess(
+            stage.points, g, per_grasp, fusion.pivot_m, fusion.grasps, view, consistency, tree
+        )
+        status = stage.status
+        if not verdict.consistent and status in ("converged", "max_iterations"):
+            status = "inconsistent"
+        seconds = stage.seconds + time.perf_counter() - started
+        diagnosed.append(replace(stage, consistency=verdict, status=status, seconds=seconds))
+    selected, reason = select_stage(diagnosed)
+    return EstimateResult(stages=tuple(diagnosed), selected_stage=selected, selection_reason=reason)
 
 
 def diagonal_covariance(stds: tuple[float, ...]) -> np.ndarray:

@@ -23,6 +23,7 @@ from . import ExperimentOptions, SweepTask
 from .synthetic_study import CONFIG_SECTIONS as CONFIG_SECTIONS
 from .synthetic_study import (
     SUCCESS_MM,
+    diagnosis_section,
     failures_section,
     final_error,
     fmt,
@@ -139,6 +140,7 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
                 [np.minimum(s, 1e3) for s in samples],
             )
         )
+    lines += diagnosis_section(good)
     figure_paths = []
     if panels:
         figure = box_plot_figure(

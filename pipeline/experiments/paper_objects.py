@@ -56,6 +56,7 @@ import tomli_w
 
 from ..catalogue import list_objects
 from ..errors import ConfigError, StageFailure
+from ..formats import consistency_fields
 from ..perception.grasp_geometry import narrowest_width
 from ..plots import BoxPanel, box_plot_figure
 from ..sim.camera import CameraParams
@@ -254,11 +255,13 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
         "points": document.get("points"),
         "taxels_in_contact": document.get("taxels_in_contact"),
         "timings": dict(document.get("timings", {})),
+        "selected_stage": document.get("selected_stage"),
     }
     for stage_json, stage_metrics in zip(document["stages"], metrics, strict=True):
         prefix = f"stage{stage_json['stage']}"
         row[f"{prefix}_status"] = stage_json.get("status")
         row[f"{prefix}_iterations"] = stage_json.get("iterations")
+        row.update(consistency_fields(prefix, stage_json.get("consistency")))
         for name, value in stage_metrics.items():
             if name == "deviation_m":
                 for field, metres in value.items():

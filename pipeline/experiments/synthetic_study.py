@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from ..formats import consistency_fields, consistency_to_json
 from ..metrics import diameter_error
 from ..plots import GridPanel, error_grid_figure
 from ..runner import run_estimator
@@ -156,7 +157,11 @@ def run_trial(params: Mapping[str, Any]) -> dict[str, Any]:
     )
     estimator = make_estimator(params["estimator"], params["estimator_params"])
     result = run_estimator(estimator, case.problem)
-    row: dict[str, Any] = {"points": len(case.cloud), "contacts": len(case.contacts)}
+    row: dict[str, Any] = {
+        "points": len(case.cloud),
+        "contacts": len(case.contacts),
+        "selected_stage": result.selected.stage,
+    }
     for stage in result.stages:
         prefix = f"stage{stage.stage}"
         row[f"{prefix}_diameter_error_mm"] = _diameter_error_mm(
@@ -165,6 +170,7 @@ def run_trial(params: Mapping[str, Any]) -> dict[str, Any]:
         row[f"{prefix}_status"] = stage.status
         row[f"{prefix}_iterations"] = int(stage.iterations)
         row[f"{prefix}_seconds"] = float(stage.seconds)
+        row.update(consistency_fields(prefix, consistency_to_json(stage.consistency)))
     return row
 
 
@@ -252,6 +258,35 @@ def success_summary(
         "theta_reach_deg": theta_reach,
         "r_reach_mm": r_reach,
     }
+
+
+#: Final statuses that report a failure (the estimate is not to be trusted).
+FLAGGED_STATUSES = ("no_correspondence", "diverged", "inconsistent")
+
+
+def diagnosis_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Markdown lines on the self-diagnosis: how often a correct result (final diameter
+    error < :data:`SUCCESS_MM`) was flagged (a false alarm) and how often a wrong one was
+    not (a miss), by the final stage's status."""
+    last = [row for row in rows if "stage2_status" in row or "stage1_status" in row]
+    if not last:
+        return []
+
+    def flagged(row: Mapping[str, Any]) -> bool:
+        stage = 2 if "stage2_status" in row else 1
+        return row[f"stage{stage}_status"] in FLAGGED_STATUSES
+
+    correct = [row for row in last if final_error(row) < SUCCESS_MM]
+    wrong = [row for row in last if not final_error(row) < SUCCESS_MM]
+    alarms = sum(flagged(row) for row in correct)
+    misses = sum(not flagged(row) for row in wrong)
+    rate = f" ({100.0 * alarms / len(correct):.1f} %)" if correct else ""
+    return [
+        "",
+        "Self-diagnosis (final status inconsistent, diverged or no_correspondence = flagged): "
+        f"{alarms} of {len(correct)} correct results flagged (false alarms{rate}); "
+        f"{misses} of {len(wrong)} wrong results not flagged.",
+    ]
 
 
 def fmt(value: float | None, digits: int = 1) -> str:
@@ -368,6 +403,7 @@ def report_grid(
         threshold=SUCCESS_MM,
         title=title,
     )
+    lines += diagnosis_section(good)
     lines += ["", f"![{name}]({figure.name})"]
     lines += failures_section(failed)
     report_path = out_dir / "report.md"

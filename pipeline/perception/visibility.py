@@ -112,15 +112,8 @@ def visibility_violations(
     points, q = points[order], q[order]
     normals = np.column_stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)])
     normals_camera = normals @ rotation_camera_robot.T
-    height, width = depth_m.shape
-    # Free-space limit per pixel (measured depth minus tolerance); -inf = unknown. The extra
-    # last entry catches points outside the image. float32 is ample at these ranges.
-    limit = np.asarray(depth_m, dtype=np.float32).reshape(-1) - np.float32(tolerance_m)
-    limit = np.append(np.where(np.isfinite(limit), limit, -np.inf), -np.inf).astype(np.float32)
-    outside = height * width
+    limit = _free_space_limits(depth_m, tolerance_m)
     qx, qy, qz = (q[:, k].astype(np.float32) for k in range(3))
-    fx, fy = np.float32(intrinsics.fx), np.float32(intrinsics.fy)
-    cx, cy = np.float32(intrinsics.cx), np.float32(intrinsics.cy)
 
     violations = np.zeros(len(theta), dtype=np.int64)
     depth_sum = np.zeros(len(theta))
@@ -130,16 +123,70 @@ def visibility_violations(
             np.float32
         )
         nx, ny, nz = (normals_camera[block, k, None].astype(np.float32) for k in range(3))
-        z = qz - twice_signed * nz
-        in_view = z > 1e-3
-        inverse_z = np.reciprocal(np.where(in_view, z, np.float32(1.0)))
-        # Nearest pixel, shifted by one so truncation toward zero equals floor wherever the
-        # result can be inside the image (valid shifted indices are 1..size).
-        col = (fx * (qx - twice_signed * nx) * inverse_z + (cx + 1.5)).astype(np.int32)
-        row = (fy * (qy - twice_signed * ny) * inverse_z + (cy + 1.5)).astype(np.int32)
-        inside = in_view & (col >= 1) & (col <= width) & (row >= 1) & (row <= height)
-        index = np.where(inside, row * width + col - (width + 1), outside)
-        in_front = limit[index] - z
+        in_front = _in_front(
+            qx - twice_signed * nx,
+            qy - twice_signed * ny,
+            qz - twice_signed * nz,
+            limit,
+            intrinsics,
+        )
         violations[block] = np.count_nonzero(in_front > 0.0, axis=1)
         depth_sum[block] = np.maximum(in_front, 0.0).sum(axis=1, dtype=np.float64)
     return violations.reshape(shape), depth_sum.reshape(shape)
+
+
+def free_space_depths(
+    points_robot: np.ndarray,
+    depth_m: np.ndarray,
+    intrinsics: CameraIntrinsics,
+    T_robot_camera: np.ndarray,
+) -> np.ndarray:
+    """How far each point lies in front of the surface the camera measured on its ray.
+
+    The same test as :func:`visibility_violations` for one set of points, without a
+    tolerance: a point at depth ``z`` (optical axis, frame C) projecting onto a pixel that
+    measured ``d`` gets ``d - z``; positive values are in known free space.
+
+    Args:
+        points_robot: ``(N, 3)`` points in the robot frame, metres.
+        depth_m, intrinsics, T_robot_camera: the camera's image and pose (as believed).
+
+    Returns:
+        ``(N,)`` distance in front of the measured surface (m); ``-inf`` where unknown (NaN
+        pixel, outside the image, behind the camera).
+    """
+    T = np.asarray(T_robot_camera, dtype=np.float64)
+    q = (np.asarray(points_robot, dtype=np.float64) - T[:3, 3]) @ T[:3, :3]
+    limit = _free_space_limits(depth_m, 0.0)
+    qx, qy, qz = (q[:, k].astype(np.float32) for k in range(3))
+    return _in_front(qx, qy, qz, limit, intrinsics).astype(np.float64)
+
+
+def _free_space_limits(depth_m: np.ndarray, tolerance_m: float) -> np.ndarray:
+    """Per pixel the measured depth minus the tolerance, ``-inf`` where unknown, row-major,
+    with one extra ``-inf`` entry for points outside the image (float32 is ample at these
+    ranges)."""
+    limit = np.asarray(depth_m, dtype=np.float32).reshape(-1) - np.float32(tolerance_m)
+    return np.append(np.where(np.isfinite(limit), limit, -np.inf), -np.inf).astype(np.float32)
+
+
+def _in_front(
+    qx: np.ndarray,
+    qy: np.ndarray,
+    qz: np.ndarray,
+    limit: np.ndarray,
+    intrinsics: CameraIntrinsics,
+) -> np.ndarray:
+    """``limit[pixel] - z`` of camera-frame points (float32 arrays of any equal shape)."""
+    height, width = intrinsics.height, intrinsics.width
+    fx, fy = np.float32(intrinsics.fx), np.float32(intrinsics.fy)
+    cx, cy = np.float32(intrinsics.cx), np.float32(intrinsics.cy)
+    in_view = qz > 1e-3
+    inverse_z = np.reciprocal(np.where(in_view, qz, np.float32(1.0)))
+    # Nearest pixel, shifted by one so truncation toward zero equals floor wherever the
+    # result can be inside the image (valid shifted indices are 1..size).
+    col = (fx * qx * inverse_z + (cx + 1.5)).astype(np.int32)
+    row = (fy * qy * inverse_z + (cy + 1.5)).astype(np.int32)
+    inside = in_view & (col >= 1) & (col <= width) & (row >= 1) & (row <= height)
+    index = np.where(inside, row * width + col - (width + 1), height * width)
+    return limit[index] - qz

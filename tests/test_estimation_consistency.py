@@ -1,0 +1,245 @@
+"""Self-diagnosis: the consistency kernels against hand-computed cases, and the estimator's
+verdicts on right and wrong synthetic problems."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from estimation_scenes import cylinder_scene, fusion_problem
+
+from pipeline.estimation.consistency import (
+    ConsistencySettings,
+    assess,
+    free_space_count,
+    normalised_innovations,
+    pad_test,
+    select_stage,
+    surface_residuals,
+)
+from pipeline.estimation.covariances import normal_ellipsoids
+from pipeline.experiments.synthetic_study import make_estimator
+from pipeline.metrics import diameter_error
+from pipeline.perception.visibility import free_space_depths, visibility_violations
+from pipeline.runner import run_estimator
+from pipeline.synthetic import Cylinder, make_case
+from pipeline.types import (
+    Bias,
+    CameraIntrinsics,
+    Consistency,
+    DepthObservation,
+    StageEstimate,
+    SymmetryPlane,
+)
+
+
+def grid_plane(spacing_m: float = 0.002, half_m: float = 0.03) -> np.ndarray:
+    """Points on the plane z = 0, a square grid."""
+    steps = np.arange(-half_m, half_m + 1e-12, spacing_m)
+    x, y = np.meshgrid(steps, steps)
+    return np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+
+
+def test_taxels_two_millimetres_off_a_plane_give_two_millimetres_rms_and_known_nis():
+    taxels = grid_plane(0.0034, 0.01) + np.array([0.0005, 0.0003, 0.002])
+    residuals = surface_residuals(taxels, grid_plane())
+    assert residuals == pytest.approx(np.tile([0.0, 0.0, -0.002], (len(taxels), 1)), abs=1e-12)
+    assert np.sqrt(np.mean(np.sum(residuals**2, axis=1))) == pytest.approx(0.002)
+    # Along the taxel normal R has 1 mm std, the surface 2 mm: NIS = 2^2 / (1 + 4).
+    noise = normal_ellipsoids(np.tile([0.0, 0.0, -1.0], (len(taxels), 1)), 0.001, 0.003)
+    nis = normalised_innovations(residuals, noise, 0.002)
+    assert nis == pytest.approx(np.full(len(taxels), 4.0 / 5.0))
+
+
+def test_residual_to_a_curved_surface_is_the_radial_distance():
+    angle = np.linspace(0.0, 2.0 * np.pi, 2000, endpoint=False)
+    height = np.linspace(0.0, 0.1, 100)
+    a, h = np.meshgrid(angle, height)
+    cylinder = np.column_stack([0.04 * np.cos(a.ravel()), 0.04 * np.sin(a.ravel()), h.ravel()])
+    taxels = np.array([[0.043, 0.0, 0.05], [0.0, -0.0385, 0.03]])
+    distances = np.linalg.norm(surface_residuals(taxels, cylinder), axis=1)
+    assert distances == pytest.approx([0.003, 0.0015], abs=1e-4)
+
+
+def test_a_taxel_beyond_the_edge_of_the_model_is_measured_as_far_from_it():
+    """A taxel in the plane of the model but 20 mm beyond its edge is not touching it."""
+    taxel = np.array([[0.05, 0.0, 0.0]])
+    distance = float(np.linalg.norm(surface_residuals(taxel, grid_plane())))
+    assert 0.015 < distance <= 0.02
+
+
+def test_pad_test_averages_within_pads_and_uses_chi_square_with_one_dof_per_pad():
+    statistic, bound = pad_test(np.array([1.0, 1.0, 1.0, 3.0]), np.array(list("aaab")), 0.001)
+    assert statistic == pytest.approx((1.0 + 3.0) / 2.0)
+    # chi-square with 2 dof: the 1 - alpha quantile is -2 ln(alpha).
+    assert bound == pytest.approx(-2.0 * math.log(0.001) / 2.0)
+    assert pad_test(np.zeros(0), np.zeros(0), 0.001) == (
+        pytest.approx(math.nan, nan_ok=True),
+        math.inf,
+    )
+
+
+def test_free_space_tolerance_is_the_depth_difference_quantile():
+    settings = ConsistencySettings(alpha=0.001, surface_std_m=0.002)
+    # z_0.999 = 3.0902; the difference of two depths with 2 mm std each has 2.83 mm std.
+    assert settings.free_space_tolerance_m == pytest.approx(
+        3.0902 * math.sqrt(2.0) * 0.002, rel=1e-4
+    )
+
+
+def flat_view(depth_m: float = 1.0) -> DepthObservation:
+    """A 40 x 30 camera at the robot origin looking along +x (optical z = robot x) at a wall
+    ``depth_m`` away, with one NaN pixel."""
+    intrinsics = CameraIntrinsics(width=40, height=30, fx=50.0, fy=50.0, cx=19.5, cy=14.5)
+    depth = np.full((30, 40), depth_m, dtype=np.float32)
+    depth[0, 0] = np.nan
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    rgb = np.zeros((30, 40, 3), dtype=np.uint8)
+    return DepthObservation(depth_m=depth, rgb=rgb, intrinsics=intrinsics, T_robot_camera=T)
+
+
+def test_free_space_depths_on_a_wall():
+    view = flat_view()
+    corner = [1.0, 19.5 / 50.0, 14.5 / 50.0]  # projects onto the NaN pixel (0, 0)
+    points = np.array([[0.9, 0.0, 0.0], [1.1, 0.0, 0.0], [1.0, 5.0, 0.0], [-1.0, 0, 0], corner])
+    depths = free_space_depths(points, view.depth_m, view.intrinsics, view.T_robot_camera)
+    assert depths[:2] == pytest.approx([0.1, -0.1], abs=1e-6)
+    assert np.all(np.isneginf(depths[2:]))
+    assert free_space_count(depths, 0.05) == 1
+
+
+def test_free_space_depths_agree_with_the_visibility_constraint_counts():
+    view = flat_view()
+    rng = np.random.default_rng(0)
+    points = np.column_stack(
+        [rng.uniform(0.95, 1.2, 400), rng.uniform(-0.2, 0.2, 400), rng.uniform(-0.1, 0.1, 400)]
+    )
+    plane = SymmetryPlane(theta_rad=0.3, offset_m=1.0)
+    counts, _ = visibility_violations(
+        points,
+        np.array([plane.theta_rad]),
+        np.array([plane.offset_m]),
+        view.depth_m,
+        view.intrinsics,
+        view.T_robot_camera,
+        tolerance_m=0.01,
+    )
+    depths = free_space_depths(
+        plane.mirror(points), view.depth_m, view.intrinsics, view.T_robot_camera
+    )
+    assert 0 < counts[0] == free_space_count(depths, 0.01)
+
+
+def test_assess_passes_the_true_state_and_fails_a_plane_thirty_millimetres_off():
+    scene = cylinder_scene(4000)
+    problem = fusion_problem(scene, scene.g_true)
+    settings = ConsistencySettings()
+    right = assess(
+        scene.points_m, scene.g_true, [scene.g_true], scene.pivot_m, problem.grasps, None, settings
+    )
+    assert right.consistent and right.checks == ("taxels",)
+    assert right.taxel_rms_m < 0.001 and right.free_space_violations is None
+    wrong_g = scene.g_true + np.array([0, 0, 0, 0, 0.03, 0])
+    wrong = assess(
+        scene.points_m, wrong_g, [wrong_g], scene.pivot_m, problem.grasps, None, settings
+    )
+    assert not wrong.consistent and "taxels" in wrong.reason
+    assert wrong.taxel_rms_m > 0.01 and wrong.excess > 1.0
+
+
+def stage(index: int, excess_nis: float) -> StageEstimate:
+    verdict = Consistency(
+        checks=("taxels",),
+        taxel_rms_m=0.001,
+        nis=excess_nis,
+        nis_threshold=1.0,
+        free_space_violations=None,
+        free_space_limit=None,
+        consistent=excess_nis <= 1.0,
+        reason="" if excess_nis <= 1.0 else "taxels",
+    )
+    return StageEstimate(
+        stage=index,
+        plane=SymmetryPlane(0.0, 0.0),
+        bias=Bias(),
+        covariance=np.eye(6),
+        points=np.zeros((1, 3)),
+        completed=np.zeros((2, 3)),
+        iterations=1,
+        status="converged" if excess_nis <= 1.0 else "inconsistent",
+        seconds=0.0,
+        consistency=verdict,
+    )
+
+
+def test_selection_keeps_a_consistent_last_stage_and_otherwise_the_least_contradicted():
+    assert select_stage([stage(0, 0.1), stage(1, 0.5), stage(2, 0.9)])[0] == 2
+    assert select_stage([stage(0, 0.5), stage(1, 3.0), stage(2, 2.0)])[0] == 0
+    index, reason = select_stage([stage(0, 9.0), stage(1, 1.5), stage(2, 2.0)])
+    assert index == 1 and "Stage 1" in reason
+    assert select_stage([stage(0, 9.0), stage(1, 3.0), stage(2, 2.0)])[0] == 2
+
+
+def run_case(case, **overrides):
+    problem = case.problem
+    if overrides:
+        problem = dataclasses.replace(problem, **overrides)
+    return run_estimator(make_estimator("iekf", {}), problem)
+
+
+def test_a_correct_fusion_is_converged_and_consistent_with_both_checks():
+    case = make_case(np.random.default_rng(1), theta_error_rad=math.radians(45.0), r_error_m=0.02)
+    result = run_case(case)
+    final = result.final
+    assert final.status == "converged"
+    assert final.consistency.consistent
+    assert final.consistency.checks == ("taxels", "free_space")
+    assert result.selected_stage == 2
+    assert abs(diameter_error(final.completed, case.cylinder.diameter_m)) < 0.004
+    # Stage 0 (45 deg, 20 mm off) puts the mirrored back in front of the visible surface.
+    initial = result.stage(0).consistency
+    assert not initial.consistent and initial.free_space_violations > initial.free_space_limit
+
+
+def test_contacts_of_a_larger_object_end_inconsistent():
+    """Three pads touched the same cylinder scaled 1.4x: no plane and bias of the seen
+    cylinder explains them."""
+    case = make_case(np.random.default_rng(3), gripper="three_finger")
+    big = make_case(
+        np.random.default_rng(3),
+        gripper="three_finger",
+        cylinder=dataclasses.replace(Cylinder(), radius_m=1.4 * Cylinder().radius_m),
+    )
+    result = run_case(case, grasps=(big.contacts,))
+    assert result.final.status == "inconsistent"
+    assert not result.final.consistency.consistent
+
+
+@pytest.mark.parametrize(
+    ("gripper", "phi_deg", "theta_deg", "r_mm"),
+    [("parallel", 0, 80, 40), ("parallel", 0, 67.5, 50), ("three_finger", 45, 67.5, 50)],
+)
+def test_a_far_off_initial_plane_that_is_not_corrected_is_never_converged(
+    gripper, phi_deg, theta_deg, r_mm
+):
+    case = make_case(
+        np.random.default_rng(1),
+        gripper=gripper,
+        tactile_angle_rad=math.radians(phi_deg),
+        theta_error_rad=math.radians(theta_deg),
+        r_error_m=r_mm * 1e-3,
+    )
+    final = run_case(case).final
+    assert abs(diameter_error(final.completed, case.cylinder.diameter_m)) > 0.004
+    assert final.status in ("inconsistent", "diverged", "no_correspondence")
+
+
+def test_without_a_camera_image_only_the_taxels_are_checked():
+    case = make_case(np.random.default_rng(1))
+    result = run_case(case, view=None)
+    for estimate in result.stages:
+        assert estimate.consistency.checks == ("taxels",)
+        assert estimate.consistency.free_space_violations is None
