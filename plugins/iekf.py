@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from pipeline import hookimpl
-from pipeline.estimation.consistency import ConsistencySettings
-from pipeline.estimation.iekf import FusionProblem, IekfSettings, fuse
 from pipeline.estimation.problem import (
     bias_plane_covariance,
     checked_points,
@@ -22,6 +20,10 @@ from pipeline.estimation.problem import (
 from pipeline.params import param, project
 from pipeline.stages import Estimator
 from pipeline.types import EstimateResult, EstimationProblem
+
+if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
+    from pipeline.estimation.consistency import ConsistencySettings
+    from pipeline.estimation.iekf import FusionProblem, IekfSettings
 
 
 class IekfEstimator(Estimator):
@@ -151,6 +153,8 @@ class IekfEstimator(Estimator):
 
     def fusion_problem(self, problem: EstimationProblem) -> FusionProblem:
         """The kernel's view of ``problem`` under these parameters."""
+        from pipeline.estimation.iekf import FusionProblem
+
         p = self.params
         points = checked_points(problem, self.name)
         pivot = points.mean(axis=0)
@@ -171,6 +175,8 @@ class IekfEstimator(Estimator):
 
     def consistency_settings(self) -> ConsistencySettings:
         """The self-diagnosis thresholds: the model surface is as uncertain as one point."""
+        from pipeline.estimation.consistency import ConsistencySettings
+
         p = self.params
         return ConsistencySettings(
             alpha=p.consistency_alpha,
@@ -180,9 +186,13 @@ class IekfEstimator(Estimator):
 
     def settings(self) -> IekfSettings:
         """The kernel's iteration control under these parameters."""
+        from pipeline.estimation.iekf import IekfSettings
+
         return project(IekfSettings, self.params)
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
+        from pipeline.estimation.iekf import fuse
+
         started = time.perf_counter()
         fusion = self.fusion_problem(problem)
         outcomes = fuse(fusion, self.settings(), last_stage=self.params.last_stage)

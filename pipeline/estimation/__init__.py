@@ -1,16 +1,7 @@
 """Visuo-tactile state estimation: geometry, correspondences, the structured IEKF, its dense
-reference and the ICP baseline (METHOD.md sections 1-4). Pure array code, no I/O."""
+reference, the self-diagnosis and the ICP baseline. Pure array code, no I/O.
 
-from .dense import DenseCovariance
-from .iekf import FusionProblem, GraspContacts, IekfSettings, StageOutcome, fuse
-from .structured import StructuredCovariance
-
-__all__ = [
-    "DenseCovariance",
-    "FusionProblem",
-    "GraspContacts",
-    "IekfSettings",
-    "StageOutcome",
-    "StructuredCovariance",
-    "fuse",
-]
+The package namespace re-exports nothing: importing it must stay cheap, since every
+estimator plugin's module imports from here when ``symfuse plugins`` lists them; the
+kernels (and scipy) load when an estimate runs.
+"""

@@ -5,9 +5,9 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..errors import StageFailure
 from ..types import (
@@ -21,10 +21,12 @@ from ..types import (
     StageEstimate,
     SymmetryPlane,
 )
-from .consistency import ConsistencySettings, assess, select_stage
 from .covariances import normal_ellipsoids
 from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
-from .iekf import FusionProblem, GraspContacts, IterationRecord, StageOutcome
+
+if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
+    from .consistency import ConsistencySettings
+    from .iekf import FusionProblem, GraspContacts, IterationRecord, StageOutcome
 
 
 def checked_points(problem: EstimationProblem, estimator: str) -> np.ndarray:
@@ -51,6 +53,8 @@ def grasp_contacts(
 ) -> GraspContacts:
     """Taxels of one grasp with ``C_t`` and ``R`` built from (along, across) normal stds;
     with ``facing_filter`` their normals are kept for the surface-orientation filter."""
+    from .iekf import GraspContacts
+
     return GraspContacts(
         positions_m=contacts.positions,
         pads=contacts.pads,
@@ -153,6 +157,10 @@ def estimate_result(
     # One tree over the unfused points serves every stage: Stage 1 holds them fixed and
     # Stage 2 moves them by millimetres, so their nearest neighbours by index barely change
     # (the patches take the stage's own coordinates).
+    from scipy.spatial import cKDTree
+
+    from .consistency import assess, select_stage
+
     tree = cKDTree(fusion.points_m, balanced_tree=False)
     diagnosed = []
     for stage, g, per_grasp in zip((initial, *fused), states, grasp_states, strict=True):

@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d
 
 from ..params import param
 from ..sim.taxels import pad_grid
@@ -688,6 +687,8 @@ _PROFILE_STEP_M = 0.001
 def _swept_profile(step: int, clearance_m: float) -> tuple[np.ndarray, np.ndarray]:
     """The finger profile at proximal angle ``step`` x 3 deg, grown by ``clearance_m`` in
     both directions."""
+    from scipy.ndimage import maximum_filter1d  # deferred: planners load with `plugins`
+
     grid, depth = sdh.finger_profile(step * _OPEN_STEP_RAD, _PROFILE_STEP_M)
     width = 2 * math.ceil(clearance_m / _PROFILE_STEP_M) + 1
     return grid, maximum_filter1d(depth, width) + clearance_m

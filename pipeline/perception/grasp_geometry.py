@@ -20,7 +20,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import ConvexHull
 
 from pipeline.types import PadLayout
 
@@ -386,6 +385,8 @@ def narrowest_width(points_xy: np.ndarray) -> tuple[float, float]:
         about +z, in [0, pi).
     """
     points_xy = np.asarray(points_xy, dtype=np.float64)
+    from scipy.spatial import ConvexHull  # deferred: planners load with `plugins`
+
     hull = points_xy[ConvexHull(points_xy).vertices]
     edges = np.roll(hull, -1, axis=0) - hull
     normals = np.column_stack([-edges[:, 1], edges[:, 0]])

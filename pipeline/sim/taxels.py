@@ -15,7 +15,6 @@ along the surface, so the grid is the flat grid rolled onto that curve.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 
 def pad_grid(
@@ -72,6 +71,8 @@ def rotations_from_quaternions(quaternions_xyzw: np.ndarray) -> np.ndarray:
 
     The quaternions are normalised first (PyBullet's are unit only to about 1e-7).
     """
+    from scipy.spatial.transform import Rotation  # deferred: planners load with `plugins`
+
     return Rotation.from_quat(
         np.asarray(quaternions_xyzw, dtype=np.float64).reshape(-1, 4)
     ).as_matrix()
