@@ -47,7 +47,7 @@ from .types import (
     SymmetryPlane,
 )
 
-#: Kinect v1 depth intrinsics (HARDWARE.md, ROS defaults).
+#: Kinect v1 depth intrinsics (the ROS driver's defaults).
 KINECT_INTRINSICS = CameraIntrinsics(width=640, height=480, fx=575.8, fy=575.8, cx=314.5, cy=235.5)
 
 GripperKind = Literal["parallel", "three_finger"]
@@ -111,7 +111,7 @@ class Viewpoint:
 class PadGeometry:
     """A flat tactile pad: ``rows`` along the finger (vertical), ``cols`` across it.
 
-    Defaults: Weiss DSA 9205-style, 6 x 14 taxels at 3.4 mm (HARDWARE.md).
+    Defaults: Weiss DSA 9205-style, 6 x 14 taxels at 3.4 mm (the Weiss datasheet).
     """
 
     rows: int = 14

@@ -16,7 +16,7 @@ PAPER_OBJECTS = {
     "box", "bread", "coffee", "cup", "jam", "salt_cylinder_kth", "saltbox", "sedan",
 }  # fmt: skip
 NAMES = sorted(PAPER_OBJECTS)
-PG70_APERTURE_M = 0.065  # HARDWARE.md: usable aperture with tactile pads
+PG70_APERTURE_M = 0.065  # datasheet: usable aperture with tactile pads
 
 
 def surface_samples(mesh: trimesh.Trimesh, count: int = 1500) -> np.ndarray:

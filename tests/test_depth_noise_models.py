@@ -73,7 +73,7 @@ def quantisation_levels(z_centre_m: float) -> np.ndarray:
 def test_kinect_quantisation_steps_grow_with_z_squared():
     step_1m = np.median(np.diff(quantisation_levels(1.0)))
     step_2m = np.median(np.diff(quantisation_levels(2.0)))
-    # HARDWARE.md: dz = z^2 / (8 f b): 2.9 mm at 1 m, 11.6 mm at 2 m.
+    # Kinect v1 disparity quantisation: dz = z^2 / (8 f b): 2.9 mm at 1 m, 11.6 mm at 2 m.
     assert step_1m == pytest.approx(1.0 / (8 * 575.8 * 0.075), rel=0.05)
     assert step_2m == pytest.approx(4.0 / (8 * 575.8 * 0.075), rel=0.05)
     assert step_2m / step_1m == pytest.approx(4.0, rel=0.05)

@@ -139,7 +139,7 @@ def test_sdh_opening_is_the_distal_pad_circle_diameter_at_60_deg(client, opening
     robot.update_cfg(_urdf_cfg(robot, hand.joint_positions()))
     for finger in ("f1", "f2", "thumb"):
         pad = robot.get_transform(f"{finger}_distal_pad", "palm")
-        # 10 um: HARDWARE.md's base triangle is rounded (f1 sits 38.104 mm off the axis).
+        # 10 um: the datasheet's base triangle is rounded (f1 sits 38.104 mm off the axis).
         assert np.hypot(*pad[:2, 3]) == pytest.approx(opening / 2, abs=1e-5)
         # The pad faces the palm axis and is parallel to it.
         np.testing.assert_allclose(pad[:2, 2], -pad[:2, 3] / np.hypot(*pad[:2, 3]), atol=1e-3)

@@ -1,4 +1,4 @@
-"""The shipped hand URDFs against the datasheet numbers of HARDWARE.md, via yourdfpy and
+"""The shipped hand URDFs against the datasheet numbers, via yourdfpy and
 PyBullet (two independent parsers and forward-kinematics implementations)."""
 
 from __future__ import annotations

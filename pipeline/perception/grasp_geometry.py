@@ -269,7 +269,7 @@ def parallel_top_grasp(
 
 
 #: SDH finger directions from the palm axis in the palm frame at spread 60 degrees: thumb
-#: at 180 deg (front), fingers 1 and 2 at +-60 deg (HARDWARE.md finger base triangle).
+#: at 180 deg (front), fingers 1 and 2 at +-60 deg (the SDH-2's finger base triangle).
 SDH_FINGER_ANGLES_RAD = (np.pi, np.pi / 3, -np.pi / 3)
 #: At spread 0 fingers 1 and 2 face the thumb (closing along -x), their distal pads this far
 #: either side of the closing line along the palm's y axis (robots/sdh2.urdf).

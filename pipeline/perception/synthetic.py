@@ -16,7 +16,7 @@ import numpy as np
 
 from pipeline.types import CameraIntrinsics, DepthObservation
 
-#: Kinect v1 depth intrinsics (ROS defaults, HARDWARE.md).
+#: Kinect v1 depth intrinsics (the ROS driver's defaults).
 KINECT = CameraIntrinsics(width=640, height=480, fx=575.8, fy=575.8, cx=314.5, cy=235.5)
 
 

@@ -12,7 +12,7 @@ the left). Noise is added to the disparity and the disparity is rounded to the s
 sub-pixel step, so the depth step grows as ``z^2 step / (f B)`` and the depth error as
 ``z^2 sigma_d / (f B)``.
 
-Kinect v1 numbers (see ``HARDWARE.md``):
+Kinect v1 numbers (published calibrations of the sensor):
 
 * Nguyen, Izadi & Lovell 2012, "Modeling Kinect sensor noise for improved 3D reconstruction
   and tracking" (3DIMPVT): axial ``sigma_z(z, theta) = 0.0012 + 0.0019 (z - 0.4)^2`` m, plus

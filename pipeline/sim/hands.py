@@ -1,7 +1,7 @@
 """The simulated hands: gripper specs, and a PyBullet hand that opens, moves and closes.
 
 Two hands ship with symfuse, described by ``robots/pg70.urdf`` and ``robots/sdh2.urdf``
-(numbers from HARDWARE.md; the URDF headers explain each one):
+(numbers from the datasheets; the URDF headers explain each one):
 
 * ``"pg70"`` - Schunk PG-70 parallel gripper, pads ``"left"`` and ``"right"`` (6 x 14).
 * ``"sdh"`` - Schunk SDH-2 three-finger hand, pads ``"<finger>_<link>"`` for fingers
