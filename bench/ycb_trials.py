@@ -10,7 +10,7 @@ three-finger top grasp (:func:`pipeline.experiments.paper_objects.scan_trial_par
 
 Prints one row per scan: gripper, how the trial ended, the median deviation of the
 completed cloud from the scan's surface at Stage 0 and Stage 2 (mm), and the wall time.
-Target (METHOD.md sec. 7, "when the method's conditions hold"): Stage 2 median below
+Target (docs/method.md §7, "when the method's conditions hold"): Stage 2 median below
 Stage 0's and about 5 mm or less. The scans are not exactly mirror-symmetric and their
 printed shapes are not always convex, so misses here say as much about the objects as
 about the method. The results go to ``--out`` (default: a temporary folder).

@@ -1,4 +1,4 @@
-"""Scoring an estimate against the ground truth of a simulated trial (METHOD.md section 6).
+"""Scoring an estimate against the ground truth of a simulated trial (docs/method.md §6).
 
 The completed model of a stage lives in the frame where the hand touched the object, so it
 is compared with the object's true pose *after* the grasp, and its symmetry plane is the

@@ -1,4 +1,4 @@
-"""Evaluation metrics of a completed object model (METHOD.md section 6).
+"""Evaluation metrics of a completed object model (docs/method.md §6).
 
 Pure functions on point arrays in the robot frame ``R`` (metres, radians):
 
@@ -256,7 +256,7 @@ def plane_after_bias(plane: SymmetryPlane, bias: Bias) -> SymmetryPlane:
 
 @dataclass(frozen=True)
 class ThicknessFit:
-    """Thickness and side angle of a box-like object (METHOD.md section 6).
+    """Thickness and side angle of a box-like object (docs/method.md §6).
 
     Attributes:
         thickness_m: distance between the front and back lines along the line through the

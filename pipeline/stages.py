@@ -13,7 +13,7 @@ Order in a trial (``pipeline.runner``)::
 
 Every initialiser has both a ``propose`` (before the grasp: enough of a plane to plan with)
 and a ``refine`` (after it, with the contacts). PS initialisation does its real work in
-``refine`` (METHOD.md section 5), VC in ``propose``; the runner never asks which one it has.
+``refine`` (docs/method.md §5), VC in ``propose``; the runner never asks which one it has.
 """
 
 from __future__ import annotations

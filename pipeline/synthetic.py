@@ -1,4 +1,4 @@
-"""Synthetic cylinder scenes for the paper's synthetic studies (METHOD.md section 7).
+"""Synthetic cylinder scenes for the paper's synthetic studies (docs/method.md §7).
 
 A vertical cylinder stands on the table (frame ``R``, z up). A pinhole depth camera sees it
 once; rays are intersected with the cylinder analytically, so the cloud holds only the

@@ -11,7 +11,7 @@ Conventions used everywhere in symfuse:
 * Point arrays are ``(N, 3) float64``.
 
 The estimator's parameter order, used by every covariance in these types, is
-``(b_theta, b_x, b_y, b_z, m_r, m_theta)`` (METHOD.md section 1).
+``(b_theta, b_x, b_y, b_z, m_r, m_theta)`` (docs/method.md §1).
 """
 
 from __future__ import annotations
@@ -128,8 +128,8 @@ class PointCloud:
 class SymmetryPlane:
     """A vertical mirror plane ``{p : n . p = offset_m}`` in frame ``R``.
 
-    The unit normal is horizontal, ``n = (cos theta_rad, sin theta_rad, 0)`` (METHOD.md
-    section 1: ``m_theta`` is the normal's angle about +z, ``m_r`` the offset).
+    The unit normal is horizontal, ``n = (cos theta_rad, sin theta_rad, 0)`` (docs/method.md
+    §1: ``m_theta`` is the normal's angle about +z, ``m_r`` the offset).
     """
 
     theta_rad: float
@@ -158,7 +158,7 @@ class SymmetryPlane:
 
 @dataclass(frozen=True)
 class Bias:
-    """Rigid planar motion between the camera's view and the hand's frame (METHOD.md §1).
+    """Rigid planar motion between the camera's view and the hand's frame (docs/method.md §1).
 
     ``f_b(p) = R_z(yaw_rad) (p - pivot_m) + pivot_m + translation_m``. It absorbs both the
     object's motion during the grasp and the camera-to-robot calibration error. The pivot is

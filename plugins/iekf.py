@@ -31,7 +31,7 @@ class IekfEstimator(Estimator):
 
     A thin adapter over :func:`pipeline.estimation.iekf.fuse` (structured covariance). The
     bias pivot is the centroid of the cloud, recorded in every stage's ``Bias``. Defaults come
-    from the hardware (METHOD.md section 4, HARDWARE.md): 3.4 mm taxel pitch, a 65 mm PG-70
+    from the hardware (docs/method.md §4): 3.4 mm taxel pitch, a 65 mm PG-70
     aperture, Kinect noise of about 2 mm at 1 m.
     """
 

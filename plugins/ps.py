@@ -27,8 +27,8 @@ class PsInitialiser(SymmetryInitialiser):
     """PS (vision + proprioception): PCA plane, moved to the centre between the jaws.
 
     ``propose``: the PCA plane (normal = minor axis of the table-projected cloud) through the
-    cloud's centroid, enough to plan a grasp closing along it. ``refine`` (METHOD.md section
-    5): the bias translation is the front surface's motion along the front pad's normal
+    cloud's centroid, enough to plan a grasp closing along it. ``refine`` (docs/method.md
+    §5): the bias translation is the front surface's motion along the front pad's normal
     (detected front contacts minus ``plan.predicted_contacts``; zero without a plan); the
     offset puts the plane through the centre between the two pads' contact centroids, taken
     back into the camera view's frame by the bias (``m_r = n . (centre - b_T)``). With fewer

@@ -45,7 +45,7 @@ class TopParallel(GraspPlanner):
     proposed plane's normal rotated about z by ``tactile_angle_deg``; the hand's x axis
     points from the front jaw (the PG-70's ``"left"`` pad, camera side) to the back jaw. The
     closing line passes through the cloud's centroid projected onto the proposed plane (the
-    centroid of the cloud completed by that plane; METHOD.md section 5); the front pad's
+    centroid of the cloud completed by that plane; docs/method.md §5); the front pad's
     surface stands ``jaw_clearance_m`` in front of where it would first touch the visible
     surface on that line (within the pad's width and height range; a curved face at its
     fitted extreme, :func:`pipeline.perception.grasp_geometry.pad_touch`). Pads cover the

@@ -29,7 +29,7 @@ class VcInitialiser(SymmetryInitialiser):
     The O x D hypotheses are scored by the mirrored points they put in known free space.
     Hypotheses rotate the plane by up to ``max_angle_deg`` about z relative to the seed axis
     and shift it by up to ``max_offset_m`` from the cloud's centroid along the normal
-    (METHOD.md section 5); on a nearly round footprint (PCA axis length ratio
+    (docs/method.md §5); on a nearly round footprint (PCA axis length ratio
     ``sqrt(var_a / var_b)`` below ``round_axis_ratio``) the seed axis means nothing, so the
     orientations cover the whole +-90 deg at the same angular step. Each hypothesis
     mirrors the whole cloud, projects it into the depth image with the believed camera pose

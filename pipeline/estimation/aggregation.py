@@ -1,7 +1,7 @@
 """Gated Gaussian sums over a voxel-aggregated cloud, for gates much wider than a voxel.
 
 Stage 1 needs, per taxel, only the weight mass ``a = sum_n w(p_n)`` and the weighted sum
-``sum_n w(p_n) p_n`` with ``w = N(p; t, C)`` gated at ``D2 < 7.815`` (METHOD.md section 2).
+``sum_n w(p_n) p_n`` with ``w = N(p; t, C)`` gated at ``D2 < 7.815`` (docs/method.md §2).
 Before the first update the gates are tens of millimetres wide and cover most of the cloud,
 so exact sums cost ``O(M N)`` per iteration. Here the points are binned once into an
 axis-aligned voxel grid and every voxel keeps its count ``n``, centroid ``c`` and scatter

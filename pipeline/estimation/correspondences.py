@@ -1,4 +1,4 @@
-"""Taxel-to-point correspondence weights (paper eqs. 9, 11 and 13; METHOD.md section 2).
+"""Taxel-to-point correspondence weights (paper eqs. 9, 11 and 13; docs/method.md §2).
 
 For each taxel ``i`` and each side (front ``f_b``, back ``f_mb``) the weights are Gaussian
 densities ``w = N(f(p_n); centre_i, C_i)`` gated at the chi-square(3) 95 % quantile

@@ -1,4 +1,4 @@
-"""Measurement and correspondence covariances (METHOD.md section 4, paper sec. 5.2).
+"""Measurement and correspondence covariances (docs/method.md §4, paper sec. 5.2).
 
 Every covariance here is a robot-frame (3, 3) matrix in square metres.
 """

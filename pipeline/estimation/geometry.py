@@ -1,4 +1,4 @@
-"""Bias, mirroring and their analytic Jacobians (METHOD.md section 1).
+"""Bias, mirroring and their analytic Jacobians (docs/method.md §1).
 
 All functions are pure and work on robot-frame arrays in metres and radians.
 

@@ -1,4 +1,4 @@
-"""The visuo-tactile iterated EKF (METHOD.md section 3, paper eqs. 5-7).
+"""The visuo-tactile iterated EKF (docs/method.md §3, paper eqs. 5-7).
 
 For grasp ``k`` with prior ``x-, P-`` every iteration relinearises around ``x_i``::
 

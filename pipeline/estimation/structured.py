@@ -1,4 +1,4 @@
-"""The IEKF covariance kept in structured form (METHOD.md section 3, "structure").
+"""The IEKF covariance kept in structured form (docs/method.md §3, "structure").
 
 ``P`` of the full state ``(g, p_1 .. p_N)`` is never formed. It is held as
 

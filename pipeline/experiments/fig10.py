@@ -89,7 +89,7 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
     lines = [
         "# Fig. 10: tolerance to bias, synthetic cylinder",
         "",
-        "Paper (METHOD.md §7): median diameter error < 4 mm up to 15 mm bias with the parallel "
+        "Paper: median diameter error < 4 mm up to 15 mm bias with the parallel "
         "jaw (tactile angle 0), up to 50 mm with three fingers (tactile angle 180).",
         "",
         f"Ours: final (Stage 2) diameter error, every trial one point (|r| <= 15 mm, theta <= "

@@ -1,4 +1,4 @@
-"""Shared machinery of the synthetic cylinder studies (paper Figs. 8, 9, 10; METHOD.md §7).
+"""Shared machinery of the synthetic cylinder studies (paper Figs. 8, 9, 10; docs/method.md §7).
 
 One trial: generate a noisy single-view cloud of a 40 mm radius cylinder and the contacts of
 one top grasp (:func:`pipeline.synthetic.make_case`), run the estimator, and score every stage
@@ -339,7 +339,7 @@ def report_grid(
     thetas = sorted({row["params"]["theta_deg"] for row in good})
     rs = sorted({row["params"]["r_mm"] for row in good})
     panels, lines = [], []
-    lines += [f"# {title}", "", "Paper (METHOD.md §7):", ""]
+    lines += [f"# {title}", "", "Paper:", ""]
     lines += [f"- {claim}" for claim in claims]
     lines += [
         "",

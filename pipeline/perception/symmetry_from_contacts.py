@@ -1,5 +1,5 @@
 """PS initialisation from a parallel grasp: plane offset and bias from the contacts
-(paper section 4.1, METHOD.md section 5).
+(paper section 4.1; docs/method.md §5).
 
 * The plane keeps the proposed orientation (PCA: it contains ``e_a`` and z) and is moved so
   that it passes through the centre between the jaws: the mean of the two pads' contact
