@@ -25,6 +25,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import InputError
+from pipeline.metrics import mesh_occupancy, point_to_mesh_distances
 from pipeline.types import ObjectPose
 
 from . import native_output_silenced
@@ -36,6 +37,14 @@ OBJECT_RGBA = (0.2, 0.45, 0.8, 1.0)
 #: Bullet collision margin of the table and objects (m). Bullet's default (about 1 mm on
 #: convex hulls) would leave objects floating that high above the table.
 COLLISION_MARGIN_M = 1e-4
+#: How far (m) a convex part of a non-convex object's collision geometry may stick out of
+#: the true surface. Taxels in contact lie on the collision geometry, so this bounds their
+#: offset from the surface the estimator is measured against.
+HULL_TOLERANCE_M = 2e-4
+#: Surface samples of a non-convex mesh the refined parts are built from, and the most
+#: times a part may be halved.
+HULL_SAMPLES = 40_000
+HULL_MAX_SPLITS = 6
 
 
 def cache_dir() -> Path:
@@ -60,10 +69,15 @@ def convex_decomposition(mesh: trimesh.Trimesh, resolution: int) -> Path:
     puts their vertices up to about a voxel (2-3 mm for a 10 cm object) outside the surface;
     for a watertight mesh each such vertex is moved to the closest surface point and the
     part's hull rebuilt ("shrink-wrapping", as V-HACD 4 does), so objects neither float
-    above the table nor meet the fingers early.
+    above the table nor meet the fingers early. Shrink-wrapping fixes the vertices, not the
+    faces: a hull still bridges any concavity smaller than a voxel (a lid 1.5 mm wider than
+    its can), so the fingers would stop that far outside the true surface and every taxel
+    in contact would lie there. Each part is therefore also refined
+    (:func:`_faithful_hulls`) until no hull sticks out of the mesh by more than
+    ``HULL_TOLERANCE_M``.
     """
     directory = cache_dir() / "vhacd"
-    key = f"{mesh_hash(mesh)[:32]}_r{resolution}_wrapped"
+    key = f"{mesh_hash(mesh)[:32]}_r{resolution}_refined{HULL_TOLERANCE_M * 1e6:.0f}um"
     path = directory / f"{key}.obj"
     if path.is_file():
         return path
@@ -84,7 +98,7 @@ def convex_decomposition(mesh: trimesh.Trimesh, resolution: int) -> Path:
         if not parts:
             raise InputError(f"convex decomposition of mesh {key} produced no parts")
         if mesh.is_watertight:
-            parts = [_shrink_wrap(part, mesh) for part in parts]
+            parts = _faithful_hulls([_shrink_wrap(part, mesh) for part in parts], mesh)
         staged = Path(scratch) / "wrapped.obj"
         _write_obj_parts(staged, parts)
         os.replace(staged, path)
@@ -110,6 +124,88 @@ def _shrink_wrap(vertices: np.ndarray, mesh: trimesh.Trimesh) -> trimesh.Trimesh
     if outside.any():
         wrapped[outside] = trimesh.proximity.closest_point(mesh, vertices[outside])[0]
     return trimesh.convex.convex_hull(wrapped)
+
+
+def _outside_distances(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
+    """``(N,)`` how far (m) each point lies outside the watertight ``mesh`` (0 inside)."""
+    distances = point_to_mesh_distances(points, mesh.vertices, mesh.faces)
+    return np.where(mesh_occupancy(points, mesh.vertices, mesh.faces), 0.0, distances)
+
+
+def _faithful_hulls(hulls: list[trimesh.Trimesh], mesh: trimesh.Trimesh) -> list[trimesh.Trimesh]:
+    """Convex parts covering the watertight ``mesh`` that stick out of it by at most
+    ``HULL_TOLERANCE_M`` (as far as ``HULL_MAX_SPLITS`` halvings get).
+
+    Dense surface samples are shared out among the parts (each goes to the hull it lies
+    in, or the nearest), each part becomes the hull of its samples, and a hull that sticks
+    out too far is cut in two (:func:`_split_where_hull_bulges`) and both halves refined.
+    """
+    rng = np.random.default_rng(0)
+    samples, _ = trimesh.sample.sample_surface(mesh, HULL_SAMPLES, seed=rng)
+    points = np.concatenate([samples, mesh.vertices])
+    outside = np.stack(
+        [
+            np.where(
+                hull.contains(points),
+                0.0,
+                point_to_mesh_distances(points, hull.vertices, hull.faces),
+            )
+            for hull in hulls
+        ]
+    )
+    owner = np.argmin(outside, axis=0)
+    refined: list[trimesh.Trimesh] = []
+    for index in range(len(hulls)):
+        refined.extend(_split_where_hull_bulges(points[owner == index], mesh, HULL_MAX_SPLITS))
+    return refined
+
+
+def _hull_bulge(
+    points: np.ndarray, mesh: trimesh.Trimesh
+) -> tuple[trimesh.Trimesh, float, np.ndarray]:
+    """The hull of ``points``, how far (m) it sticks out of ``mesh`` at most, and where."""
+    hull = trimesh.convex.convex_hull(points)
+    probes, _ = trimesh.sample.sample_surface(hull, 4000, seed=np.random.default_rng(0))
+    probes = np.concatenate([probes, hull.vertices])
+    outside = _outside_distances(probes, mesh)
+    worst = int(np.argmax(outside))
+    return hull, float(outside[worst]), probes[worst]
+
+
+def _split_where_hull_bulges(
+    points: np.ndarray, mesh: trimesh.Trimesh, splits_left: int
+) -> list[trimesh.Trimesh]:
+    """Hulls of ``points`` (samples of the mesh surface): one, or, where it sticks out of
+    ``mesh`` by more than ``HULL_TOLERANCE_M``, those of the two halves on either side of
+    a plane through the surface point nearest to the worst bulge.
+
+    Of the three planes normal to the principal axes of ``points``, the one whose halves
+    bulge least is taken: a hull that bridges a step, such as a lid wider than its can, is
+    cut at the step.
+    """
+    if len(points) < 4 or np.linalg.matrix_rank(points - points[0], tol=1e-9) < 3:
+        return []
+    hull, bulge, worst = _hull_bulge(points, mesh)
+    if hull.volume < 1e-12:  # a sliver of coplanar samples holds nothing up
+        return []
+    if splits_left == 0 or bulge <= HULL_TOLERANCE_M:
+        return [hull]
+    nearest = trimesh.proximity.closest_point(mesh, worst[None])[0][0]
+    centred = points - points.mean(axis=0)
+    best: tuple[float, list[np.ndarray]] | None = None
+    for axis in np.linalg.eigh(centred.T @ centred)[1].T:
+        height = (points - nearest) @ axis
+        halves = [points[height > 0.0], points[height <= 0.0]]
+        if min(len(h) for h in halves) < 4:
+            continue
+        worst_half = max(_hull_bulge(h, mesh)[1] for h in halves)
+        if best is None or worst_half < best[0]:
+            best = (worst_half, halves)
+    if best is None:
+        return [hull]
+    return [
+        hull for half in best[1] for hull in _split_where_hull_bulges(half, mesh, splits_left - 1)
+    ]
 
 
 def _write_obj_parts(path: Path, parts: list[trimesh.Trimesh | np.ndarray]) -> None:
