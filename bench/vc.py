@@ -123,7 +123,8 @@ def plane_error(plane: SymmetryPlane, obj, yaw: float) -> tuple[float, float]:
 def ps_with_true_contacts(cloud, observation, obj, yaw) -> SymmetryPlane:
     """PS: PCA orientation; offset = centre between where both jaws meet the true shape."""
     proposal = PsInitialiser().propose(cloud, observation)
-    plan = TopParallel().plan(cloud, proposal, PG70)
+    # The paper's grasp: closing along the proposed plane's normal, which the band below assumes.
+    plan = TopParallel(TopParallel.Params(strategy="paper")).plan(cloud, proposal, PG70)
     surface = place(sample_surface(obj, 0.002), (*CENTRE_XY, yaw), 0.0)
     pad = PG70.pads[0]
     band = PadBand(plan.T_robot_hand[2, 3] - 0.125, pad.rows * pad.pitch_m, pad.cols * pad.pitch_m)
