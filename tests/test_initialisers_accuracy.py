@@ -11,7 +11,8 @@ BENCH = Path(__file__).resolve().parents[1] / "bench" / "vc.py"
 
 
 @pytest.mark.slow
-def test_vc_and_ps_recover_the_plane_on_most_views():
+def test_vc_and_ps_recover_the_plane_on_most_views(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCH.parent))  # the bench's own helpers (summary)
     spec = importlib.util.spec_from_file_location("bench_vc", BENCH)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
