@@ -187,12 +187,17 @@ class TopParallel(GraspPlanner):
             housing_depth_m=p.housing_depth_m,
         )
         centre = frame.completed.mean(axis=0)
+        # Which way is front to back depends on the closing angle alone, not on the height.
+        directions = [
+            (angle, front_to_back(points, rotate_z(proposal.plane.normal, angle)))
+            for angle in closing_angles(p.angle_step_deg)
+        ]
         candidates = [
             parallel_candidate(
                 points,
                 frame.completed,
                 centre,
-                front_to_back(points, rotate_z(proposal.plane.normal, angle)),
+                direction,
                 angle,
                 height,
                 hand,
@@ -200,7 +205,7 @@ class TopParallel(GraspPlanner):
                 jaw_clearance_m=p.jaw_clearance_m,
                 back_margin_m=p.back_margin_m,
             )
-            for angle in closing_angles(p.angle_step_deg)
+            for angle, direction in directions
             for height in frame.heights_m
         ]
         return plan_from_candidates(

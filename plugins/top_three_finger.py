@@ -182,12 +182,17 @@ class TopThreeFinger(GraspPlanner):
             contact_edge_below_centre_m=sdh_flat_part_edge_m(pad),
         )
         centre = frame.completed.mean(axis=0)
+        # Which way is front to back depends on the closing angle alone, not on the height.
+        directions = [
+            (angle, front_to_back(points, rotate_z(proposal.plane.normal, angle)))
+            for angle in closing_angles(p.angle_step_deg)
+        ]
         candidates = [
             sdh_candidate(
                 points,
                 frame.completed,
                 centre,
-                front_to_back(points, rotate_z(proposal.plane.normal, angle)),
+                direction,
                 angle,
                 height,
                 spread,
@@ -196,7 +201,7 @@ class TopThreeFinger(GraspPlanner):
                 frame.settings,
             )
             for spread in SDH_SPREADS
-            for angle in closing_angles(p.angle_step_deg)
+            for angle, direction in directions
             for height in frame.heights_m
         ]
         return plan_from_candidates(
