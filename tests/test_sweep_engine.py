@@ -214,7 +214,9 @@ def test_a_dying_worker_keeps_finished_rows_and_a_rerun_completes(tmp_path):
 
 def test_ctrl_c_during_a_pool_run_keeps_finished_rows_and_reraises(tmp_path):
     results = tmp_path / "results.jsonl"
-    slow = [SweepTask(t.key, {**t.params, "sleep_s": 0.15}) for t in make_tasks(12)]
+    # 3 s of work on two workers, interrupted after 1 s: the interrupt must land mid-run
+    # even when the pool starts at once on an idle machine.
+    slow = [SweepTask(t.key, {**t.params, "sleep_s": 0.25}) for t in make_tasks(24)]
     timer = threading.Timer(1.0, os.kill, args=(os.getpid(), signal.SIGINT))
     timer.start()
     try:
