@@ -48,8 +48,13 @@ class TrialSettings:
         "feasible grasp on this object",
     )
     seed: int = param(0, "seed of every random choice in the trial", at_least=0)
-    x_m: float = param(0.0, "object position on the table, robot frame x (m)")
-    y_m: float = param(0.0, "object position on the table, robot frame y (m)")
+    # The table is 2 m x 2 m about the robot origin: an object placed beyond it falls.
+    x_m: float = param(
+        0.0, "object position on the table, robot frame x (m)", above=-1.0, below=1.0
+    )
+    y_m: float = param(
+        0.0, "object position on the table, robot frame y (m)", above=-1.0, below=1.0
+    )
     yaw_deg: float = param(0.0, "object rotation about the table normal (deg)")
     pictures: bool = param(True, "write the PNG pictures (sweeps of many trials may skip them)")
     units: Literal["m", "mm"] = param(
