@@ -165,6 +165,21 @@ class World(StageImplementation):
             ConfigError: no hand, or the plan is for another hand.
         """
 
+    @classmethod
+    def hand_meshes(
+        cls,
+        gripper: str,
+        joint_positions: dict[str, float] | None,
+        T_robot_hand: np.ndarray,
+        plan: GraspPlan,
+    ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """``link -> (vertices (V, 3), faces (F, 3), vertex normals (V, 3))`` of the hand
+        ``gripper`` in frame R, with its palm at ``T_robot_hand`` and its joints at
+        ``joint_positions`` (or, when a run did not record them, opened as ``plan``
+        says), to draw a recorded grasp. Empty (the default) when the world cannot draw
+        its hands; nothing else depends on it."""
+        return {}
+
     @abstractmethod
     def release(self) -> ObjectPose:
         """Open the hand and withdraw it from the object (the object stays where it is let

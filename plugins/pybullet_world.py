@@ -160,6 +160,47 @@ class Pybullet(World):
         hand = self._hand()
         return release(self.sim.client, hand, self.sim.object_id, self._opening_m)
 
+    @classmethod
+    def hand_meshes(
+        cls,
+        gripper: str,
+        joint_positions: dict[str, float] | None,
+        T_robot_hand: np.ndarray,
+        plan: GraspPlan,
+    ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Each link of a shipped hand from its URDF's forward kinematics; each face gets
+        its own vertices, so the boxes and cylinders of the URDF shade flat."""
+        import trimesh
+        import yourdfpy
+
+        from pipeline.sim.hands import HAND_MODELS
+        from robots import ROOT
+
+        model = HAND_MODELS.get(gripper)
+        if model is None:
+            return {}
+        urdf = yourdfpy.URDF.load(str(ROOT / model.urdf))
+        if joint_positions is None:
+            joint_positions = model.open_configuration(plan.opening_m, plan.spread_rad)
+        urdf.update_cfg(
+            {k: v for k, v in joint_positions.items() if k in urdf.actuated_joint_names}
+        )
+        scene = urdf.scene
+        shapes: dict[str, list[trimesh.Trimesh]] = {}
+        for node in scene.graph.nodes_geometry:
+            T_hand_shape, geometry = scene.graph[node]
+            link = scene.graph.transforms.parents[node]
+            shape = trimesh.Trimesh(
+                scene.geometry[geometry].vertices, scene.geometry[geometry].faces
+            )
+            shapes.setdefault(link, []).append(shape.apply_transform(T_robot_hand @ T_hand_shape))
+        meshes = {}
+        for link, parts in shapes.items():
+            mesh = trimesh.util.concatenate(parts)
+            mesh.unmerge_vertices()
+            meshes[link] = (np.asarray(mesh.vertices), np.asarray(mesh.faces), mesh.vertex_normals)
+        return meshes
+
     def _hand(self):
         if self.sim.hand is None:
             raise ConfigError("world 'pybullet' has no hand: call add_hand first")
