@@ -1,10 +1,11 @@
 """One full simulated grasp trial, from the camera to the evaluated estimate.
 
-    sensor -> segmenter -> initialiser.propose -> planner (and hand choice) -> grasp
-      -> tactile -> initialiser.refine -> estimator -> evaluation
+    world -> sensor -> segmenter -> initialiser.propose -> planner (and hand choice)
+      -> grasp -> tactile -> initialiser.refine -> estimator -> evaluation
 
-The scene is sensed before its hand is chosen (:mod:`pipeline.hand_choice`); the chosen
-hand is then added to it.
+The configured world (a stage like the others, :class:`pipeline.stages.World`) builds the
+scene; it is sensed before its hand is chosen (:mod:`pipeline.hand_choice`) among the hands
+the world offers, and the chosen hand is then added to it.
 
 Every file the trial writes goes into one output folder (see :data:`TRIAL_FILES`); the
 stages are timed one by one, and the resolved config is written next to the results.
@@ -41,7 +42,7 @@ from .formats import (
 from .hand_choice import choice_to_json, choose_grasp
 from .registry import StageRegistry
 from .runner import estimate
-from .types import EstimateResult, ObjectPose, SymmetryInit, SymmetryPlane
+from .types import EstimateResult, ObjectPose, SceneSetup, SymmetryInit, SymmetryPlane
 
 #: The pictures a trial draws unless ``trial.pictures = false`` (VC adds ``vc_scores.png``).
 PICTURE_FILES = ("rgb.png", "depth.png", "topdown.png", "deviation.png")
@@ -210,22 +211,21 @@ def _simulate(
 ) -> TrialRecord:
     """The body of :func:`run_trial`: simulate, estimate, evaluate, write."""
     from .images import save_depth, save_rgb
-    from .sim.hands import GRIPPERS
-    from .sim.world import PybulletWorld
 
     settings = config.trial
+    world = stages["world"]
     report(f"scene: {settings.object} with {settings.gripper}")
-    with timer.phase("scene"):
-        world = PybulletWorld.create(
-            obj,
-            None,
-            x=settings.x_m,
-            y=settings.y_m,
-            yaw=np.radians(settings.yaw_deg),
-            seed=settings.seed,
-            urdf_path=obj.urdf_path,
-        )
-    with world:
+    try:
+        with timer.phase("scene"):
+            world.load_scene(
+                SceneSetup(
+                    obj,
+                    x_m=settings.x_m,
+                    y_m=settings.y_m,
+                    yaw_rad=float(np.radians(settings.yaw_deg)),
+                    seed=settings.seed,
+                )
+            )
         pose_before = world.object_pose()
         document["object_pose_before"] = pose_to_json(pose_before)
         report("sensing")
@@ -248,8 +248,9 @@ def _simulate(
         with timer.phase("initialiser"):
             proposal = stages["initialiser"].propose(cloud, observation)
         with timer.phase("planner"):
+            grippers = {name: world.gripper_spec(name) for name in world.hands}
             choice = choose_grasp(
-                config, registry, cloud, proposal, GRIPPERS, observation.table_height_m
+                config, registry, cloud, proposal, grippers, observation.table_height_m
             )
         plan = choice.plan
         document["gripper"] = choice.answer.gripper
@@ -286,6 +287,8 @@ def _simulate(
             mesh_after = obj.mesh.copy().apply_transform(outcome.object_after.transform)
             mesh_after.export(out_dir / "object_final.ply")
         document["taxels_in_contact"] = len(contacts)
+    finally:
+        world.close()
 
     report("estimating")
     with timer.phase("initialiser"):

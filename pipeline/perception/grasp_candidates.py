@@ -35,8 +35,8 @@ from typing import Literal
 
 import numpy as np
 
+from ..pad_layout import pad_grid
 from ..params import param
-from ..sim.taxels import pad_grid
 from ..types import GraspCandidate, GraspPlan, PadLayout, SymmetryPlane
 from . import sdh_geometry as sdh
 from .grasp_geometry import front_to_back, hand_pose
