@@ -36,6 +36,8 @@ from typing import Literal
 
 import numpy as np
 
+from .kinect import KINECT_V1_INTRINSICS
+from .poses import look_at, rotation_z
 from .types import (
     Bias,
     CameraIntrinsics,
@@ -46,9 +48,6 @@ from .types import (
     SymmetryInit,
     SymmetryPlane,
 )
-
-#: Kinect v1 depth intrinsics (the ROS driver's defaults).
-KINECT_INTRINSICS = CameraIntrinsics(width=640, height=480, fx=575.8, fy=575.8, cx=314.5, cy=235.5)
 
 GripperKind = Literal["parallel", "three_finger"]
 
@@ -104,7 +103,7 @@ class Viewpoint:
     azimuth_rad: float = np.pi
     elevation_rad: float = np.radians(30.0)
     distance_m: float = 0.8
-    intrinsics: CameraIntrinsics = KINECT_INTRINSICS
+    intrinsics: CameraIntrinsics = KINECT_V1_INTRINSICS
 
 
 @dataclass(frozen=True)
@@ -156,21 +155,6 @@ class CylinderView:
     intrinsics: CameraIntrinsics
     camera_position_m: np.ndarray
     on_cap: np.ndarray
-
-
-def _look_at(camera_m: np.ndarray, target_m: np.ndarray) -> np.ndarray:
-    """``T_robot_camera`` of an OpenCV camera at ``camera_m`` looking at ``target_m``."""
-    z_axis = target_m - camera_m
-    z_axis /= np.linalg.norm(z_axis)
-    x_axis = np.cross(z_axis, [0.0, 0.0, 1.0])
-    if np.linalg.norm(x_axis) < 1e-9:
-        raise ValueError("camera looks straight down: the view direction is undefined")
-    x_axis /= np.linalg.norm(x_axis)
-    y_axis = np.cross(z_axis, x_axis)
-    transform = np.eye(4)
-    transform[:3, :3] = np.column_stack([x_axis, y_axis, z_axis])
-    transform[:3, 3] = camera_m
-    return transform
 
 
 def camera_direction(viewpoint: Viewpoint) -> np.ndarray:
@@ -232,10 +216,10 @@ def render_cylinder(
         ValueError: the camera sees none of the cylinder.
     """
     centre = cylinder.centre_m
-    u_cam = camera_direction(viewpoint)
-    offset = np.cos(viewpoint.elevation_rad) * u_cam + [0.0, 0.0, np.sin(viewpoint.elevation_rad)]
-    camera_m = centre + viewpoint.distance_m * offset
-    T_robot_camera = _look_at(camera_m, centre)
+    T_robot_camera = look_at(
+        centre, viewpoint.distance_m, viewpoint.elevation_rad, viewpoint.azimuth_rad
+    )
+    camera_m = T_robot_camera[:3, 3]
     rotation = T_robot_camera[:3, :3]
     intr = viewpoint.intrinsics
 
@@ -362,11 +346,9 @@ def touch_pads(
 
 def move_contacts(contacts: Contacts, bias: Bias) -> Contacts:
     """Contacts seen through a bias: positions by ``f_b``, normals rotated by its yaw."""
-    c, s = np.cos(bias.yaw_rad), np.sin(bias.yaw_rad)
-    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return Contacts(
         positions=bias.apply(contacts.positions),
-        normals=contacts.normals @ rotation.T,
+        normals=contacts.normals @ rotation_z(bias.yaw_rad).T,
         pads=contacts.pads,
         taxel_indices=contacts.taxel_indices,
     )
