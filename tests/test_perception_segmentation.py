@@ -14,9 +14,9 @@ from pipeline.perception.clustering import (
     voxel_subsample_indices,
 )
 from pipeline.perception.depth import backproject_depth, project_points
-from pipeline.perception.synthetic import box_object, render_depth, synthetic_observation
 from pipeline.perception.table import fit_table_ransac
 from pipeline.poses import look_at
+from pipeline.synthetic import box_object, render_depth, synthetic_observation
 from pipeline.types import CameraIntrinsics, DepthObservation
 from plugins.ground_truth_mask import GroundTruthMask
 from plugins.table_cluster import TableCluster
