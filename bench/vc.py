@@ -25,7 +25,8 @@ from summary import record
 
 from pipeline.perception.grasp_geometry import PadBand, corridor
 from pipeline.perception.principal_axes import table_axes
-from pipeline.perception.synthetic import (
+from pipeline.perception.visibility import plane_grid, visibility_violations
+from pipeline.synthetic import (
     box_object,
     cylinder_object,
     place,
@@ -33,7 +34,6 @@ from pipeline.perception.synthetic import (
     spray_bottle_object,
     synthetic_observation,
 )
-from pipeline.perception.visibility import plane_grid, visibility_violations
 from pipeline.types import GripperSpec, PadLayout, SymmetryPlane
 from plugins.pca import PcaInitialiser
 from plugins.ps import PsInitialiser

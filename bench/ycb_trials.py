@@ -6,7 +6,7 @@ machine; ``--workers 2`` runs two at a time, ``--only mug`` a subset). Each scan
 goes through ``symfuse trial`` as ``trial.object=<path>``: the PG-70 with PS initialisation
 when the object's narrowest horizontal width plus the planner's jaw clearance fits the 65 mm
 aperture (the narrow direction turned toward the camera), else the SDH-2 with VC and the
-three-finger top grasp (:func:`pipeline.experiments.paper_objects.scan_trial_params`).
+three-finger top grasp (:func:`pipeline.experiments.scanned.scan_trial_params`).
 
 Prints one row per scan: gripper, how the trial ended, the median deviation of the
 completed cloud from the scan's surface at Stage 0 and Stage 2 (mm), and the wall time.
@@ -24,11 +24,9 @@ import tempfile
 from pathlib import Path
 
 from pipeline.experiments import SweepTask
-from pipeline.experiments.paper_objects import (
-    DEVIATION_TARGET_MM,
-    run_paper_trial,
-    scan_trial_params,
-)
+from pipeline.experiments.paper_report import DEVIATION_TARGET_MM
+from pipeline.experiments.paper_trial import run_paper_trial
+from pipeline.experiments.scanned import scan_trial_params
 from pipeline.sweep import run_sweep
 from pipeline.tables import format_table
 

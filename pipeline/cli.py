@@ -461,8 +461,6 @@ def _cmd_trial(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    import importlib
-
     from .config import changed_settings, load_config
     from .experiments import EXPERIMENTS, ExperimentOptions
     from .sweep import prepare_sweep_folder, run_sweep, settings_section
@@ -470,11 +468,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if args.scheduler and args.executor != "dask":
         raise ConfigError("--scheduler applies to --executor dask")
     registry, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
-    experiment = importlib.import_module(EXPERIMENTS[args.experiment])
+    experiment = EXPERIMENTS[args.experiment]
     estimator = config.choices["estimator"]
     resolved = config.to_dict()
     user = changed_settings(resolved, load_config(registry).to_dict())
-    sections = getattr(experiment, "CONFIG_SECTIONS", tuple(resolved))
+    sections = experiment.config_sections or tuple(resolved)
     unread = sorted(set(user) - set(sections))
     if unread:
         raise ConfigError(

@@ -23,6 +23,8 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
+from .poses import rotation_z
+
 #: Parameter names of the 6x6 bias-and-plane covariance, in order.
 BIAS_PLANE_PARAMETERS = ("b_theta", "b_x", "b_y", "b_z", "m_r", "m_theta")
 
@@ -176,8 +178,7 @@ class Bias:
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Move ``(N, 3)`` robot-frame points by the bias."""
-        c, s = np.cos(self.yaw_rad), np.sin(self.yaw_rad)
-        rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        rotation = rotation_z(self.yaw_rad)
         return (points - self.pivot_m) @ rotation.T + self.pivot_m + self.translation_m
 
 

@@ -4,42 +4,50 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Literal
 
 from pipeline import hookimpl
+from pipeline.estimation.map_params import MapParams, consistency_settings, fusion_problem
 from pipeline.estimation.problem import estimate_result
 from pipeline.params import param, project
+from pipeline.stages import Estimator
 from pipeline.types import EstimateResult, EstimationProblem
 
-from .iekf import IekfEstimator
 
-
-class IcpEstimator(IekfEstimator):
+class IcpEstimator(Estimator):
     """ICP baseline: each taxel matched to its nearest front/back point (paper sec. 5.1).
 
     Solves the same bias + plane (Stage 1) and point (Stage 2) MAP problem as ``iekf`` with
-    :mod:`pipeline.estimation.icp`, sharing ``iekf``'s noise, prior and re-grasp parameters;
-    the correspondence window, schedule and side options do not apply. ``active_points``
-    counts the matched taxels.
+    :mod:`pipeline.estimation.icp`, under the same noise, priors, re-grasp noise and
+    self-diagnosis (:class:`~pipeline.estimation.map_params.MapParams`); a taxel's match is
+    its nearest point, so there is no correspondence window. ``active_points`` counts the
+    matched taxels.
     """
 
     name = "icp"
 
     @dataclass(frozen=True)
-    class Params(IekfEstimator.Params):
+    class Params(MapParams):
         max_match_distance_m: float = param(
             0.02, "a taxel farther than this from every point has no match (m)", above=0.0
         )
-        last_stage: Literal[1, 2] = param(2, "1: bias + plane only; 2: also the points")
+        max_iterations: int = param(
+            30,
+            "re-matching rounds per grasp and stage; the solve stops earlier when the matches "
+            "stop changing",
+            at_least=1,
+        )
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         from pipeline.estimation.icp import IcpSettings, icp_fuse  # scipy.optimize
 
+        p = self.params
         started = time.perf_counter()
-        fusion = self.fusion_problem(problem)
-        settings = project(IcpSettings, self.params)
-        outcomes = icp_fuse(fusion, settings, last_stage=self.params.last_stage)
-        return estimate_result(fusion, outcomes, started, problem.view, self.consistency_settings())
+        # The window and the taxel normals only weigh the IEKF's correspondences; nearest
+        # neighbours need neither.
+        noise = (p.noise_along_normal_m, p.noise_across_normal_m)
+        fusion = fusion_problem(problem, p, self.name, noise, facing_filter=False)
+        outcomes = icp_fuse(fusion, project(IcpSettings, p), last_stage=p.last_stage)
+        return estimate_result(fusion, outcomes, started, problem.view, consistency_settings(p))
 
 
 @hookimpl

@@ -7,11 +7,16 @@ import pytest
 import trimesh
 from scipy import ndimage
 
-from pipeline.sim.camera import calibration_error, look_at, render
+from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
+from pipeline.poses import look_at as look_at_rad
+from pipeline.sim.camera import calibration_error, render
 from pipeline.sim.scene import Scene
 from pipeline.types import CameraIntrinsics
 
-KINECT = CameraIntrinsics(640, 480, 575.8, 575.8, 314.5, 235.5)
+
+def look_at(target_m, distance_m, elevation_deg, azimuth_deg):
+    """:func:`pipeline.poses.look_at` with the angles in degrees, as the sensors take them."""
+    return look_at_rad(target_m, distance_m, np.deg2rad(elevation_deg), np.deg2rad(azimuth_deg))
 
 
 def back_project(depth_m, intrinsics, T_robot_camera, rows, cols):

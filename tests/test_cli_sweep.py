@@ -8,9 +8,8 @@ import json
 import pytest
 
 from pipeline.errors import EXIT_BAD_INPUT
-from pipeline.experiments import ExperimentOptions
-from pipeline.experiments.paper_objects import trial_config
-from pipeline.experiments.table1 import tasks as table1_tasks
+from pipeline.experiments import EXPERIMENTS, ExperimentOptions
+from pipeline.experiments.paper_tasks import trial_config
 from pipeline.sweep import read_rows, settings_section
 
 QUICK = ["sweep", "fig10", "--quick", "--workers", "1"]
@@ -82,7 +81,7 @@ def test_a_paper_trial_starts_from_the_users_config_and_the_experiment_wins():
         "sensor": {"pybullet-kinect": {"calibration_yaw_deg": 2.5}},
         "trial": {"yaw_deg": 99.0, "pictures": False},
     }
-    tasks = table1_tasks(ExperimentOptions(config=user, quick=True))
+    tasks = EXPERIMENTS["table1"].tasks(ExperimentOptions(config=user, quick=True))
     for task in tasks:
         config = trial_config(task.params)
         assert config.stage_params("sensor").calibration_yaw_deg == 2.5

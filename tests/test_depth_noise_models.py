@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
+from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.sim.depth_noise import (
     KinectV1Noise,
     StereoNoise,
@@ -18,7 +19,6 @@ from pipeline.sim.depth_noise import (
 )
 from pipeline.types import CameraIntrinsics
 
-KINECT = CameraIntrinsics(640, 480, 575.8, 575.8, 314.5, 235.5)
 STEREO = CameraIntrinsics(640, 480, 1600.0, 1600.0, 319.5, 239.5)
 QUIET_KINECT = KinectV1Noise(axial_noise=False, lateral_noise=False, shadows=False)
 

@@ -104,3 +104,34 @@ def test_iekf_traces_every_iteration_and_ends_at_the_stage_estimate(scene):
     stage_one = estimate_to_json(result)[1]
     assert len(stage_one["trace"]) == result.stage(1).iterations
     assert stage_one["trace"][-1]["plane"] == stage_one["plane"]
+
+
+def test_icp_declares_only_the_parameters_it_uses(run):
+    icp = set(IcpEstimator.Params.__dataclass_fields__)
+    iekf = set(IekfEstimator.Params.__dataclass_fields__)
+    # The IEKF's correspondence window, weights and iteration control mean nothing to ICP.
+    for name in ("window_along_normal_m", "schedule", "exclusive_sides", "facing_filter"):
+        assert name in iekf and name not in icp
+    for name in ("refine_gates", "gate_tolerance_m", "tolerance_m", "max_step_m"):
+        assert name in iekf and name not in icp
+    assert {"max_match_distance_m", "max_iterations", "prior_m_theta_rad"} <= icp
+    code, out, _ = run("plugins", "--params")
+    assert code == 0
+    section = out.split("[estimator.icp]")[1].split("\n[")[0]
+    shown = {line.split("=")[0].strip() for line in section.splitlines() if "=" in line}
+    assert shown == icp
+
+
+def test_an_iekf_parameter_given_to_icp_is_an_unknown_key(run, tmp_path):
+    code, _, err = run(
+        "trial",
+        "--set",
+        "estimator.use=icp",
+        "--set",
+        "estimator.icp.schedule=standard",
+        "--out",
+        tmp_path / "trial",
+    )
+    assert code == ConfigError.exit_code
+    assert "unknown config key 'estimator.icp.schedule'" in err
+    assert not (tmp_path / "trial").exists()

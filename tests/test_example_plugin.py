@@ -55,8 +55,8 @@ def test_listed_selectable_and_working(installed):
 
     # the same path the runner takes: registry from entry points, selection by config
     from pipeline.config import load_config
-    from pipeline.perception.synthetic import box_object, synthetic_observation
     from pipeline.registry import load_registry
+    from pipeline.synthetic import box_object, synthetic_observation
 
     registry = load_registry()
     chosen = load_config(registry, overrides=["segmenter.use=voxel-grid"])

@@ -9,15 +9,18 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from pipeline.experiments import EXPERIMENTS, ExperimentOptions, fig8, fig9, fig10
+from pipeline.experiments import EXPERIMENTS, ExperimentOptions, fig10
 from pipeline.experiments import synthetic_study as study
 from pipeline.types import Bias, EstimateResult, StageEstimate, SymmetryPlane
 
+fig8, fig9 = EXPERIMENTS["fig8"], EXPERIMENTS["fig9"]
+
 
 def test_experiments_are_registered():
-    assert EXPERIMENTS["fig8"] == "pipeline.experiments.fig8"
-    assert EXPERIMENTS["fig9"] == "pipeline.experiments.fig9"
-    assert EXPERIMENTS["fig10"] == "pipeline.experiments.fig10"
+    assert (fig8.gripper, fig9.gripper) == ("parallel", "three_finger")
+    assert EXPERIMENTS["fig10"].module is fig10
+    for name in ("fig8", "fig9", "fig10"):
+        assert EXPERIMENTS[name].config_sections == ("estimator",)
 
 
 @pytest.mark.parametrize(

@@ -10,7 +10,7 @@ from pipeline.experiments import init as experiment
 
 def test_grid_is_objects_by_yaws_by_initialisers_with_shared_yaws():
     tasks = experiment.tasks(ExperimentOptions(seed=3))
-    assert EXPERIMENTS["init"] == "pipeline.experiments.init"
+    assert EXPERIMENTS["init"].module is experiment
     assert len(tasks) == len(experiment.OBJECTS) * experiment.YAWS * len(experiment.INITS)
     assert len({t.key for t in tasks}) == len(tasks)
     by_yaw = {}

@@ -16,13 +16,11 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from pipeline.experiments import ExperimentOptions, table1
-from pipeline.experiments.paper_objects import (
-    object_tasks,
-    report_deviation,
-    report_measure,
-    run_paper_trial,
-)
+from pipeline.experiments import EXPERIMENTS, ExperimentOptions
+from pipeline.experiments.deviation_report import report_deviation
+from pipeline.experiments.measure_report import report_measure
+from pipeline.experiments.paper_tasks import object_tasks
+from pipeline.experiments.paper_trial import run_paper_trial
 from pipeline.sweep import run_sweep
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -101,7 +99,7 @@ def test_a_refused_grasp_becomes_a_failed_row(sweep):
 
 def test_measure_report_lists_each_trial_and_the_papers_numbers(sweep, tmp_path):
     _, rows = sweep
-    paths = report_measure(rows, tmp_path, table1.STUDY)
+    paths = report_measure(rows, tmp_path, EXPERIMENTS["table1"])
     assert [p.name for p in paths] == [
         "results.csv",
         "table1_error.png",

@@ -3,7 +3,6 @@ report (slow: two or three full simulated trials per experiment)."""
 
 from __future__ import annotations
 
-import importlib
 import re
 
 import pytest
@@ -16,7 +15,7 @@ pytestmark = pytest.mark.slow
 
 @pytest.mark.parametrize("name", ["table1", "table2", "table3", "spray", "kth"])
 def test_quick_sweep_runs_and_reports(name, tmp_path):
-    module = importlib.import_module(EXPERIMENTS[name])
+    module = EXPERIMENTS[name]
     tasks = module.tasks(ExperimentOptions(quick=True))
     rows = run_sweep(tasks, module.run_one, tmp_path / "results.jsonl", workers=1, progress=False)
     assert [row["key"] for row in rows] == [task.key for task in tasks]

@@ -1,9 +1,8 @@
 """The real-object experiments' task grids, config overrides and pure helpers
-(pipeline/experiments/paper_objects.py, table1-3, spray, kth)."""
+(pipeline/experiments/paper_tasks.py, paper_trial.py, the table1-3 rows, spray, kth)."""
 
 from __future__ import annotations
 
-import importlib
 import json
 import math
 
@@ -13,16 +12,15 @@ import pytest
 from pipeline.catalogue import list_objects
 from pipeline.config import load_config
 from pipeline.experiments import EXPERIMENTS, ExperimentOptions, kth
-from pipeline.experiments.paper_objects import (
-    CAMERA_AZIMUTH_DEG,
-    DIVERGED_GROWTH_MM,
-    is_diverged,
-    mean_five_numbers,
-    measure_statistics,
-    narrowest_width,
+from pipeline.experiments.measure_report import measure_statistics
+from pipeline.experiments.paper_tasks import (
+    camera_azimuth_deg,
     reference_yaw_deg,
     trial_overrides,
 )
+from pipeline.experiments.paper_trial import DIVERGED_GROWTH_MM, is_diverged
+from pipeline.experiments.rows import mean_five_numbers
+from pipeline.perception.grasp_geometry import narrowest_width
 from pipeline.registry import load_registry
 
 PAPER_EXPERIMENTS = ("table1", "table2", "table3", "spray", "kth")
@@ -34,16 +32,16 @@ def registry():
 
 
 def _module(name):
-    return importlib.import_module(EXPERIMENTS[name])
+    return EXPERIMENTS[name]
 
 
 def test_experiments_are_registered_with_the_protocol():
     for name in PAPER_EXPERIMENTS:
-        module = _module(name)
-        assert name == module.NAME
-        assert module.DESCRIPTION
+        experiment = _module(name)
+        assert name == experiment.name
+        assert experiment.description
         for function in ("tasks", "run_one", "report"):
-            assert callable(getattr(module, function))
+            assert callable(getattr(experiment, function))
 
 
 @pytest.mark.parametrize(
@@ -95,18 +93,32 @@ def test_kth_poses_follow_table4_and_spread_over_the_yaw_range():
     assert np.allclose(np.diff(cup), 2 * kth.YAW_SPREAD_DEG / 7)
 
 
-def test_reference_yaw_points_the_mirror_normal_along_the_view():
-    view = -np.array(
-        [math.cos(math.radians(CAMERA_AZIMUTH_DEG)), math.sin(math.radians(CAMERA_AZIMUTH_DEG))]
-    )
+@pytest.mark.parametrize("azimuth_deg", [180.0, 135.0, -60.0])
+def test_reference_yaw_points_the_mirror_normal_along_the_view(azimuth_deg):
+    view = -np.array([math.cos(math.radians(azimuth_deg)), math.sin(math.radians(azimuth_deg))])
     for info in list_objects():
-        yaw = math.radians(reference_yaw_deg(info.name))
+        yaw = math.radians(reference_yaw_deg(info.name, azimuth_deg))
         if info.symmetry_plane is None:
             assert yaw == 0.0
             continue
         theta = info.symmetry_plane.theta_rad + yaw
         normal = np.array([math.cos(theta), math.sin(theta)])
         assert abs(normal @ view) == pytest.approx(1.0, abs=1e-12), info.name
+
+
+def test_the_camera_azimuth_is_the_configured_sensors():
+    assert camera_azimuth_deg(ExperimentOptions()) == 180.0
+    moved = ExperimentOptions(
+        quick=True, config={"sensor": {"pybullet-kinect": {"azimuth_deg": 150.0}}}
+    )
+    assert camera_azimuth_deg(moved) == 150.0
+    stereo = ("sensor.use=pybullet-stereo", "sensor.pybullet-stereo.azimuth_deg=120")
+    assert camera_azimuth_deg(ExperimentOptions(), stereo) == 120.0
+    # a user who turns the camera turns every object's reference pose with it
+    table1 = EXPERIMENTS["table1"]
+    default = table1.tasks(ExperimentOptions(quick=True))[0].params["yaw_deg"]
+    turned = table1.tasks(moved)[0].params["yaw_deg"]
+    assert (turned - default) % 180.0 == pytest.approx((150.0 - 180.0) % 180.0)
 
 
 def test_overrides_build_the_trial_config(registry):

@@ -17,7 +17,7 @@ from pipeline.perception.grasp_candidates import (
     pad_coverage,
     sdh_distal_taxels,
 )
-from pipeline.perception.synthetic import box_object, cylinder_object
+from pipeline.synthetic import box_object, cylinder_object
 from pipeline.types import PadLayout
 from plugins.top_parallel import TopParallel
 from plugins.top_three_finger import TopThreeFinger

@@ -8,12 +8,12 @@ import pytest
 
 from pipeline.errors import ConfigError
 from pipeline.params import build
-from pipeline.perception.synthetic import (
+from pipeline.perception.visibility import visibility_violations
+from pipeline.synthetic import (
     box_object,
     cylinder_object,
     synthetic_observation,
 )
-from pipeline.perception.visibility import visibility_violations
 from pipeline.types import (
     Contacts,
     GripperSpec,

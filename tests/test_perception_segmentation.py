@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import EXIT_BAD_INPUT, PluginError, StageFailure
+from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.open3d_loader import open3d
 from pipeline.perception.clustering import (
     dbscan_labels,
@@ -13,14 +14,9 @@ from pipeline.perception.clustering import (
     voxel_subsample_indices,
 )
 from pipeline.perception.depth import backproject_depth, project_points
-from pipeline.perception.synthetic import (
-    KINECT,
-    box_object,
-    look_at,
-    render_depth,
-    synthetic_observation,
-)
 from pipeline.perception.table import fit_table_ransac
+from pipeline.poses import look_at
+from pipeline.synthetic import box_object, render_depth, synthetic_observation
 from pipeline.types import CameraIntrinsics, DepthObservation
 from plugins.ground_truth_mask import GroundTruthMask
 from plugins.table_cluster import TableCluster

@@ -13,7 +13,7 @@ from pipeline.perception.grasp_geometry import (
     first_touched,
     pad_touch,
 )
-from pipeline.perception.synthetic import box_object, cylinder_object, synthetic_observation
+from pipeline.synthetic import box_object, cylinder_object, synthetic_observation
 from pipeline.types import Bias, GripperSpec, PadLayout, SymmetryInit, SymmetryPlane
 from plugins.table_cluster import TableCluster
 from plugins.top_parallel import TopParallel

@@ -171,3 +171,27 @@ def test_simulation_is_deterministic_and_context_closes_client():
     np.testing.assert_array_equal(first.position_m, second.position_m)
     np.testing.assert_array_equal(first.quaternion_xyzw, second.quaternion_xyzw)
     assert not pybullet.isConnected(client)
+
+
+def test_convex_parts_round_trip_through_obj_and_load_as_one_child_each(tmp_path):
+    box = trimesh.creation.box((0.04, 0.04, 0.04))
+    ball = trimesh.creation.icosphere(subdivisions=1, radius=0.02)
+    ball.apply_translation((0.1, 0.0, 0.0))
+    points = np.random.default_rng(0).normal(size=(30, 3)) * 0.01 + (0.0, 0.1, 0.0)
+    path = tmp_path / "parts.obj"
+    scene_module._write_obj_parts(path, [box, ball, points])
+    parts = scene_module._read_obj_parts(path)
+    expected = [box.vertices, ball.vertices, trimesh.convex.convex_hull(points).vertices]
+    assert len(parts) == 3
+    for part, vertices in zip(parts, expected, strict=True):
+        np.testing.assert_allclose(part, vertices, atol=1e-9)
+    client = pybullet.connect(pybullet.DIRECT)
+    try:
+        shape = pybullet.createCollisionShape(
+            pybullet.GEOM_MESH, fileName=str(path), physicsClientId=client
+        )
+        body = pybullet.createMultiBody(0.0, shape, physicsClientId=client)
+        children = pybullet.getCollisionShapeData(body, -1, physicsClientId=client)
+        assert len(children) == 3
+    finally:
+        pybullet.disconnect(client)

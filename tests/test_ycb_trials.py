@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipeline.experiments.paper_objects import run_paper_trial, scan_trial_params
+from pipeline.experiments.paper_trial import run_paper_trial
+from pipeline.experiments.scanned import scan_trial_params
 
 YCB_ROOT = Path(__file__).resolve().parents[2] / "shared" / "ycb"
 

@@ -19,17 +19,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..poses import rotation_z
+
 #: Length of the bias-and-plane block of the state.
 BIAS_PLANE_DIM = 6
 #: Slices into ``g``.
 BIAS = slice(0, 4)
 PLANE = slice(4, 6)
-
-
-def rotation_z(theta_rad: float) -> np.ndarray:
-    """``R_z(theta)``, (3, 3)."""
-    c, s = np.cos(theta_rad), np.sin(theta_rad)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def rotation_z_derivative(theta_rad: float) -> np.ndarray:

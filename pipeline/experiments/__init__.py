@@ -1,18 +1,10 @@
 """Experiments that ``symfuse sweep NAME`` runs: the paper's figures and tables.
 
-Each experiment is a module in this package exposing::
-
-    NAME: str                 # the name users type after ``symfuse sweep``
-    DESCRIPTION: str          # one line for ``symfuse sweep --help``
-    CONFIG_SECTIONS: tuple    # optional: the config sections its trials read (default all)
-    def tasks(options: ExperimentOptions) -> list[SweepTask]
-    def run_one(params: dict) -> dict          # top-level, picklable, JSON in and out
-    def report(rows: list[dict], out_dir: Path) -> list[Path]
-
-``tasks`` enumerates the grid (each task's ``key`` is unique and stable, so a re-run can skip
-finished ones); ``run_one`` runs a single trial from its JSON parameters and returns one
-JSON-serialisable result row; ``report`` turns all rows into the CSV, the figure PNG(s) and
-``report.md``. :mod:`pipeline.sweep` runs the tasks locally or on Dask.
+:data:`EXPERIMENTS` (:mod:`.table`) lists them, one row each. A row's ``tasks`` enumerates
+the grid (each task's ``key`` is unique and stable, so a re-run can skip finished ones);
+``run_one`` runs a single trial from its JSON parameters and returns one JSON-serialisable
+result row; ``report`` turns all rows into the CSV, the figure PNG(s) and ``report.md``.
+:mod:`pipeline.sweep` runs the tasks locally or on Dask.
 
 A trial's config is the sweep's (the defaults, ``--config`` files and ``--set`` values; what
 the user changed travels in :attr:`ExperimentOptions.config`) with the experiment's own
@@ -22,25 +14,21 @@ sweep's ``report.md`` shows where they replace the user's values.
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-#: Experiment name -> module that implements it.
-EXPERIMENTS: dict[str, str] = {
-    "fig8": "pipeline.experiments.fig8",
-    "fig9": "pipeline.experiments.fig9",
-    "fig10": "pipeline.experiments.fig10",
-    "table1": "pipeline.experiments.table1",
-    "table2": "pipeline.experiments.table2",
-    "table3": "pipeline.experiments.table3",
-    "spray": "pipeline.experiments.spray",
-    "kth": "pipeline.experiments.kth",
-    "init": "pipeline.experiments.init",
-}
+from .table import EXPERIMENTS, Experiment, experiment_descriptions
 
+__all__ = [
+    "EXPERIMENTS",
+    "LOCATION_PARAMS",
+    "Experiment",
+    "ExperimentOptions",
+    "SweepTask",
+    "experiment_descriptions",
+]
 
 #: Task params that say where a trial keeps its files, not what it computes: they are left
 #: out of the row hash, so a sweep folder can be moved and resumed.
@@ -87,11 +75,3 @@ class ExperimentOptions:
     seed: int = 0
     repeats: int | None = None
     out_dir: Path | None = None
-
-
-def experiment_descriptions() -> dict[str, str]:
-    """Experiment name -> its one-line description."""
-    return {
-        name: importlib.import_module(module).DESCRIPTION
-        for name, module in sorted(EXPERIMENTS.items())
-    }

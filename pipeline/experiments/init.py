@@ -20,7 +20,9 @@ import numpy as np
 
 from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask
-from .paper_objects import INIT_LABELS, group_rows, paper_task, run_paper_trial, user_settings
+from .paper_tasks import paper_task, user_settings
+from .paper_trial import run_paper_trial
+from .rows import INIT_LABELS, group_rows
 from .synthetic_study import task_seed
 
 NAME = "init"

@@ -15,13 +15,10 @@ from typing import Any
 import numpy as np
 
 from . import ExperimentOptions, SweepTask
-from .paper_objects import (
-    QUICK_VIEW_OFFSET_DEG,
-    group_rows,
-    object_tasks,
-    report_deviation,
-    run_paper_trial,
-)
+from .deviation_report import report_deviation
+from .paper_tasks import QUICK_VIEW_OFFSET_DEG, object_tasks
+from .paper_trial import run_paper_trial
+from .rows import group_rows
 
 NAME = "kth"
 DESCRIPTION = "three-finger set, SDH-2 + stereo, VC: deviation per object and stage (paper Fig. 23)"

@@ -13,15 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from . import ExperimentOptions, SweepTask
-from .paper_objects import (
-    INIT_LABELS,
-    QUICK_VIEW_OFFSET_DEG,
-    VIEW_OFFSETS_DEG,
-    group_rows,
-    object_tasks,
-    report_deviation,
-    run_paper_trial,
-)
+from .deviation_report import report_deviation
+from .paper_tasks import QUICK_VIEW_OFFSET_DEG, VIEW_OFFSETS_DEG, object_tasks
+from .paper_trial import run_paper_trial
+from .rows import INIT_LABELS, group_rows
 
 NAME = "spray"
 DESCRIPTION = "spray bottle, PG-70: deviation box plots per stage, VC and PS (paper Figs. 14-19)"

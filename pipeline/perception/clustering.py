@@ -1,14 +1,7 @@
-"""Clustering and subsampling of point clouds (scipy k-d tree; no open3d).
+"""Clustering and subsampling of point clouds, with open3d.
 
-scipy is imported where it is used: :mod:`pipeline.perception` loads this module, and the
+open3d is imported where it is used: :mod:`pipeline.perception` loads this module, and the
 plugins that import from that package must stay quick to import (``symfuse plugins``).
-
-``dbscan_labels`` follows the usual DBSCAN definition (the same as open3d's
-``cluster_dbscan``): a point is *core* when at least ``min_points`` points, itself
-included, lie within ``eps_m``; clusters are the connected components of core points
-linked by ``eps_m``; a non-core point within ``eps_m`` of a core point joins that core
-point's cluster (the nearest such core point when there are several); the rest is noise.
-With ``min_points = 1`` it is plain Euclidean (single-linkage) clustering.
 """
 
 from __future__ import annotations
@@ -16,45 +9,46 @@ from __future__ import annotations
 import numpy as np
 
 
+def _cloud(points: np.ndarray):
+    from pipeline.open3d_loader import open3d
+
+    o3d = open3d()
+    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+
+
 def dbscan_labels(points: np.ndarray, eps_m: float, min_points: int) -> np.ndarray:
     """DBSCAN cluster labels ``(N,)`` int: 0, 1, ... per cluster, -1 for noise.
 
+    A point is *core* when at least ``min_points`` points, itself included, lie within
+    ``eps_m``; clusters are the connected components of core points linked by ``eps_m``
+    (open3d's ``cluster_dbscan``), numbered in the order of their first core point; a
+    non-core point within ``eps_m`` of a core point joins the cluster of the nearest one;
+    the rest is noise. open3d gives such a border point to whichever cluster reaches it
+    first, which depends on the order of the points; taking the nearest core point instead
+    makes the segmentation of a scene independent of how its points are ordered (a depth
+    image and the point cloud made from it). With ``min_points = 1`` it is plain Euclidean
+    (single-linkage) clustering.
+
     Args:
-        points: ``(N, D)`` coordinates (metres).
+        points: ``(N, 3)`` coordinates (metres).
         eps_m: neighbourhood radius.
         min_points: neighbours (self included) that make a point core.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
     points = np.asarray(points, dtype=np.float64)
-    n = len(points)
-    labels = np.full(n, -1, dtype=np.int64)
-    if n == 0:
-        return labels
-    tree = cKDTree(points)
-    pairs = tree.query_pairs(eps_m, output_type="ndarray")
-    counts = 1 + np.bincount(pairs.ravel(), minlength=n)
-    core = counts >= min_points
-    both_core = core[pairs[:, 0]] & core[pairs[:, 1]]
-    core_pairs = pairs[both_core]
-    graph = coo_matrix(
-        (np.ones(len(core_pairs)), (core_pairs[:, 0], core_pairs[:, 1])), shape=(n, n)
+    if len(points) == 0:
+        return np.zeros(0, dtype=np.int64)
+    labels = np.asarray(
+        _cloud(points).cluster_dbscan(eps_m, min_points, print_progress=False), dtype=np.int64
     )
-    _, component = connected_components(graph, directed=False)
-    core_index = np.flatnonzero(core)
-    # Renumber the components that contain core points 0..K-1 by first appearance.
-    _, first, inverse = np.unique(component[core_index], return_index=True, return_inverse=True)
-    order = np.argsort(np.argsort(first))
-    labels[core_index] = order[inverse]
-    border = np.flatnonzero(~core)
-    if len(border) and len(core_index):
-        distance, nearest = cKDTree(points[core_index]).query(
-            points[border], distance_upper_bound=eps_m
-        )
-        attached = np.isfinite(distance)
-        labels[border[attached]] = labels[core_index[nearest[attached]]]
+    tree = cKDTree(points)
+    core = tree.query_ball_point(points, eps_m, return_length=True) >= min_points
+    border = np.flatnonzero((labels >= 0) & ~core)
+    if len(border):
+        core_index = np.flatnonzero(core)
+        _, nearest = cKDTree(points[core_index]).query(points[border])
+        labels[border] = labels[core_index[nearest]]
     return labels
 
 
@@ -70,18 +64,22 @@ def largest_cluster_indices(labels: np.ndarray) -> np.ndarray:
 def voxel_subsample_indices(points: np.ndarray, voxel_m: float) -> np.ndarray:
     """Keep one point per cubic voxel of side ``voxel_m``: the one nearest the voxel's mean.
 
+    The voxels are open3d's (``voxel_down_sample_and_trace``) on the grid of multiples of
+    ``voxel_m`` in frame R, so a point's voxel does not depend on the rest of the cloud.
     Returns sorted indices into ``points``, so per-point data (pixels) can follow.
     """
     points = np.asarray(points, dtype=np.float64)
     if voxel_m <= 0.0 or len(points) == 0:
         return np.arange(len(points))
-    keys = np.floor(points / voxel_m).astype(np.int64)
-    _, voxel, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    voxel = voxel.reshape(-1)
-    sums = np.zeros((len(counts), 3))
-    np.add.at(sums, voxel, points)
-    distance = np.linalg.norm(points - (sums / counts[:, None])[voxel], axis=1)
-    order = np.lexsort((distance, voxel))
+    # open3d's voxels start at min_bound: put it on the grid, at or below every point.
+    low = np.floor(points.min(axis=0) / voxel_m) * voxel_m
+    high = points.max(axis=0) + voxel_m
+    means, _, members = _cloud(points).voxel_down_sample_and_trace(voxel_m, low, high, False)
+    sizes = np.array([len(member) for member in members])
+    index = np.concatenate([np.asarray(member) for member in members])
+    voxel = np.repeat(np.arange(len(sizes)), sizes)
+    distance = np.linalg.norm(points[index] - np.asarray(means.points)[voxel], axis=1)
+    order = np.lexsort((index, distance, voxel))
     first = np.ones(len(order), dtype=bool)
     first[1:] = voxel[order][1:] != voxel[order][:-1]
-    return np.sort(order[first])
+    return np.sort(index[order[first]])

@@ -17,7 +17,9 @@ import numpy as np
 import pybullet
 
 from pipeline.errors import ConfigError
+from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.params import param
+from pipeline.poses import look_at, rotation_z
 from pipeline.sim.depth_noise import SimulatedDepth
 from pipeline.types import CameraIntrinsics, DepthObservation
 
@@ -49,33 +51,6 @@ class Rendering:
     depth_m: np.ndarray
     segmentation: np.ndarray
     T_robot_camera: np.ndarray
-
-
-def look_at(
-    target_robot: np.ndarray, distance_m: float, elevation_deg: float, azimuth_deg: float
-) -> np.ndarray:
-    """``T_robot_camera`` of a camera looking at ``target_robot`` from a viewpoint.
-
-    The camera sits at ``target + distance (cos el cos az, cos el sin az, sin el)``: azimuth
-    is measured about +z from the robot's +x axis, elevation up from the table plane. The
-    image x axis stays horizontal (no roll), so the table's vertical projects to the image's
-    up direction. Defined for every elevation, including straight down (90 deg).
-    """
-    elevation, azimuth = np.deg2rad(elevation_deg), np.deg2rad(azimuth_deg)
-    direction_to_camera = np.array(
-        [
-            np.cos(elevation) * np.cos(azimuth),
-            np.cos(elevation) * np.sin(azimuth),
-            np.sin(elevation),
-        ]
-    )
-    z_axis = -direction_to_camera
-    x_axis = np.array([-np.sin(azimuth), np.cos(azimuth), 0.0])
-    y_axis = np.cross(z_axis, x_axis)
-    transform = np.eye(4)
-    transform[:3, :3] = np.column_stack([x_axis, y_axis, z_axis])
-    transform[:3, 3] = np.asarray(target_robot, dtype=np.float64) + distance_m * direction_to_camera
-    return transform
 
 
 def view_matrix(T_robot_camera: np.ndarray) -> list[float]:
@@ -152,8 +127,7 @@ def calibration_error(
     the believed pose is the true cloud moved by exactly that planar motion (the form of the
     estimator's bias), and a yaw error alone does not shift points at the pivot.
     """
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    rotation = rotation_z(yaw_rad)
     pivot = np.asarray(pivot_robot, dtype=np.float64)
     T_believed_true = np.eye(4)
     T_believed_true[:3, :3] = rotation
@@ -175,12 +149,12 @@ class CameraParams:
         "object",
         "'object': target_m is an offset from the object's base position; 'robot': absolute",
     )
-    width: int = param(640, "image width (px)")
-    height: int = param(480, "image height (px)")
-    fx: float = param(575.8, "focal length along x (px)")
-    fy: float = param(575.8, "focal length along y (px)")
-    cx: float = param(314.5, "principal point column, from the top-left pixel centre (px)")
-    cy: float = param(235.5, "principal point row, from the top-left pixel centre (px)")
+    width: int = param(KINECT.width, "image width (px)")
+    height: int = param(KINECT.height, "image height (px)")
+    fx: float = param(KINECT.fx, "focal length along x (px)")
+    fy: float = param(KINECT.fy, "focal length along y (px)")
+    cx: float = param(KINECT.cx, "principal point column, from the top-left pixel centre (px)")
+    cy: float = param(KINECT.cy, "principal point row, from the top-left pixel centre (px)")
     near_m: float = param(0.05, "renderer near clipping plane (m)")
     far_m: float = param(6.0, "renderer far clipping plane (m); nothing is seen beyond it")
     noise: bool = param(True, "apply the sensor's noise and missing-data model")
@@ -223,7 +197,10 @@ def observe(
     if params.target_relative_to == "object":
         target_robot = target_robot + world.object_pose().position_m
     T_robot_camera = look_at(
-        target_robot, params.distance_m, params.elevation_deg, params.azimuth_deg
+        target_robot,
+        params.distance_m,
+        np.deg2rad(params.elevation_deg),
+        np.deg2rad(params.azimuth_deg),
     )
     intrinsics = params.intrinsics
     image = world.render(intrinsics, T_robot_camera, params.near_m, params.far_m)

@@ -36,6 +36,7 @@ from typing import Literal
 
 import numpy as np
 
+from pipeline.kinect import axial_sigma_m
 from pipeline.types import CameraIntrinsics
 
 #: Largest incidence angle used in the Nguyen terms (their ``pi/2 - theta`` denominators
@@ -151,7 +152,7 @@ def nguyen_axial_sigma_m(depth_m: np.ndarray, incidence_rad: np.ndarray) -> np.n
     """
     z = np.asarray(depth_m, dtype=np.float64)
     theta = np.minimum(np.asarray(incidence_rad, dtype=np.float64), MAX_INCIDENCE_RAD)
-    sigma = 0.0012 + 0.0019 * (z - 0.4) ** 2
+    sigma = axial_sigma_m(z)
     grazing = 0.0001 / np.sqrt(z) * theta**2 / (np.pi / 2 - theta) ** 2
     return sigma + np.where(theta > np.deg2rad(60.0), grazing, 0.0)
 

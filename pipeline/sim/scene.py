@@ -106,15 +106,20 @@ def convex_decomposition(mesh: trimesh.Trimesh, resolution: int) -> Path:
 
 
 def _read_obj_parts(path: Path) -> list[np.ndarray]:
-    """Vertices ``(K, 3)`` of each ``o`` object in an OBJ file (faces are not needed: every
-    part is convex and rebuilt as a hull)."""
-    parts: list[list[list[float]]] = []
-    for line in path.read_text().splitlines():
-        if line.startswith("o "):
-            parts.append([])
-        elif line.startswith("v ") and parts:
-            parts[-1].append([float(value) for value in line.split()[1:4]])
-    return [np.array(part) for part in parts if len(part) >= 4]
+    """Vertices ``(K, 3)`` of each ``o`` object in an OBJ file, in file order (faces are not
+    needed: every part is convex and rebuilt as a hull)."""
+    text = path.read_text()
+    scene = trimesh.load(
+        path,
+        file_type="obj",
+        force="scene",
+        split_objects=True,
+        group_material=False,
+        process=False,
+    )
+    names = sorted(scene.geometry, key=lambda name: text.find(f"o {name}\n"))
+    parts = [np.asarray(scene.geometry[name].vertices) for name in names]
+    return [part for part in parts if len(part) >= 4]
 
 
 def _shrink_wrap(vertices: np.ndarray, mesh: trimesh.Trimesh) -> trimesh.Trimesh:
@@ -209,15 +214,17 @@ def _split_where_hull_bulges(
 
 
 def _write_obj_parts(path: Path, parts: list[trimesh.Trimesh | np.ndarray]) -> None:
-    lines: list[str] = []
-    offset = 1
+    """Write each part's convex hull as one ``o part_<i>`` object of an OBJ file (PyBullet
+    makes each object one convex child of the collision shape)."""
+    scene = trimesh.Scene()
     for index, part in enumerate(parts):
         hull = part if isinstance(part, trimesh.Trimesh) else trimesh.convex.convex_hull(part)
-        lines.append(f"o part_{index}")
-        lines.extend(f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in hull.vertices)
-        lines.extend(f"f {a + offset} {b + offset} {c + offset}" for a, b, c in hull.faces)
-        offset += len(hull.vertices)
-    path.write_text("\n".join(lines) + "\n")
+        scene.add_geometry(hull, geom_name=f"part_{index}")
+    path.write_text(
+        trimesh.exchange.obj.export_obj(
+            scene, include_normals=False, include_color=False, include_texture=False, digits=9
+        )
+    )
 
 
 def _quaternion_yaw(yaw_rad: float) -> list[float]:

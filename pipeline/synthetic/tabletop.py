@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
+from pipeline.kinect import axial_sigma_m
+from pipeline.poses import look_at, rotation_z
 from pipeline.types import CameraIntrinsics, DepthObservation
-
-#: Kinect v1 depth intrinsics (the ROS driver's defaults).
-KINECT = CameraIntrinsics(width=640, height=480, fx=575.8, fy=575.8, cx=314.5, cy=235.5)
 
 
 @dataclass(frozen=True)
@@ -98,28 +98,6 @@ def spray_bottle_object() -> SyntheticObject:
     )
 
 
-def look_at(target_m: np.ndarray, distance_m: float, elevation_rad: float, azimuth_rad: float):
-    """``T_robot_camera`` of a camera at ``distance_m`` from ``target_m``, looking at it from
-    ``elevation_rad`` above the horizontal and bearing ``azimuth_rad`` (camera position
-    relative to the target), image rows pointing down."""
-    target = np.asarray(target_m, dtype=np.float64)
-    direction = np.array(
-        [
-            np.cos(elevation_rad) * np.cos(azimuth_rad),
-            np.cos(elevation_rad) * np.sin(azimuth_rad),
-            np.sin(elevation_rad),
-        ]
-    )
-    z_axis = -direction
-    x_axis = np.cross(z_axis, [0.0, 0.0, 1.0])
-    x_axis /= np.linalg.norm(x_axis)
-    y_axis = np.cross(z_axis, x_axis)
-    T = np.eye(4)
-    T[:3, :3] = np.column_stack([x_axis, y_axis, z_axis])
-    T[:3, 3] = target + distance_m * direction
-    return T
-
-
 def _box_interval(origin, direction, box: Box):
     centre = np.asarray(box.centre_m)
     half = np.asarray(box.half_extents_m)
@@ -179,8 +157,7 @@ def render_depth(
     t_table = np.where(t_table > 0.0, t_table, np.inf)
 
     x, y, yaw = pose_xy_yaw
-    c, s = np.cos(yaw), np.sin(yaw)
-    rotation_object_robot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    rotation_object_robot = rotation_z(yaw).T
     origin_object = rotation_object_robot @ (origin_robot - np.array([x, y, table_height_m]))
     rays_object = rays_robot @ rotation_object_robot.T
     t_object = np.full(rows.shape, np.inf)
@@ -197,7 +174,7 @@ def render_depth(
 
 def kinect_noise(depth_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Add Gaussian axial noise ``sigma_z = 0.0012 + 0.0019 (z - 0.4)^2`` (metres)."""
-    sigma = 0.0012 + 0.0019 * (depth_m.astype(np.float64) - 0.4) ** 2
+    sigma = axial_sigma_m(depth_m)
     noisy = depth_m + rng.standard_normal(depth_m.shape) * sigma
     return noisy.astype(np.float32)
 
@@ -286,6 +263,4 @@ def sample_surface(obj: SyntheticObject, spacing_m: float = 0.002) -> np.ndarray
 def place(points_object: np.ndarray, pose_xy_yaw, table_height_m: float) -> np.ndarray:
     """Object-frame points ``(N, 3)`` to the robot frame for an object at ``pose_xy_yaw``."""
     x, y, yaw = pose_xy_yaw
-    c, s = np.cos(yaw), np.sin(yaw)
-    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return points_object @ rotation.T + np.array([x, y, table_height_m])
+    return points_object @ rotation_z(yaw).T + np.array([x, y, table_height_m])

@@ -1,0 +1,100 @@
+"""Report parts every paper experiment shares: the shape-score table and the deviation
+box plots."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..plots import BoxPanel, box_plot_figure
+from .rows import STAGES, count_rows, finished_rows, mean_five_numbers, mean_value
+from .synthetic_study import fmt
+
+#: The paper's average deviation after fusion "when the method's conditions hold" (mm).
+DEVIATION_TARGET_MM = 5.0
+
+
+#: The shape scores the reports show per stage: (row field after ``stage{k}_``, column
+#: label, decimals). See :func:`pipeline.evaluation.shape_scores`.
+SHAPE_SCORES = (
+    ("chamfer_mm", "Chamfer (mm)", 1),
+    ("fscore_2mm", "F@2mm", 2),
+    ("fscore_5mm", "F@5mm", 2),
+    ("iou", "IoU", 2),
+)
+
+
+#: Per-trial table columns of the shape scores.
+SHAPE_HEADER = [f"{label} S0 / S1 / S2" for _, label, _ in SHAPE_SCORES]
+
+
+def deviation_box_figure(
+    categories: Sequence[tuple[float, Sequence[Mapping[str, Any]]]],
+    out_path: Path,
+    *,
+    xlabel: str,
+    title: str,
+) -> Path:
+    """Deviation box-and-whisker plots, one panel per stage, one box per category.
+
+    Each box is the category's averaged five-number summary (:func:`mean_five_numbers`).
+    It is drawn by handing :func:`pipeline.plots.box_plot_figure` those five values as the
+    sample: their 0/25/50/75/100th percentiles (linear interpolation) are exactly the five
+    values, so the drawn box is the summary itself.
+    """
+    panels = []
+    for stage in STAGES:
+        panels.append(
+            BoxPanel(
+                f"Stage {stage}",
+                np.array([position for position, _ in categories], dtype=np.float64),
+                [mean_five_numbers(group, stage) for _, group in categories],
+            )
+        )
+    return box_plot_figure(
+        panels,
+        out_path,
+        xlabel=xlabel,
+        ylabel="deviation from the true surface (mm)",
+        threshold=DEVIATION_TARGET_MM,
+        ylim=(0.0, 40.0),
+        title=title,
+    )
+
+
+def shape_cells(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """One ``S0 / S1 / S2`` cell per shape score, each stage's mean over ``rows`` (one row:
+    that trial's scores)."""
+    return [
+        " / ".join(fmt(mean_value(rows, f"stage{k}_{field}"), digits) for k in STAGES)
+        for field, _, digits in SHAPE_SCORES
+    ]
+
+
+def shape_score_section(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:
+    """The "Shape scores" table: per group, the shape scores averaged over its finished
+    trials, per stage."""
+    lines = [
+        "## Shape scores",
+        "",
+        "Symmetric Chamfer distance between the completed model and the true surface (mm, "
+        "lower is better), F-score at 2 and 5 mm (share of the model within the distance of "
+        "the true surface and of the true surface within it of the model, combined; 1 is "
+        "perfect) and the volumetric IoU of the model's convex hull with the true solid. "
+        "The true surface leaves out the face the object stands on. Averaged over a group's "
+        "finished trials.",
+        "",
+        "| group | trials | " + " | ".join(SHAPE_HEADER) + " |",
+        "|---|---|" + "---|" * len(SHAPE_HEADER),
+    ]
+    for label, group in groups.items():
+        cells = shape_cells(finished_rows(group))
+        lines.append(f"| {label} | {count_rows(group).text()} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def met(condition: bool) -> str:
+    return "met" if condition else "MISSED"

@@ -1,0 +1,104 @@
+"""One trial of a paper experiment, from its task params to its flat result row.
+
+Result rows (``k`` = stage 0, 1, 2): ``failed`` (None, or the reason a stage refused:
+empty segmentation, refused or unexecuted grasp, rejected initialisation), ``status`` (the
+final stage's, or ``"failed"``), ``diverged``, ``points``, ``taxels_in_contact``,
+``seconds``, ``timings``, and per stage ``stage{k}_status``, ``stage{k}_iterations``,
+``stage{k}_deviation_{min,q1,median,q3,max,mean}_mm`` and every scalar metric of
+:func:`pipeline.evaluation.evaluate_stage` as ``stage{k}_<metric>`` (thickness, side angle,
+diameter, plane errors, and the shape scores: ``chamfer_mm``, ``precision_2mm``,
+``recall_2mm``, ``fscore_2mm``, the same at 5 mm, ``iou``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from ..errors import StageFailure
+from ..formats import consistency_fields
+from .paper_tasks import plugin_registry, trial_config
+from .rows import STAGES
+
+#: A trial diverged when the estimator says so, or when its final median deviation from the
+#: true surface exceeds Stage 0's by more than this (mm).
+DIVERGED_GROWTH_MM = 5.0
+
+
+def run_paper_trial(params: Mapping[str, Any]) -> dict[str, Any]:
+    """Run one trial from its task params and return its result row (see the module doc).
+
+    The trial runs with :func:`trial_config`. Its folder is replaced whole (a re-run never
+    mixes files of two runs). A :class:`StageFailure` becomes a row with ``failed`` set; any other
+    exception propagates (the sweep engine records it as an error row).
+    """
+    from ..outdir import staged_output
+    from ..trial import run_trial
+
+    registry = plugin_registry()
+    config = trial_config(params)
+    started = time.perf_counter()
+    with contextlib.ExitStack() as stack:
+        trial_dir = params.get("trial_dir")
+        if trial_dir is None:
+            trial_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="symfuse-"))
+        try:
+            with staged_output(Path(trial_dir), overwrite=True) as staging:
+                record = run_trial(config, registry, staging)
+        except StageFailure as exc:
+            return {
+                "failed": str(exc),
+                "status": "failed",
+                "diverged": False,
+                "seconds": time.perf_counter() - started,
+            }
+        row = trial_row(record.document, record.metrics)
+    row["seconds"] = time.perf_counter() - started
+    return row
+
+
+def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """The flat result row of a finished trial from its ``result.json`` document and the
+    per-stage metrics (deviations converted to millimetres)."""
+    row: dict[str, Any] = {
+        "failed": None,
+        "status": document["status"],
+        "points": document.get("points"),
+        "taxels_in_contact": document.get("taxels_in_contact"),
+        "timings": dict(document.get("timings", {})),
+        "selected_stage": document.get("selected_stage"),
+    }
+    for stage_json, stage_metrics in zip(document["stages"], metrics, strict=True):
+        prefix = f"stage{stage_json['stage']}"
+        row[f"{prefix}_status"] = stage_json.get("status")
+        row[f"{prefix}_iterations"] = stage_json.get("iterations")
+        row.update(consistency_fields(prefix, stage_json.get("consistency")))
+        for name, value in stage_metrics.items():
+            if name == "deviation_m":
+                for field, metres in value.items():
+                    if field != "count":
+                        row[f"{prefix}_deviation_{field}_mm"] = 1e3 * float(metres)
+            elif name == "thickness_error" and isinstance(value, str):
+                row[f"{prefix}_thickness_fit_failed"] = value
+            elif isinstance(value, int | float):
+                row[f"{prefix}_{name}"] = float(value)
+    row["diverged"] = is_diverged(row)
+    return row
+
+
+def is_diverged(row: Mapping[str, Any]) -> bool:
+    """See :data:`DIVERGED_GROWTH_MM`."""
+    last = max((k for k in STAGES if f"stage{k}_status" in row), default=None)
+    if last is None:
+        return False
+    if row[f"stage{last}_status"] == "diverged":
+        return True
+    first = row.get("stage0_deviation_median_mm")
+    final = row.get(f"stage{last}_deviation_median_mm")
+    if first is None or final is None:
+        return False
+    return bool(final - first > DIVERGED_GROWTH_MM)

@@ -1,0 +1,248 @@
+"""The experiments ``symfuse sweep NAME`` runs, as one table (:data:`EXPERIMENTS`).
+
+Most of the paper's experiments differ only in their constants, so they are rows of a
+kind: :class:`SymmetryGrid` (Figs. 8 and 9: synthetic cylinder, theta x r grid per tactile
+angle) and :class:`MeasureTable` (Tables 1-3: one dimension of one object per stage and
+initialiser). The experiments with their own grid or report are modules
+(:class:`ModuleExperiment`: Fig. 10, the spray bottle, the three-finger set, the
+initialisers).
+
+Every row offers what the sweep engine needs: ``name``, ``description``,
+``config_sections`` (the config sections its trials read; None: all), ``tasks(options)``,
+``run_one`` (a top-level, picklable function from a task's JSON params to its JSON row) and
+``report(rows, out_dir)`` (the CSV, figures and ``report.md``). Nothing heavy is imported
+until a row is run, so listing the experiments stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:
+    from . import ExperimentOptions, SweepTask
+
+
+class Experiment(Protocol):
+    """What ``symfuse sweep`` runs."""
+
+    name: str
+
+    @property
+    def description(self) -> str: ...
+    @property
+    def config_sections(self) -> tuple[str, ...] | None: ...
+    @property
+    def run_one(self) -> Callable[[dict], dict[str, Any]]: ...
+    def tasks(self, options: ExperimentOptions) -> list[SweepTask]: ...
+    def report(self, rows: list[dict], out_dir: Path) -> list[Path]: ...
+
+
+@dataclass(frozen=True)
+class SymmetryGrid:
+    """Synthetic cylinder, one gripper: the final diameter error over the initial symmetry
+    error ``theta x r`` for each tactile angle, zero bias (:mod:`.synthetic_study`).
+
+    The full grid is theta 0..90 deg (11.25 deg steps) x r -50..50 mm (10 mm steps);
+    ``quick`` keeps theta {0, 45} and r {-20, +20}.
+
+    Attributes:
+        title: report title.
+        gripper: ``"parallel"`` or ``"three_finger"``.
+        tactile_angles_deg: the grasp angles relative to the view (deg).
+        claims: the paper's statements, quoted in the report.
+    """
+
+    name: str
+    description: str
+    title: str
+    gripper: str
+    tactile_angles_deg: tuple[float, ...]
+    claims: tuple[str, ...]
+
+    @property
+    def config_sections(self) -> tuple[str, ...]:
+        from .synthetic_study import CONFIG_SECTIONS
+
+        return CONFIG_SECTIONS
+
+    @property
+    def run_one(self) -> Callable[[dict], dict[str, Any]]:
+        from .synthetic_study import run_trial
+
+        return run_trial
+
+    def tasks(self, options: ExperimentOptions) -> list[SweepTask]:
+        from .synthetic_study import R_MM_FULL, THETA_DEG_FULL, grid_tasks
+
+        return grid_tasks(
+            options,
+            gripper=self.gripper,
+            tactile_angles_deg=self.tactile_angles_deg,
+            thetas_deg=(0.0, 45.0) if options.quick else THETA_DEG_FULL,
+            rs_mm=(-20.0, 20.0) if options.quick else R_MM_FULL,
+        )
+
+    def report(self, rows: list[dict], out_dir: Path) -> list[Path]:
+        from .synthetic_study import report_grid
+
+        return report_grid(rows, out_dir, name=self.name, title=self.title, claims=self.claims)
+
+
+@dataclass(frozen=True)
+class MeasureTable:
+    """One catalogue object grasped with the PG-70 in simulation: one dimension measured per
+    stage and initialiser, ours beside the paper's (:mod:`.measure_report`).
+
+    Five poses (object yaw -30..30 deg around the reference view) per initialiser,
+    ``repeats`` seeds each (default 1: the paper's five runs); ``quick`` keeps one pose per
+    initialiser.
+
+    Attributes:
+        object: catalogue name.
+        title: report title.
+        measure: ``"thickness"`` (box-like: with the side angle) or ``"diameter"``.
+        true_mm: the object's true dimension (mm).
+        paper_error_pct: init -> (Stage 0, Stage 2) error of the mean (%) in the paper.
+        target_pct: the largest acceptable Stage 2 error after fusion (%).
+        inits: the initialisers compared.
+    """
+
+    name: str
+    description: str
+    object: str
+    title: str
+    measure: str
+    true_mm: float
+    paper_error_pct: Mapping[str, tuple[float, float]]
+    target_pct: float
+    inits: tuple[str, ...] = ("ps", "vc")
+    config_sections = None
+
+    @property
+    def run_one(self) -> Callable[[dict], dict[str, Any]]:
+        from .paper_trial import run_paper_trial
+
+        return run_paper_trial
+
+    def tasks(self, options: ExperimentOptions) -> list[SweepTask]:
+        from .paper_tasks import QUICK_VIEW_OFFSET_DEG, VIEW_OFFSETS_DEG, object_tasks
+
+        offsets = (QUICK_VIEW_OFFSET_DEG,) if options.quick else VIEW_OFFSETS_DEG
+        return object_tasks(options, self.object, inits=self.inits, view_offsets_deg=offsets)
+
+    def report(self, rows: list[dict], out_dir: Path) -> list[Path]:
+        from .measure_report import report_measure
+
+        return report_measure(rows, out_dir, self)
+
+
+@dataclass(frozen=True)
+class ModuleExperiment:
+    """An experiment with its own grid or report, implemented by a module exposing
+    ``DESCRIPTION``, ``tasks``, ``run_one``, ``report`` and optionally ``CONFIG_SECTIONS``."""
+
+    name: str
+    module_name: str
+
+    @property
+    def module(self) -> Any:
+        return importlib.import_module(self.module_name)
+
+    @property
+    def description(self) -> str:
+        return self.module.DESCRIPTION
+
+    @property
+    def config_sections(self) -> tuple[str, ...] | None:
+        return getattr(self.module, "CONFIG_SECTIONS", None)
+
+    @property
+    def run_one(self) -> Callable[[dict], dict[str, Any]]:
+        return self.module.run_one
+
+    def tasks(self, options: ExperimentOptions) -> list[SweepTask]:
+        return self.module.tasks(options)
+
+    def report(self, rows: list[dict], out_dir: Path) -> list[Path]:
+        return self.module.report(rows, out_dir)
+
+
+_ROWS: tuple[Experiment, ...] = (
+    SymmetryGrid(
+        name="fig8",
+        description="synthetic cylinder, parallel jaw: diameter error vs symmetry error "
+        "(paper Fig. 8)",
+        title="Fig. 8: parallel jaw, synthetic cylinder",
+        gripper="parallel",
+        tactile_angles_deg=(0.0, 45.0, -45.0, 90.0, -90.0),
+        claims=(
+            "tactile angle 0: diameter error < 4 mm for theta up to 45 deg and |r| <= 30 mm",
+            "tactile angle +-45: more sensitive to the initialisation",
+            "tactile angle +-90 (grasped from the sides): large errors in r are not corrected",
+        ),
+    ),
+    SymmetryGrid(
+        name="fig9",
+        description="synthetic cylinder, three fingers: diameter error vs symmetry error "
+        "(paper Fig. 9)",
+        title="Fig. 9: three fingers, synthetic cylinder",
+        gripper="three_finger",
+        # At 0 the thumb touches the front and two fingers the back; at 180 two fingers
+        # touch the front.
+        tactile_angles_deg=(0.0, 90.0, -90.0, 180.0),
+        claims=(
+            "tactile angle 180 (two contacts on the front) is the best, less sensitive to theta",
+            "tactile angle 0: a large theta may leave a back finger without correspondences",
+            "tactile angles +-90 work reasonably well (two fingers still touch front and back)",
+        ),
+    ),
+    ModuleExperiment("fig10", "pipeline.experiments.fig10"),
+    MeasureTable(
+        name="table1",
+        description="CD drive, PG-70: thickness per stage with PS and VC initialisation "
+        "(paper Table 1)",
+        object="cd_drive",
+        title="Table 1: CD drive, PG-70",
+        measure="thickness",
+        true_mm=42.0,
+        paper_error_pct={"ps": (11.3, 1.9), "vc": (37.6, 1.4)},
+        target_pct=1.9,
+    ),
+    MeasureTable(
+        name="table2",
+        description="plastic case, PG-70: thickness per stage with PS and VC initialisation "
+        "(paper Table 2)",
+        object="plastic_case",
+        title="Table 2: plastic case, PG-70",
+        measure="thickness",
+        true_mm=44.0,
+        paper_error_pct={"ps": (11.9, 3.4), "vc": (35.8, 3.5)},
+        target_pct=3.4,
+    ),
+    MeasureTable(
+        name="table3",
+        description="salt cylinder, PG-70: diameter per stage with PS and VC initialisation "
+        "(paper Table 3)",
+        object="salt_cylinder",
+        title="Table 3: salt cylinder, PG-70",
+        measure="diameter",
+        true_mm=53.0,
+        paper_error_pct={"ps": (14.1, 4.4), "vc": (14.3, 4.6)},
+        target_pct=4.4,
+    ),
+    ModuleExperiment("spray", "pipeline.experiments.spray"),
+    ModuleExperiment("kth", "pipeline.experiments.kth"),
+    ModuleExperiment("init", "pipeline.experiments.init"),
+)
+
+#: Experiment name -> its definition.
+EXPERIMENTS: dict[str, Experiment] = {row.name: row for row in _ROWS}
+
+
+def experiment_descriptions() -> dict[str, str]:
+    """Experiment name -> its one-line description."""
+    return {name: row.description for name, row in sorted(EXPERIMENTS.items())}
