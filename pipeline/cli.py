@@ -446,7 +446,8 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     )
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())
     print(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s")
-    print(f"wrote {out}/ (result.json, clouds, contacts.json, pictures)")
+    pictures = ", pictures" if settings.pictures else ""
+    print(f"wrote {out}/ (result.json, clouds, contacts.json{pictures})")
     record_if_asked(args, out)
     if estimate_failed(record.result.final.status):
         print(

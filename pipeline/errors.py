@@ -28,6 +28,8 @@ EXIT_INTERRUPTED = 130
 
 #: Final estimate statuses that make a run exit with :data:`EXIT_ESTIMATE_FAILED`.
 FAILED_STATUSES = frozenset({"no_correspondence", "diverged", "inconsistent"})
+#: Statuses of a stage whose estimator gave up and returned its prior unchanged.
+FELL_BACK_STATUSES = frozenset({"no_correspondence", "diverged"})
 
 
 def estimate_failed(status: str) -> bool:

@@ -183,6 +183,15 @@ def test_selection_keeps_a_consistent_last_stage_and_otherwise_the_least_contrad
     assert select_stage([stage(0, 9.0), stage(1, 3.0), stage(2, 2.0)])[0] == 2
 
 
+def test_a_last_stage_that_kept_its_prior_gives_way_to_the_last_that_did_not_fail():
+    gave_up = dataclasses.replace(stage(2, 0.1), status="no_correspondence")
+    index, reason = select_stage([stage(0, 0.5), stage(1, 0.2), gave_up])
+    assert index == 1 and "Stage 2 ended no_correspondence" in reason
+    initial = dataclasses.replace(stage(0, 0.5), status="initial")
+    diverged = dataclasses.replace(stage(1, 0.1), status="diverged")
+    assert select_stage([initial, diverged, dataclasses.replace(diverged, stage=2)])[0] == 0
+
+
 def run_case(case, **overrides):
     problem = case.problem
     if overrides:

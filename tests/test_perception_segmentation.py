@@ -78,6 +78,19 @@ def _blobs(rng):
     return np.concatenate([*blobs, noise]), sizes
 
 
+def test_ransac_is_reproducible_with_its_seed():
+    """open3d samples on several threads, so its plane alone varies between runs with the
+    same seed; the fit must not."""
+    rng = np.random.default_rng(0)
+    table = np.c_[rng.uniform(-0.5, 0.5, (60000, 2)), rng.normal(-0.2, 0.002, 60000)]
+    points = np.vstack([table, rng.normal(size=(20000, 3)) * 0.05])
+    fits = [fit_table_ransac(points, np.random.default_rng(3)) for _ in range(8)]
+    for plane, inliers in fits[1:]:
+        assert plane.offset_m == fits[0][0].offset_m
+        np.testing.assert_array_equal(plane.normal, fits[0][0].normal)
+        np.testing.assert_array_equal(inliers, fits[0][1])
+
+
 def test_dbscan_matches_open3d_partition():
     points, sizes = _blobs(np.random.default_rng(0))
     ours = dbscan_labels(points, 0.01, 10)

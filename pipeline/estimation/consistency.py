@@ -35,6 +35,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.stats import chi2, norm
 
+from ..errors import FELL_BACK_STATUSES, estimate_failed
 from ..perception.visibility import free_space_depths
 from ..types import Consistency, DepthObservation, StageEstimate
 from .geometry import invert_side, mirror, side_linear_part
@@ -281,8 +282,19 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
     inconsistent, the stage with the smallest :attr:`~pipeline.types.Consistency.excess` is
     selected (the later one on a tie), so fusion never makes the model worse than vision
     alone without saying so. Stages without a diagnosis are never selected over the last.
+    A last stage that fell back to its prior (``no_correspondence``, ``diverged``) gives way
+    to the last stage whose status is not failed.
     """
     last = len(stages) - 1
+    if stages[last].status in FELL_BACK_STATUSES:
+        # The estimator kept its prior: the "fused" model is vision alone, whatever its
+        # diagnosis says, so the stage that last produced an estimate of its own stands.
+        kept = [s for s in stages if not estimate_failed(s.status)]
+        if kept:
+            return kept[-1].stage, (
+                f"Stage {last} ended {stages[last].status} and kept its prior; "
+                f"Stage {kept[-1].stage} is the last stage that did not fail"
+            )
     final = stages[last].consistency
     if final is None:
         return last, "not assessed: the last stage"

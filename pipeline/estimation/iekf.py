@@ -73,6 +73,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 
+from ..errors import FELL_BACK_STATUSES
 from .correspondences import (
     Correspondences,
     PointIndex,
@@ -88,7 +89,6 @@ Schedule = Literal["standard", "alternative", "hybrid"]
 GraspStatus = Literal["converged", "max_iterations", "no_correspondence", "diverged"]
 _SEVERITY = ("converged", "max_iterations", "no_correspondence", "diverged")
 #: Stage-2 statuses whose result is replaced by Stage 1's (status and counts kept).
-_FALL_BACK = ("no_correspondence", "diverged")
 
 
 class Gain(Protocol):
@@ -471,7 +471,7 @@ def fuse(
     if last_stage == 1:
         return (stage_one,)
     stage_two = run_stage(problem, settings, 2, index, covariance_model, stage_one)
-    if stage_two.status in _FALL_BACK:
+    if stage_two.status in FELL_BACK_STATUSES:
         stage_two = replace(
             stage_one,
             status=stage_two.status,

@@ -14,10 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .table import plane_through
-
-#: Least-squares refits of the RANSAC plane to its inliers, at most.
-MAX_REFITS = 10
+from .table import refit_until_settled
 
 
 @dataclass(frozen=True)
@@ -66,18 +63,7 @@ def fit_support_plane(
     offset = -float(model[3])
     scale = float(np.linalg.norm(normal))
     normal, offset = normal / scale, offset / scale
-    # Refit to the inliers until they stop changing. open3d's RANSAC samples on several
-    # threads, so its plane varies slightly from run to run even with a seed; the refit
-    # settles on the same least-squares plane from any of them.
-    inliers = np.abs(points @ normal - offset) < inlier_distance_m
-    for _ in range(MAX_REFITS):
-        if inliers.sum() < 3:
-            break
-        normal, offset = plane_through(points[inliers])
-        settled = np.abs(points @ normal - offset) < inlier_distance_m
-        if np.array_equal(settled, inliers):
-            break
-        inliers = settled
+    normal, offset, _ = refit_until_settled(points, normal, offset, inlier_distance_m)
     # Camera at the origin: its height above the plane is -offset along the normal.
     if offset > 0.0:
         normal, offset = -normal, -offset

@@ -28,6 +28,10 @@ def table_from_height(table_height_m: float) -> TablePlane:
     return TablePlane(normal=np.array([0.0, 0.0, 1.0]), offset_m=float(table_height_m))
 
 
+#: Least-squares refits of a RANSAC plane to its inliers, at most.
+MAX_REFITS = 10
+
+
 def plane_through(points: np.ndarray) -> tuple[np.ndarray, float] | None:
     """Least-squares plane through ``(N, 3)`` points (N >= 3), normal pointing up."""
     centroid = points.mean(axis=0)
@@ -56,7 +60,7 @@ def fit_table_ransac(
     time). A plane whose normal is more than ``max_tilt_rad`` from +z (a wall, a large box
     side) is set aside with its inliers and RANSAC runs again on the rest, up to
     ``max_planes`` times. The winner is refitted by least squares to all its inliers over
-    the whole cloud, twice.
+    the whole cloud until they settle.
 
     Args:
         points_robot: ``(N, 3)`` scene points, metres.
@@ -96,14 +100,30 @@ def fit_table_ransac(
         sample = np.delete(sample, np.asarray(on_plane, dtype=np.int64), axis=0)
     if level is None:
         raise ValueError("RANSAC found no plane within the allowed tilt of horizontal")
-    normal, offset = level
-    for _ in range(2):
-        inliers = np.abs(points @ normal - offset) < inlier_distance_m
+    normal, offset, inliers = refit_until_settled(points, *level, inlier_distance_m)
+    return TablePlane(normal=normal, offset_m=float(offset)), inliers
+
+
+def refit_until_settled(
+    points: np.ndarray, normal: np.ndarray, offset: float, inlier_distance_m: float
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """Refit the plane ``normal . p = offset`` to its inliers by least squares until they
+    stop changing (at most :data:`MAX_REFITS` times); return it with its inlier mask.
+
+    open3d's RANSAC samples on several threads, so its plane varies slightly from run to
+    run even with a seed; the refit settles on the same least-squares plane from any of
+    them, which makes the fit reproducible.
+    """
+    inliers = np.abs(points @ normal - offset) < inlier_distance_m
+    for _ in range(MAX_REFITS):
         if inliers.sum() < 3:
             break
         normal, offset = plane_through(points[inliers])
-    inliers = np.abs(points @ normal - offset) < inlier_distance_m
-    return TablePlane(normal=normal, offset_m=float(offset)), inliers
+        settled = np.abs(points @ normal - offset) < inlier_distance_m
+        if np.array_equal(settled, inliers):
+            break
+        inliers = settled
+    return normal, offset, inliers
 
 
 def resolve_table(
