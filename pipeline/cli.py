@@ -667,9 +667,9 @@ def build_parser() -> argparse.ArgumentParser:
     trial.add_argument(
         "--gripper",
         metavar="NAME",
-        help="hand, one the world offers (pybullet: pg70, sdh), which also selects a planner "
-        "for it (pg70: top-parallel, sdh: top-three-finger); auto (the default): the hand "
-        "with the best feasible grasp",
+        help="hand, one the world offers (pybullet: pg70, sdh); also selects the first "
+        "installed planner that plans for it; auto (the default): the hand with the best "
+        "feasible grasp",
     )
     trial.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
     trial.add_argument("--seed", type=counting_number(0), help="random seed of the trial")
