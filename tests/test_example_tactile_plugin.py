@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_example_plugin import pip, symfuse
+from test_example_plugin import installing, listing_after_uninstalling, symfuse
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "symfuse-threshold-taxels"
 DIST = "symfuse-threshold-taxels"
@@ -18,11 +18,8 @@ DIST = "symfuse-threshold-taxels"
 
 @pytest.fixture(scope="module")
 def installed():
-    pip("install", "--no-deps", str(EXAMPLE))
-    try:
+    with installing(EXAMPLE, DIST):
         yield
-    finally:
-        pip("uninstall", "-y", DIST)
 
 
 def test_listed_and_selectable(installed):
@@ -77,8 +74,4 @@ def test_a_whole_trial_runs_with_it_in_the_analytic_world(installed, tmp_path):
 
 
 def test_uninstalling_removes_it():
-    pip("install", "--no-deps", str(EXAMPLE))
-    pip("uninstall", "-y", DIST)
-    listing = symfuse("plugins")
-    assert listing.returncode == 0, listing.stderr
-    assert "threshold-taxels" not in listing.stdout
+    assert "threshold-taxels" not in listing_after_uninstalling(EXAMPLE, DIST)
