@@ -336,15 +336,20 @@ class AnalyticWorld(World):
 def registry_with(*classes: type[StageImplementation]) -> StageRegistry:
     """The installed plugins' registry with ``classes`` added, as a plugin named
     ``"test"`` would add them (to use with :func:`pipeline.config.load_config`,
-    :func:`pipeline.trial.run_trial` or ``registry.create``).
+    :func:`pipeline.trial.run_trial` or ``registry.create``). A class that is installed
+    already (your plugin, ``pip install``-ed) is kept as installed.
 
     Raises:
-        PluginError: a class is not a stage implementation or its name is taken.
+        PluginError: a class is not a stage implementation, or another class has its name.
     """
     registry = load_registry()
     with registry.adding_from(Origin("test", "<test>", "")):
         for cls in classes:
-            registry.add(cls)
+            if (
+                cls.name not in registry.names(cls.stage)
+                or registry.get(cls.stage, cls.name).cls is not cls
+            ):
+                registry.add(cls)
     return registry
 
 

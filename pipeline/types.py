@@ -1,5 +1,8 @@
 """Data types exchanged between the pipeline's stages.
 
+Every type that crosses a stage boundary lives in this one module (hence its length), so
+that a plugin author finds the whole vocabulary of the contracts in one place.
+
 Conventions used everywhere in symfuse:
 
 * Units are SI: metres, radians, seconds. Reports may print mm and degrees.

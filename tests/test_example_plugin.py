@@ -3,9 +3,11 @@ config, run it, uninstall it and see it gone."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -31,13 +33,29 @@ def symfuse(*args: str) -> subprocess.CompletedProcess:
     )
 
 
-@pytest.fixture(scope="module")
-def installed():
-    pip("install", "--no-deps", str(EXAMPLE))
+@contextlib.contextmanager
+def installing(example: Path, dist: str) -> Iterator[None]:
+    """``example`` pip-installed (without dependencies) for the duration of the block."""
+    pip("install", "--no-deps", str(example))
     try:
         yield
     finally:
-        pip("uninstall", "-y", DIST)
+        pip("uninstall", "-y", dist)
+
+
+def listing_after_uninstalling(example: Path, dist: str) -> str:
+    """``symfuse plugins`` after installing ``example`` and uninstalling it again."""
+    with installing(example, dist):
+        pass
+    listing = symfuse("plugins")
+    assert listing.returncode == 0, listing.stderr
+    return listing.stdout
+
+
+@pytest.fixture(scope="module")
+def installed():
+    with installing(EXAMPLE, DIST):
+        yield
 
 
 def test_listed_selectable_and_working(installed):
@@ -74,11 +92,7 @@ def test_listed_selectable_and_working(installed):
 
 
 def test_uninstalling_removes_it():
-    pip("install", "--no-deps", str(EXAMPLE))
-    pip("uninstall", "-y", DIST)
-    listing = symfuse("plugins")
-    assert listing.returncode == 0, listing.stderr
-    assert "voxel-grid" not in listing.stdout
+    assert "voxel-grid" not in listing_after_uninstalling(EXAMPLE, DIST)
     chosen = symfuse("config", "--set", "segmenter.use=voxel-grid")
     assert chosen.returncode == 2
     assert chosen.stderr.startswith(

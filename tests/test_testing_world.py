@@ -109,8 +109,15 @@ def test_registry_with_adds_a_plugin_and_refuses_a_taken_name():
     registry = registry_with(AnalyticWorld)
     assert registry.get("world", "analytic").origin.plugin == "test"
     assert "pybullet" in registry.names("world")
+    assert registry_with(AnalyticWorld, AnalyticWorld).names("world") == registry.names("world")
+
+    class Another(AnalyticWorld):
+        """Another world under a name that is taken."""
+
+        name = "pybullet"
+
     with pytest.raises(PluginError, match="registered twice"):
-        registry_with(AnalyticWorld, AnalyticWorld)
+        registry_with(Another)
 
 
 def test_the_ready_estimation_problem_is_solved_by_the_built_in_estimator():

@@ -1,0 +1,152 @@
+"""``symfuse fuse``: the estimator on a recorded cloud and recorded contacts."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import __version__
+from .cli import _add_config_options, _add_output_options, _add_units_option, _load
+from .cli_summary import selection_line, stage_summary
+from .cli_view import add_rerun_option, check_rerun, record_if_asked
+from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError, StageFailure, estimate_failed
+from .outdir import staged_output
+
+if TYPE_CHECKING:
+    from .config import Config
+    from .formats import RecordedGrasps
+    from .registry import StageRegistry
+    from .types import PointCloud, SymmetryPlane
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """The ``fuse`` verb's options."""
+    parser = subparsers.add_parser(
+        "fuse",
+        help="run the estimator on a recorded cloud and contacts",
+        description="Fuse a recorded object cloud (robot frame, metres) with recorded taxel "
+        "contacts; writes result.json, config.toml and completed_stage{0,1,2}.ply to --out.",
+    )
+    parser.add_argument("--cloud", type=Path, required=True, help="PLY, PCD or NPY (N x 3)")
+    parser.add_argument("--contacts", type=Path, required=True, help="contacts JSON (README)")
+    start = parser.add_mutually_exclusive_group()
+    start.add_argument(
+        "--plane",
+        metavar="NX,NY,D",
+        help="initial symmetry plane {p : NX x + NY y = D}",
+    )
+    start.add_argument(
+        "--init",
+        metavar="NAME",
+        help="initialiser to guess the plane with (the default, vc, needs a depth image that "
+        "recorded data lacks: use ps or pca)",
+    )
+    _add_units_option(parser, "the cloud and the contacts (overrides the contacts' own)")
+    _add_config_options(parser)
+    _add_output_options(parser, default=None)
+    add_rerun_option(parser)
+    return parser
+
+
+def parse_plane(text: str):
+    """``NX,NY,D`` as a :class:`~pipeline.types.SymmetryPlane` (``NX x + NY y = D``)."""
+    from .types import SymmetryPlane
+
+    fields = [field.strip() for field in text.split(",")]
+    if len(fields) != 3:
+        raise ConfigError(f"--plane '{text}': expected three numbers NX,NY,D, got {len(fields)}")
+    try:
+        nx, ny, d = (float(field) for field in fields)
+    except ValueError:
+        raise ConfigError(f"--plane '{text}': expected three numbers NX,NY,D") from None
+    if not np.isfinite([nx, ny, d]).all():
+        raise ConfigError(f"--plane '{text}': NX, NY and D must be finite")
+    if nx == 0.0 and ny == 0.0:
+        raise ConfigError(f"--plane '{text}': the normal (NX, NY) must be non-zero")
+    return SymmetryPlane.from_normal(np.array([nx, ny]), d)
+
+
+#: The config sections ``fuse`` reads.
+FUSE_READS = ("initialiser", "estimator")
+
+
+def run(args: argparse.Namespace) -> int:
+    from .formats import read_cloud, read_contacts
+
+    check_rerun(args)
+    overrides = [f"initialiser.use={args.init}"] if args.init else []
+    registry, config = _load(args, overrides, reads=FUSE_READS)
+    plane = parse_plane(args.plane) if args.plane else None
+    inputs = [args.cloud, args.contacts, *args.config]
+    with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
+        cloud = read_cloud(args.cloud, units=args.units or "m")
+        recorded = read_contacts(args.contacts, units=args.units)
+        status = _fuse_into(staging, args, config, registry, cloud, recorded, plane)
+    print(f"wrote {args.out}/ (result.json, config.toml, completed_stage{{0,1,2}}.ply)")
+    record_if_asked(args, args.out)
+    if estimate_failed(status):
+        print(f"symfuse: error: estimate {status} (see {args.out}/result.json)", file=sys.stderr)
+        return EXIT_ESTIMATE_FAILED
+    return EXIT_OK
+
+
+def _fuse_into(
+    out: Path,
+    args: argparse.Namespace,
+    config: Config,
+    registry: StageRegistry,
+    cloud: PointCloud,
+    recorded: RecordedGrasps,
+    plane: SymmetryPlane | None,
+) -> str:
+    """Run the estimator and write its results into ``out``; return the final status.
+
+    A :class:`StageFailure` is recorded in ``result.json`` (status ``failed``) and re-raised.
+    """
+    from .formats import (
+        bias_to_json,
+        estimate_to_json,
+        plane_to_json,
+        selection_to_json,
+        write_completed_clouds,
+        write_json,
+    )
+    from .runner import fuse
+
+    config.write(out / "config.toml")
+    started = time.perf_counter()
+    document = {
+        "symfuse": __version__,
+        "command": "fuse",
+        "inputs": {"cloud": str(args.cloud), "contacts": str(args.contacts)},
+        "points": len(cloud),
+        "grasps": [len(c) for c in recorded.contacts],
+        "config": config.to_dict(),
+    }
+    try:
+        run = fuse(config, registry, cloud, recorded.contacts, recorded.plans, plane)
+    except StageFailure as exc:
+        document.update(status="failed", reason=str(exc))
+        write_json(out / "result.json", document)
+        raise
+    write_completed_clouds(out, run.result)
+    document.update(
+        init={
+            "source": "--plane" if plane is not None else config.choices["initialiser"],
+            "plane": plane_to_json(run.init.plane),
+            "bias": bias_to_json(run.init.bias),
+        },
+        stages=estimate_to_json(run.result),
+        **selection_to_json(run.result),
+        status=run.result.final.status,
+        seconds=time.perf_counter() - started,
+    )
+    write_json(out / "result.json", document)
+    print(stage_summary(run.result))
+    print(selection_line(run.result))
+    return run.result.final.status

@@ -1,0 +1,123 @@
+"""``symfuse sweep``: one of the paper's experiments as a resumable sweep of trials."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from .cli import _add_config_options, _load, counting_number
+from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError
+
+
+def run(args: argparse.Namespace) -> int:
+    from .config import changed_settings, load_config
+    from .experiments import EXPERIMENTS, ExperimentOptions
+    from .sweep import prepare_sweep_folder, run_sweep, settings_section
+
+    if args.scheduler and args.executor != "dask":
+        raise ConfigError("--scheduler applies to --executor dask")
+    registry, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
+    experiment = EXPERIMENTS[args.experiment]
+    estimator = config.choices["estimator"]
+    resolved = config.to_dict()
+    user = changed_settings(resolved, load_config(registry).to_dict())
+    sections = experiment.config_sections or tuple(resolved)
+    unread = sorted(set(user) - set(sections))
+    if unread:
+        raise ConfigError(
+            f"sweep {args.experiment}: its trials read only [{'], ['.join(sections)}] of the "
+            f"config, not [{'], ['.join(unread)}]; remove those from --config/--set"
+        )
+    # The default folder is fixed, not fresh: typing the command again resumes the sweep.
+    out = args.out or Path("runs") / f"sweep-{args.experiment}-{estimator}"
+    options = ExperimentOptions(
+        estimator=estimator,
+        estimator_params=resolved["estimator"][estimator],
+        config=user,
+        quick=args.quick,
+        seed=args.seed,
+        repeats=args.repeats,
+        out_dir=out.resolve(),
+    )
+    tasks = experiment.tasks(options)
+    read = {section: resolved[section] for section in sections}
+    fingerprint = json.dumps(read, sort_keys=True)
+    keys = [task.key for task in tasks]
+    with prepare_sweep_folder(out, keys, overwrite=args.overwrite, inputs=args.config):
+        config.write(out / "config.toml")
+        try:
+            rows = run_sweep(
+                tasks,
+                experiment.run_one,
+                out / "results.jsonl",
+                workers=args.workers,
+                executor=args.executor,
+                scheduler=args.scheduler,
+                fingerprint=fingerprint,
+                rerun_stale=args.overwrite,
+            )
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from exc
+        written = experiment.report(rows, out)
+        with (out / "report.md").open("a", encoding="utf-8") as report:
+            report.write("\n" + settings_section(tasks, resolved, user, sections))
+    for path in written:
+        print(f"wrote {path}")
+    failed = [row for row in rows if "error" in row]
+    if failed:
+        print(
+            f"symfuse: error: {len(failed)} of {len(rows)} trials raised; first: "
+            f"{failed[0]['key']}: {failed[0]['error']} (rows in {out}/results.jsonl)",
+            file=sys.stderr,
+        )
+        return EXIT_ESTIMATE_FAILED
+    return EXIT_OK
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """The ``sweep`` verb's options."""
+    from .experiments import EXPERIMENTS, experiment_descriptions
+
+    parser = subparsers.add_parser(
+        "sweep",
+        help="run one of the paper's experiments as a resumable sweep",
+        describe=lambda: (
+            "Run an experiment's trials in parallel (or on Dask), appending each "
+            "finished trial to OUT/results.jsonl at once; a re-run skips finished trials. "
+            "Then write the CSV, figures and report.md. Experiments: "
+            + "; ".join(f"{name}: {text}" for name, text in experiment_descriptions().items())
+        ),
+    )
+    parser.add_argument(
+        "experiment",
+        choices=sorted(EXPERIMENTS),
+        metavar="EXPERIMENT",
+        help=", ".join(sorted(EXPERIMENTS)),
+    )
+    parser.add_argument("--estimator", metavar="NAME", help="estimator to run (default: config)")
+    parser.add_argument("--quick", action="store_true", help="a reduced grid (smoke test)")
+    parser.add_argument("--seed", type=counting_number(0), default=0, help="base seed (default 0)")
+    parser.add_argument(
+        "--repeats", type=counting_number(1), help="trials per grid point (default: paper's)"
+    )
+    parser.add_argument(
+        "--workers", type=counting_number(1), help="local processes (default: all cores)"
+    )
+    parser.add_argument("--executor", choices=["local", "dask"], default="local")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (tcp://...)")
+    _add_config_options(parser)
+    parser.add_argument("--out", type=Path, metavar="DIR", help=SWEEP_OUT_HELP)
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="re-run rows made with another config; replace a folder that is not this sweep's",
+    )
+    return parser
+
+
+SWEEP_OUT_HELP = (
+    "output folder (default runs/sweep-EXPERIMENT-ESTIMATOR); an existing folder of the same "
+    "sweep is resumed"
+)
