@@ -173,7 +173,11 @@ def _cmd_plugins(args: argparse.Namespace) -> int:
 
 
 def _cmd_config(args: argparse.Namespace) -> int:
-    _, config = _load(args)
+    from .stages import STAGES
+
+    registry, config = _load(args)
+    for stage in STAGES:  # a selected stage's own checks of its parameters run as it is built
+        config.create(registry, stage)
     print(config.to_toml(), end="")
     return 0
 

@@ -11,8 +11,8 @@ Supported field types: ``bool``, ``int``, ``float``, ``str``, ``Literal[...]`` o
 and ``tuple[float, ...]`` / ``tuple[int, ...]`` / ``tuple[str, ...]``. An ``int`` is accepted
 where a ``float`` is declared; nothing else is converted silently; a ``float`` is finite
 (TOML's ``nan`` and ``inf`` are refused). Numbers may declare a bound, ``param(0.001,
-"...", above=0.0)`` or ``at_least=1``, and a strict upper bound ``below=1.0``, which
-:func:`build` enforces with an error naming the dotted key.
+"...", above=0.0)`` or ``at_least=1``, and an upper bound, strict ``below=1.0`` or inclusive
+``at_most=1.0``, which :func:`build` enforces with an error naming the dotted key.
 """
 
 from __future__ import annotations
@@ -33,13 +33,20 @@ def param(
     above: float | None = None,
     at_least: float | None = None,
     below: float | None = None,
+    at_most: float | None = None,
 ) -> Any:
     """Declare a parameter with its default, a one-line description (with units) and,
     for numbers, an optional strict (``above``) or inclusive (``at_least``) lower bound and
-    a strict upper bound (``below``)."""
+    a strict (``below``) or inclusive (``at_most``) upper bound."""
     return dataclasses.field(
         default=default,
-        metadata={"doc": doc, "above": above, "at_least": at_least, "below": below},
+        metadata={
+            "doc": doc,
+            "above": above,
+            "at_least": at_least,
+            "below": below,
+            "at_most": at_most,
+        },
     )
 
 
@@ -70,6 +77,8 @@ def _bound(field: dataclasses.Field) -> str:
         text = f" >= {field.metadata['at_least']:g}"
     if field.metadata.get("below") is not None:
         text += f"{',' if text else ''} < {field.metadata['below']:g}"
+    elif field.metadata.get("at_most") is not None:
+        text += f"{',' if text else ''} <= {field.metadata['at_most']:g}"
     return text
 
 
@@ -82,6 +91,9 @@ def _check_bound(field: dataclasses.Field, value: Any, key: str) -> None:
     below = field.metadata.get("below")
     if below is not None and not value < below:
         raise ConfigError(f"config key '{key}': must be < {below:g}, got {value!r}")
+    at_most = field.metadata.get("at_most")
+    if at_most is not None and not value <= at_most:
+        raise ConfigError(f"config key '{key}': must be <= {at_most:g}, got {value!r}")
 
 
 def _type_name(annotation: Any) -> str:

@@ -20,12 +20,13 @@ and a ``refine`` (after it, with the contacts). PS initialisation does its real 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from types import TracebackType
 from typing import ClassVar
 
 import numpy as np
 
-from .params import NoParams, check_bounds
+from .params import NoParams, build, check_bounds
 from .types import (
     CameraImage,
     CameraIntrinsics,
@@ -55,8 +56,13 @@ class StageImplementation(ABC):
     Params: ClassVar[type] = NoParams
 
     def __init__(self, params: object | None = None) -> None:
-        self.params = self.Params() if params is None else params
-        check_bounds(self.params, f"{self.stage}.{self.name}")
+        """``params``: a ``Params`` instance, a mapping of (some of) its values as a config
+        file gives them (validated like one), or None for the defaults."""
+        section = f"{self.stage}.{self.name}"
+        if params is None or isinstance(params, Mapping):
+            params = build(self.Params, params or {}, section)
+        self.params = params
+        check_bounds(self.params, section)
 
     @classmethod
     def description(cls) -> str:

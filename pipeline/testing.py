@@ -15,7 +15,8 @@ never moves. A sensor or tactile model that works in it uses nothing but the con
 
 :func:`registry_with` gives the installed plugins plus yours (to run a whole trial, a
 config, or ``registry.create``), :func:`estimation_problem` an
-:class:`~pipeline.types.EstimationProblem` with a known answer for estimators.
+:class:`~pipeline.types.EstimationProblem` with a known answer for estimators;
+:func:`load_config` and :func:`run_trial` build and run a trial as ``symfuse trial`` does.
 """
 
 from __future__ import annotations
@@ -27,11 +28,13 @@ from typing import Any
 
 import numpy as np
 
+from .config import load_config
 from .errors import ConfigError
 from .pad_layout import pad_grid
 from .params import param
 from .registry import Origin, StageRegistry, load_registry
 from .stages import StageImplementation, World
+from .trial import run_trial
 from .types import (
     Bias,
     CameraImage,
@@ -49,6 +52,16 @@ from .types import (
     SymmetryPlane,
     TaxelState,
 )
+
+__all__ = [
+    "PARALLEL_HAND",
+    "AnalyticWorld",
+    "estimation_problem",
+    "load_config",
+    "registry_with",
+    "run_trial",
+    "tiny_scene",
+]
 
 #: The name of the analytic world's one hand (``trial.gripper``).
 PARALLEL_HAND = "parallel"

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from pipeline import hookimpl
-from pipeline.errors import EXIT_PLUGIN_RAISED, PluginError, PluginRaised
-from pipeline.params import param
+from pipeline.errors import EXIT_PLUGIN_RAISED, ConfigError, PluginError, PluginRaised
+from pipeline.params import describe, param
 from pipeline.registry import Origin, PluginManager, load_registry
 from pipeline.stages import STAGES, Segmenter
 from pipeline.types import PointCloud
@@ -24,6 +24,7 @@ class Crop(Segmenter):
     @dataclass(frozen=True)
     class Params:
         min_z_m: float = param(0.0, "lowest kept height (m)")
+        keep_fraction: float = param(1.0, "fraction kept", at_least=0.0, at_most=1.0)
 
     def segment(self, observation):
         return PointCloud(np.zeros((1, 3)))
@@ -71,6 +72,25 @@ def test_selection_by_name_builds_typed_params():
     segmenter = registry.create("segmenter", "crop", {"min_z_m": 1})
     assert segmenter.params == Crop.Params(min_z_m=1.0)
     assert registry.get("segmenter", "crop").origin.distribution == "cropdist"
+
+
+def test_an_implementation_built_directly_takes_a_mapping_validated_like_a_config():
+    assert Crop({"min_z_m": 1}).params == Crop.Params(min_z_m=1.0)
+    assert Crop().params == Crop.Params()
+    with pytest.raises(ConfigError, match=r"unknown config key 'segmenter\.crop\.min_z'"):
+        Crop({"min_z": 1})
+    with pytest.raises(ConfigError, match=r"'segmenter\.crop\.min_z_m': expected float"):
+        Crop({"min_z_m": "high"})
+
+
+def test_an_inclusive_upper_bound_admits_its_value_and_nothing_above():
+    assert Crop({"keep_fraction": 1.0}).params.keep_fraction == 1.0
+    with pytest.raises(ConfigError, match=r"'segmenter\.crop\.keep_fraction': must be <= 1"):
+        Crop({"keep_fraction": 1.5})
+    with pytest.raises(ConfigError, match="must be <= 1"):
+        Crop(Crop.Params(keep_fraction=1.01))
+    (info,) = [i for i in describe(Crop.Params) if i.name == "keep_fraction"]
+    assert ">= 0, <= 1" in info.type_name
 
 
 def test_unknown_name_lists_what_is_available():

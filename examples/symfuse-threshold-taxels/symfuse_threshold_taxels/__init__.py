@@ -13,7 +13,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.api import (
-    ConfigError,
     Contacts,
     GraspOutcome,
     TactileModel,
@@ -62,15 +61,12 @@ class ThresholdTaxels(TactileModel):
         min_taxel_force_N: float = param(
             0.05, "a touching taxel responds from this share of its pad's force (N)", at_least=0.0
         )
-        dead_fraction: float = param(0.0, "fraction of taxels that never respond", at_least=0.0)
+        dead_fraction: float = param(
+            0.0, "fraction of taxels that never respond", at_least=0.0, at_most=1.0
+        )
+        # Which taxels are dead is a property of this (worn) sensor, the same in every
+        # trial, so it has its own seed rather than the world's generator.
         dead_seed: int = param(0, "seed of which taxels are dead", at_least=0)
-
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        if self.params.dead_fraction > 1.0:
-            raise ConfigError(
-                f"config key 'tactile.{self.name}.dead_fraction' must be within [0, 1]"
-            )
 
     def read(self, world: World, outcome: GraspOutcome) -> Contacts:
         """The responding taxels now, in frame R (``outcome`` is not needed: what the
