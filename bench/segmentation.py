@@ -22,8 +22,8 @@ from pipeline.params import build
 from pipeline.perception.clustering import dbscan_labels, voxel_subsample_indices
 from pipeline.perception.depth import backproject_depth
 from pipeline.perception.table import fit_table_ransac, table_from_height
-from pipeline.sim.world import PybulletWorld
 from plugins.pybullet_kinect import PybulletKinect
+from plugins.pybullet_world import Pybullet
 
 
 def best_of(repeats: int, function, *args) -> float:
@@ -36,7 +36,7 @@ def best_of(repeats: int, function, *args) -> float:
 
 
 def scene_points(name: str) -> tuple[np.ndarray, float]:
-    with PybulletWorld.create(load_object(name), None, yaw=0.4, seed=1) as world:
+    with Pybullet.create(load_object(name), None, yaw=0.4, seed=1) as world:
         observation = PybulletKinect(build(PybulletKinect.Params, {}, "sensor")).observe(world)
     points, _ = backproject_depth(
         observation.depth_m, observation.intrinsics, observation.T_robot_camera

@@ -30,8 +30,8 @@ from pipeline.perception.clustering import dbscan_labels, voxel_subsample_indice
 from pipeline.perception.depth import backproject_depth
 from pipeline.perception.segmentation import segment_points
 from pipeline.perception.table import fit_table_ransac, table_from_height
-from pipeline.sim.world import PybulletWorld
 from plugins.pybullet_kinect import PybulletKinect
+from plugins.pybullet_world import Pybullet
 
 EPS_M, MIN_POINTS = 0.01, 10  # the table-cluster segmenter's defaults
 MIN_HEIGHT_M = 0.02
@@ -71,7 +71,7 @@ def reference_voxel_indices(points: np.ndarray, voxel_m: float) -> np.ndarray:
 def scene(request):
     """The Kinect's scene cloud (frame R) of one catalogue object, and the table height."""
     obj = load_object(request.param)
-    with PybulletWorld.create(obj, None, x=0.0, y=0.0, yaw=0.4, seed=1) as world:
+    with Pybullet.create(obj, None, x=0.0, y=0.0, yaw=0.4, seed=1) as world:
         observation = PybulletKinect(build(PybulletKinect.Params, {}, "sensor")).observe(world)
     points, _ = backproject_depth(
         observation.depth_m, observation.intrinsics, observation.T_robot_camera
