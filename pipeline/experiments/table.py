@@ -87,7 +87,7 @@ class SymmetryGrid:
         )
 
     def report(self, rows: list[dict], out_dir: Path) -> list[Path]:
-        from .synthetic_study import report_grid
+        from .synthetic_report import report_grid
 
         return report_grid(rows, out_dir, name=self.name, title=self.title, claims=self.claims)
 
