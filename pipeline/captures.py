@@ -13,7 +13,7 @@ frame when the recording knows it.
   a virtual pinhole camera at the frame's origin looking along +z
   (:func:`depth_from_points`).
 * **Depth image**: a 16-bit PNG in millimetres (0 = no return) or a ``.npy`` float array in
-  metres (NaN = no return), with a ``camera.json`` (:func:`pipeline.formats.read_camera`)
+  metres (NaN = no return), with a ``camera.json`` (:func:`pipeline.camera_file.read_camera`)
   and optionally a colour PNG of the same size (by default ``rgb.png`` beside it).
 * **ROS bags**: see :mod:`pipeline.bags`.
 """
@@ -25,8 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .camera_file import read_camera
 from .errors import InputError
-from .formats import read_camera, read_npy, require_file
+from .formats import read_npy, require_file
 from .types import CameraIntrinsics
 
 #: A median depth above this many metres means the values are millimetres (a depth

@@ -1,4 +1,5 @@
-"""Every file format symfuse reads or writes, in one place.
+"""The file formats symfuse reads or writes (about 450 lines: clouds, contacts and results
+share the validators and JSON helpers here).
 
 * Point clouds: PLY and PCD (via open3d) or ``.npy`` (an ``(N, 3)`` array); frame R, in
   metres unless the reader is told ``units="mm"``.
@@ -11,8 +12,7 @@
   ``units`` is ``"m"`` or ``"mm"`` (positions and the plan's lengths); a reader's ``units``
   argument overrides it (``--units``).
 * Results: ``result.json`` (see :func:`estimate_to_json`) and ``completed_stage{0,1,2}.ply``.
-* Cameras: ``camera.json`` (see :func:`camera_to_json`): intrinsics in pixels, the believed
-  ``T_robot_camera`` (OpenCV optical frame) and the table height when known.
+* Cameras: ``camera.json``, in :mod:`pipeline.camera_file`.
 
 Readers validate what they read and raise :class:`~pipeline.errors.InputError` with a
 one-line message naming the file and, for JSON, the key path at fault. They convert to
@@ -35,17 +35,15 @@ from .cloud_headers import check_cloud_file
 from .errors import InputError
 from .types import (
     Bias,
-    CameraIntrinsics,
     Consistency,
     Contacts,
-    DepthObservation,
     EstimateResult,
     GraspPlan,
     PointCloud,
     StageEstimate,
     SymmetryPlane,
 )
-from .units import UNITS_IN_METRES, check_distance, check_not_metres, scale_of
+from .units import check_distance, check_not_metres, scale_of
 
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy")
 
@@ -455,104 +453,3 @@ def write_completed_clouds(out_dir: Path, result: EstimateResult) -> list[Path]:
         write_cloud(Path(out_dir) / f"completed_stage{stage.stage}.ply", stage.completed)
         for stage in result.stages
     ]
-
-
-@dataclass(frozen=True)
-class CameraFile:
-    """What a ``camera.json`` holds: intrinsics, the camera pose in the robot frame (None
-    when the recording has no robot frame) and the table height in that frame, if known."""
-
-    intrinsics: CameraIntrinsics
-    T_robot_camera: np.ndarray | None
-    table_height_m: float | None
-
-
-def camera_to_json(observation: DepthObservation) -> dict[str, Any]:
-    """Intrinsics (px) and the believed camera pose ``T_robot_camera`` (OpenCV frame)."""
-    k = observation.intrinsics
-    return {
-        "intrinsics": {
-            "width": k.width,
-            "height": k.height,
-            "fx": k.fx,
-            "fy": k.fy,
-            "cx": k.cx,
-            "cy": k.cy,
-        },
-        "T_robot_camera": np.asarray(observation.T_robot_camera).tolist(),
-        "frame": "opencv optical frame (x right, y down, z forward), metres",
-        "table_height_m": observation.table_height_m,
-    }
-
-
-def _positive(value: Any, where: str, path: Path) -> float:
-    if not isinstance(value, int | float) or isinstance(value, bool) or not 0 < value < math.inf:
-        raise InputError(f"{path}: {where} must be a positive finite number, got {value!r}")
-    return float(value)
-
-
-def _rigid_transform(value: Any, where: str, path: Path) -> np.ndarray:
-    """A JSON 4x4 matrix as a rigid transform: a rotation (orthonormal, determinant +1,
-    not a reflection), a finite translation and the bottom row 0 0 0 1."""
-    try:
-        transform = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        transform = np.zeros(0)
-    if transform.shape != (4, 4) or not np.isfinite(transform).all():
-        raise InputError(f"{path}: {where} must be a finite 4x4 matrix")
-    rotation = transform[:3, :3]
-    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
-        raise InputError(f"{path}: {where}'s rotation is not orthonormal")
-    if np.linalg.det(rotation) < 0.0:
-        raise InputError(f"{path}: {where}'s rotation is a reflection (determinant -1)")
-    if not np.allclose(transform[3], [0.0, 0.0, 0.0, 1.0]):
-        raise InputError(f"{path}: {where}'s bottom row must be 0 0 0 1")
-    return transform
-
-
-#: The keys of a ``camera.json`` (:func:`camera_to_json`) and of its ``intrinsics``.
-CAMERA_KEYS = ("intrinsics", "T_robot_camera", "frame", "table_height_m")
-INTRINSICS_KEYS = ("width", "height", "fx", "fy", "cx", "cy")
-
-
-def read_camera(path: Path) -> CameraFile:
-    """Read a ``camera.json`` as :func:`camera_to_json` writes it.
-
-    ``T_robot_camera`` and ``table_height_m`` may be missing or null (a camera with
-    intrinsics only); ``cx``, ``cy`` may be any finite number.
-    """
-    path = require_file(path)
-    document = read_json(path)
-    k = document.get("intrinsics") if isinstance(document, dict) else None
-    if not isinstance(k, dict):
-        raise InputError(f"{path}: 'intrinsics' must be an object with width, height, fx, ...")
-    # A misspelt key would silently drop the camera pose (and build a frame on the table).
-    check_keys(document, CAMERA_KEYS, "", path)
-    check_keys(k, INTRINSICS_KEYS, "intrinsics.", path)
-    size = []
-    for key in ("width", "height"):
-        if not isinstance(k.get(key), int) or isinstance(k.get(key), bool) or k[key] < 1:
-            raise InputError(f"{path}: intrinsics.{key} must be a positive integer")
-        size.append(k[key])
-    focal = [_positive(k.get(key), f"intrinsics.{key}", path) for key in ("fx", "fy")]
-    centre = []
-    for key in ("cx", "cy"):
-        value = k.get(key)
-        if (
-            not isinstance(value, int | float)
-            or isinstance(value, bool)
-            or not math.isfinite(value)
-        ):
-            raise InputError(f"{path}: intrinsics.{key} must be a finite number")
-        centre.append(float(value))
-    intrinsics = CameraIntrinsics(*size, *focal, *centre)
-    transform = document.get("T_robot_camera")
-    if transform is not None:
-        transform = _rigid_transform(transform, "T_robot_camera", path)
-        check_distance(transform[:3, 3], f"{path}: T_robot_camera's translation", UNITS_IN_METRES)
-    height = document.get("table_height_m")
-    if height is not None and (
-        not isinstance(height, int | float) or isinstance(height, bool) or not math.isfinite(height)
-    ):
-        raise InputError(f"{path}: table_height_m must be a number or null")
-    return CameraFile(intrinsics, transform, None if height is None else float(height))

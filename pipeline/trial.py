@@ -23,13 +23,13 @@ from typing import Any
 import numpy as np
 
 from . import __version__
+from .camera_file import camera_to_json
 from .catalogue import CatalogueObject, load_object
 from .config import Config
 from .errors import StageFailure, SymfuseError
 from .evaluation import GroundTruth, evaluate_stage, object_motion
 from .formats import (
     bias_to_json,
-    camera_to_json,
     contacts_to_json,
     estimate_to_json,
     plan_to_json,

@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 import trimesh
 
+from pipeline.camera_file import read_camera
 from pipeline.captures import depth_from_organised, read_capture
 from pipeline.catalogue import load_object
 from pipeline.cli import main
 from pipeline.completion import select_objects
 from pipeline.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, ConfigError, InputError
-from pipeline.formats import read_camera, read_contacts, write_cloud
+from pipeline.formats import read_contacts, write_cloud
 
 
 def one_error_line(err: str) -> str:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from pipeline.experiments import EXPERIMENTS, ExperimentOptions, fig10
+from pipeline.experiments import EXPERIMENTS, ExperimentOptions, fig10, synthetic_report
 from pipeline.experiments import synthetic_study as study
 from pipeline.types import Bias, EstimateResult, StageEstimate, SymmetryPlane
 
@@ -78,7 +78,7 @@ def test_success_summary_on_a_hand_made_grid():
     grid[:, 0] = 9.0  # r = -40 fails everywhere (outside the claim region)
     grid[2, 3] = np.nan  # theta 45, r +20: undefined -> failure
     grid[3, 2] = 5.0  # theta 67.5 fails (outside the region)
-    summary = study.success_summary(grid, thetas, rs)
+    summary = synthetic_report.success_summary(grid, thetas, rs)
     assert summary["claim_cells"] == 9 and summary["claim_successes"] == 8
     assert summary["grid_cells"] == 20 and summary["grid_successes"] == 14
     assert summary["theta_reach_deg"] == 22.5
@@ -185,7 +185,7 @@ def test_fig10_report_medians_and_reach(tmp_path):
 
 
 def test_diagnosis_section_counts_false_alarms_and_misses():
-    from pipeline.experiments.synthetic_study import diagnosis_section
+    from pipeline.experiments.synthetic_report import diagnosis_section
 
     def row(error_mm, status):
         return {"stage2_diameter_error_mm": error_mm, "stage2_status": status}

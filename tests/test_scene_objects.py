@@ -9,6 +9,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import InputError
+from pipeline.sim import collision
 from pipeline.sim import scene as scene_module
 from pipeline.sim.scene import Scene
 
@@ -179,8 +180,8 @@ def test_convex_parts_round_trip_through_obj_and_load_as_one_child_each(tmp_path
     ball.apply_translation((0.1, 0.0, 0.0))
     points = np.random.default_rng(0).normal(size=(30, 3)) * 0.01 + (0.0, 0.1, 0.0)
     path = tmp_path / "parts.obj"
-    scene_module._write_obj_parts(path, [box, ball, points])
-    parts = scene_module._read_obj_parts(path)
+    collision.write_convex_parts(path, [box, ball, points])
+    parts = collision.read_convex_parts(path)
     expected = [box.vertices, ball.vertices, trimesh.convex.convex_hull(points).vertices]
     assert len(parts) == 3
     for part, vertices in zip(parts, expected, strict=True):

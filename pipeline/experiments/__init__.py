@@ -1,6 +1,6 @@
 """Experiments that ``symfuse sweep NAME`` runs: the paper's figures and tables.
 
-:data:`EXPERIMENTS` (:mod:`.table`) lists them, one row each. A row's ``tasks`` enumerates
+:data:`EXPERIMENTS` (:mod:`.definitions`) lists them, one row each. A row's ``tasks`` enumerates
 the grid (each task's ``key`` is unique and stable, so a re-run can skip finished ones);
 ``run_one`` runs a single trial from its JSON parameters and returns one JSON-serialisable
 result row; ``report`` turns all rows into the CSV, the figure PNG(s) and ``report.md``.
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .table import EXPERIMENTS, Experiment, experiment_descriptions
+from .definitions import EXPERIMENTS, Experiment, experiment_descriptions
 
 __all__ = [
     "EXPERIMENTS",

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..sweep import write_csv
+from .common import failures_section, fmt
 from .paper_report import (
     DEVIATION_TARGET_MM,
     SHAPE_HEADER,
@@ -21,7 +22,6 @@ from .paper_report import (
 )
 from .paper_trial import DIVERGED_GROWTH_MM
 from .rows import STAGES, count_rows, failure_lines, finished_rows, mean_value, value
-from .synthetic_study import failures_section, fmt
 
 
 def deviation_verdict(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:

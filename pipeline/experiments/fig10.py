@@ -20,19 +20,10 @@ import numpy as np
 from ..plots import BoxPanel, box_plot_figure
 from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask
+from .common import failures_section, fmt, task_seed
+from .synthetic_report import SUCCESS_MM, diagnosis_section, final_error, ok_rows, stage_error
 from .synthetic_study import CONFIG_SECTIONS as CONFIG_SECTIONS
-from .synthetic_study import (
-    SUCCESS_MM,
-    diagnosis_section,
-    failures_section,
-    final_error,
-    fmt,
-    ok_rows,
-    run_trial,
-    stage_error,
-    task_seed,
-    trial_params,
-)
+from .synthetic_study import run_trial, trial_params
 
 NAME = "fig10"
 DESCRIPTION = "synthetic cylinder: diameter error vs initial bias magnitude (paper Fig. 10)"

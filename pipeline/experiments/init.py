@@ -20,10 +20,10 @@ import numpy as np
 
 from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask
+from .common import task_seed
 from .paper_tasks import paper_task, user_settings
 from .paper_trial import run_paper_trial
 from .rows import INIT_LABELS, group_rows
-from .synthetic_study import task_seed
 
 NAME = "init"
 DESCRIPTION = "initialisers (PS, VC, PCA) on the catalogue in PyBullet: plane within 10 deg/10 mm"

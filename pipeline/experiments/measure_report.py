@@ -12,11 +12,11 @@ import numpy as np
 
 from ..plots import BoxPanel, box_plot_figure
 from ..sweep import write_csv
+from .common import failures_section, fmt
+from .definitions import MeasureTable
 from .paper_report import SHAPE_HEADER, deviation_box_figure, met, shape_cells, shape_score_section
 from .paper_trial import DIVERGED_GROWTH_MM
 from .rows import INIT_LABELS, STAGES, count_rows, failure_lines, finished_rows, group_rows, value
-from .synthetic_study import failures_section, fmt
-from .table import MeasureTable
 
 #: "Clearly better than Stage 0": the final error is at most this fraction of Stage 0's.
 CLEARLY_BETTER_RATIO = 0.5

@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 
 from ..plots import BoxPanel, box_plot_figure
+from .common import fmt
 from .rows import STAGES, count_rows, finished_rows, mean_five_numbers, mean_value
-from .synthetic_study import fmt
 
 #: The paper's average deviation after fusion "when the method's conditions hold" (mm).
 DEVIATION_TARGET_MM = 5.0

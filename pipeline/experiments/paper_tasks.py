@@ -27,7 +27,6 @@ Task parameters (JSON; units in the names):
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -38,20 +37,12 @@ import tomli_w
 from ..catalogue import list_objects
 from ..errors import ConfigError
 from . import ExperimentOptions, SweepTask
-from .synthetic_study import task_seed
+from .common import plugin_registry, task_seed
 
 #: Object yaws relative to the reference view (deg): five poses, like the paper's five runs.
 VIEW_OFFSETS_DEG = (-30.0, -15.0, 0.0, 15.0, 30.0)
 #: The view offset of ``quick`` runs (deg).
 QUICK_VIEW_OFFSET_DEG = 10.0
-
-
-@functools.cache
-def plugin_registry():
-    """The plugin registry (loaded once per process)."""
-    from ..registry import load_registry
-
-    return load_registry()
 
 
 def camera_azimuth_deg(options: ExperimentOptions, overrides: Sequence[str] = ()) -> float:

@@ -21,7 +21,8 @@ from typing import Any
 
 from ..errors import StageFailure
 from ..formats import consistency_fields
-from .paper_tasks import plugin_registry, trial_config
+from .common import plugin_registry
+from .paper_tasks import trial_config
 from .rows import STAGES
 
 #: A trial diverged when the estimator says so, or when its final median deviation from the

@@ -12,7 +12,8 @@ import numpy as np
 from ..errors import ConfigError
 from ..perception.grasp_geometry import narrowest_width
 from . import ExperimentOptions
-from .paper_tasks import camera_azimuth_deg, plugin_registry
+from .common import plugin_registry
+from .paper_tasks import camera_azimuth_deg
 
 
 def scan_trial_params(

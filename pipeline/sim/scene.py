@@ -5,17 +5,12 @@ The robot frame ``R`` is PyBullet's world frame: z up, the table top is the plan
 centred in x, y) placed upright on the table at a planar pose ``(x, y, yaw)``.
 
 Collision geometry: a convex mesh is used as it is (PyBullet builds its hull); a non-convex
-one is split into convex parts with PyBullet's V-HACD, cached on disk under
-``$SYMFUSE_CACHE`` (default ``~/.cache/symfuse``) keyed by a hash of the mesh and the
-decomposition settings, so each shape is decomposed once per machine. The visual shape is the
-mesh itself.
+one is split into convex parts (:mod:`pipeline.sim.collision`). The visual shape is the mesh
+itself.
 """
 
 from __future__ import annotations
 
-import hashlib
-import os
-import tempfile
 from pathlib import Path
 from types import TracebackType
 
@@ -25,206 +20,23 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import InputError
-from pipeline.metrics import mesh_occupancy, point_to_mesh_distances
 from pipeline.types import ObjectPose
 
-from . import native_output_silenced
+from .collision import convex_decomposition
 
 #: Half-extents of the table box (m): 2 m x 2 m, 5 cm thick.
 TABLE_HALF_EXTENTS_M = (1.0, 1.0, 0.025)
+
+
 TABLE_RGBA = (0.55, 0.45, 0.35, 1.0)
+
+
 OBJECT_RGBA = (0.2, 0.45, 0.8, 1.0)
+
+
 #: Bullet collision margin of the table and objects (m). Bullet's default (about 1 mm on
 #: convex hulls) would leave objects floating that high above the table.
 COLLISION_MARGIN_M = 1e-4
-#: How far (m) a convex part of a non-convex object's collision geometry may stick out of
-#: the true surface. Taxels in contact lie on the collision geometry, so this bounds their
-#: offset from the surface the estimator is measured against.
-HULL_TOLERANCE_M = 2e-4
-#: Surface samples of a non-convex mesh the refined parts are built from, and the most
-#: times a part may be halved.
-HULL_SAMPLES = 40_000
-HULL_MAX_SPLITS = 6
-
-
-def cache_dir() -> Path:
-    """Directory for cached convex decompositions: ``$SYMFUSE_CACHE`` or ``~/.cache/symfuse``."""
-    root = os.environ.get("SYMFUSE_CACHE") or Path.home() / ".cache" / "symfuse"
-    return Path(root)
-
-
-def mesh_hash(mesh: trimesh.Trimesh) -> str:
-    """A stable hex digest of a mesh's vertices (float64) and faces (int64)."""
-    digest = hashlib.sha256()
-    digest.update(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes())
-    digest.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
-    return digest.hexdigest()
-
-
-def convex_decomposition(mesh: trimesh.Trimesh, resolution: int) -> Path:
-    """Path of an OBJ file holding convex parts of ``mesh`` (one OBJ object per part).
-
-    Computed on first use with ``pybullet.vhacd`` and cached; later calls with the same mesh
-    and settings return the cached file. V-HACD builds its hulls from a voxelisation, which
-    puts their vertices up to about a voxel (2-3 mm for a 10 cm object) outside the surface;
-    for a watertight mesh each such vertex is moved to the closest surface point and the
-    part's hull rebuilt ("shrink-wrapping", as V-HACD 4 does), so objects neither float
-    above the table nor meet the fingers early. Shrink-wrapping fixes the vertices, not the
-    faces: a hull still bridges any concavity smaller than a voxel (a lid 1.5 mm wider than
-    its can), so the fingers would stop that far outside the true surface and every taxel
-    in contact would lie there. Each part is therefore also refined
-    (:func:`_faithful_hulls`) until no hull sticks out of the mesh by more than
-    ``HULL_TOLERANCE_M``.
-    """
-    directory = cache_dir() / "vhacd"
-    key = f"{mesh_hash(mesh)[:32]}_r{resolution}_refined{HULL_TOLERANCE_M * 1e6:.0f}um"
-    path = directory / f"{key}.obj"
-    if path.is_file():
-        return path
-    directory.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=directory) as scratch:
-        source = Path(scratch) / "source.obj"
-        result = Path(scratch) / "parts.obj"
-        mesh.export(source)
-        with native_output_silenced(1):
-            pybullet.vhacd(
-                str(source),
-                str(result),
-                str(Path(scratch) / "vhacd.log"),
-                resolution=resolution,
-                maxNumVerticesPerCH=64,
-            )
-        parts = _read_obj_parts(result) if result.is_file() else []
-        if not parts:
-            raise InputError(f"convex decomposition of mesh {key} produced no parts")
-        if mesh.is_watertight:
-            parts = _faithful_hulls([_shrink_wrap(part, mesh) for part in parts], mesh)
-        staged = Path(scratch) / "wrapped.obj"
-        _write_obj_parts(staged, parts)
-        os.replace(staged, path)
-    return path
-
-
-def _read_obj_parts(path: Path) -> list[np.ndarray]:
-    """Vertices ``(K, 3)`` of each ``o`` object in an OBJ file, in file order (faces are not
-    needed: every part is convex and rebuilt as a hull)."""
-    text = path.read_text()
-    scene = trimesh.load(
-        path,
-        file_type="obj",
-        force="scene",
-        split_objects=True,
-        group_material=False,
-        process=False,
-    )
-    names = sorted(scene.geometry, key=lambda name: text.find(f"o {name}\n"))
-    parts = [np.asarray(scene.geometry[name].vertices) for name in names]
-    return [part for part in parts if len(part) >= 4]
-
-
-def _shrink_wrap(vertices: np.ndarray, mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """Convex hull of ``vertices`` after moving those outside ``mesh`` onto its surface."""
-    outside = trimesh.proximity.signed_distance(mesh, vertices) < 0.0  # trimesh: outside < 0
-    wrapped = vertices.copy()
-    if outside.any():
-        wrapped[outside] = trimesh.proximity.closest_point(mesh, vertices[outside])[0]
-    return trimesh.convex.convex_hull(wrapped)
-
-
-def _outside_distances(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
-    """``(N,)`` how far (m) each point lies outside the watertight ``mesh`` (0 inside)."""
-    distances = point_to_mesh_distances(points, mesh.vertices, mesh.faces)
-    return np.where(mesh_occupancy(points, mesh.vertices, mesh.faces), 0.0, distances)
-
-
-def _faithful_hulls(hulls: list[trimesh.Trimesh], mesh: trimesh.Trimesh) -> list[trimesh.Trimesh]:
-    """Convex parts covering the watertight ``mesh`` that stick out of it by at most
-    ``HULL_TOLERANCE_M`` (as far as ``HULL_MAX_SPLITS`` halvings get).
-
-    Dense surface samples are shared out among the parts (each goes to the hull it lies
-    in, or the nearest), each part becomes the hull of its samples, and a hull that sticks
-    out too far is cut in two (:func:`_split_where_hull_bulges`) and both halves refined.
-    """
-    rng = np.random.default_rng(0)
-    samples, _ = trimesh.sample.sample_surface(mesh, HULL_SAMPLES, seed=rng)
-    points = np.concatenate([samples, mesh.vertices])
-    outside = np.stack(
-        [
-            np.where(
-                hull.contains(points),
-                0.0,
-                point_to_mesh_distances(points, hull.vertices, hull.faces),
-            )
-            for hull in hulls
-        ]
-    )
-    owner = np.argmin(outside, axis=0)
-    refined: list[trimesh.Trimesh] = []
-    for index in range(len(hulls)):
-        refined.extend(_split_where_hull_bulges(points[owner == index], mesh, HULL_MAX_SPLITS))
-    return refined
-
-
-def _hull_bulge(
-    points: np.ndarray, mesh: trimesh.Trimesh
-) -> tuple[trimesh.Trimesh, float, np.ndarray]:
-    """The hull of ``points``, how far (m) it sticks out of ``mesh`` at most, and where."""
-    hull = trimesh.convex.convex_hull(points)
-    probes, _ = trimesh.sample.sample_surface(hull, 4000, seed=np.random.default_rng(0))
-    probes = np.concatenate([probes, hull.vertices])
-    outside = _outside_distances(probes, mesh)
-    worst = int(np.argmax(outside))
-    return hull, float(outside[worst]), probes[worst]
-
-
-def _split_where_hull_bulges(
-    points: np.ndarray, mesh: trimesh.Trimesh, splits_left: int
-) -> list[trimesh.Trimesh]:
-    """Hulls of ``points`` (samples of the mesh surface): one, or, where it sticks out of
-    ``mesh`` by more than ``HULL_TOLERANCE_M``, those of the two halves on either side of
-    a plane through the surface point nearest to the worst bulge.
-
-    Of the three planes normal to the principal axes of ``points``, the one whose halves
-    bulge least is taken: a hull that bridges a step, such as a lid wider than its can, is
-    cut at the step.
-    """
-    if len(points) < 4 or np.linalg.matrix_rank(points - points[0], tol=1e-9) < 3:
-        return []
-    hull, bulge, worst = _hull_bulge(points, mesh)
-    if hull.volume < 1e-12:  # a sliver of coplanar samples holds nothing up
-        return []
-    if splits_left == 0 or bulge <= HULL_TOLERANCE_M:
-        return [hull]
-    nearest = trimesh.proximity.closest_point(mesh, worst[None])[0][0]
-    centred = points - points.mean(axis=0)
-    best: tuple[float, list[np.ndarray]] | None = None
-    for axis in np.linalg.eigh(centred.T @ centred)[1].T:
-        height = (points - nearest) @ axis
-        halves = [points[height > 0.0], points[height <= 0.0]]
-        if min(len(h) for h in halves) < 4:
-            continue
-        worst_half = max(_hull_bulge(h, mesh)[1] for h in halves)
-        if best is None or worst_half < best[0]:
-            best = (worst_half, halves)
-    if best is None:
-        return [hull]
-    return [
-        hull for half in best[1] for hull in _split_where_hull_bulges(half, mesh, splits_left - 1)
-    ]
-
-
-def _write_obj_parts(path: Path, parts: list[trimesh.Trimesh | np.ndarray]) -> None:
-    """Write each part's convex hull as one ``o part_<i>`` object of an OBJ file (PyBullet
-    makes each object one convex child of the collision shape)."""
-    scene = trimesh.Scene()
-    for index, part in enumerate(parts):
-        hull = part if isinstance(part, trimesh.Trimesh) else trimesh.convex.convex_hull(part)
-        scene.add_geometry(hull, geom_name=f"part_{index}")
-    path.write_text(
-        trimesh.exchange.obj.export_obj(
-            scene, include_normals=False, include_color=False, include_texture=False, digits=9
-        )
-    )
 
 
 def _quaternion_yaw(yaw_rad: float) -> list[float]:

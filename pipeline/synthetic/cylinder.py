@@ -56,7 +56,7 @@ class Viewpoint:
         azimuth_rad: direction of the camera from the axis, about +z (0 = +x side).
         elevation_rad: camera height angle above the horizontal through the centre.
         distance_m: camera-to-centre distance.
-        intrinsics: pinhole intrinsics (default Kinect v1, 640x480, f = 575.8 px).
+        intrinsics: pinhole intrinsics (default :data:`pipeline.kinect.KINECT_V1_INTRINSICS`).
     """
 
     azimuth_rad: float = np.pi

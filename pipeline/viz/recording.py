@@ -57,25 +57,30 @@ from ..formats import read_cloud, read_contacts, read_json
 from ..metrics import nearest_distances, plane_after_bias, point_to_mesh_distances
 from ..plots import DEVIATION_CMAP, DEVIATION_MAX_M
 from ..types import Bias, Contacts, SymmetryPlane
+from .layout import blueprint, plots_path
+from .shapes import plane_quad
 
 #: File name of the recording inside a run folder.
 RECORDING_NAME = "recording.rrd"
+
+
 #: Taxel colours span 0 to this distance from the model (m).
 TAXEL_RESIDUAL_MAX_M = 0.010
-#: The plane quad reaches this far beyond the model on each side (m).
-PLANE_MARGIN_M = 0.015
-PLANE_RGBA = (255, 190, 0, 90)
-CLOUD_RGB = (90, 150, 230)
-MODEL_RGB = (240, 140, 40)
-TRUTH_RGBA = (200, 200, 200, 110)
-HAND_RGBA = (120, 120, 130, 255)
 
-#: How far the 3-D view's eye starts from the objects (m), its angle (rad) beside the
-#: camera's line of sight (so the completed back shows), and how much lower than the camera
-#: it looks (the ratio of its elevation's sine to the camera's).
-EYE_DISTANCE_M = 0.4
-EYE_TURN_RAD = 0.9
-EYE_LOWER = 0.6
+
+PLANE_RGBA = (255, 190, 0, 90)
+
+
+CLOUD_RGB = (90, 150, 230)
+
+
+MODEL_RGB = (240, 140, 40)
+
+
+TRUTH_RGBA = (200, 200, 200, 110)
+
+
+HAND_RGBA = (120, 120, 130, 255)
 
 
 def rerun_module() -> ModuleType:
@@ -116,8 +121,8 @@ def write_recording(run_dir: Path, out_path: Path | None = None) -> Path:
     camera = read_run_json(camera_path) if camera_path.is_file() else None
     out_path = Path(out_path) if out_path is not None else run_dir / RECORDING_NAME
     recording = rr.RecordingStream("symfuse", recording_id=str(uuid.uuid4()))
-    plots = {entity: _plots_path(entity) for _, entity in runs}
-    recording.save(out_path, default_blueprint=_blueprint(runs, camera, list(plots.values())))
+    plots = {entity: plots_path(entity) for _, entity in runs}
+    recording.save(out_path, default_blueprint=blueprint(runs, camera, list(plots.values())))
     timeline = _Timeline(rr, recording)
     recording.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     if camera is not None:
@@ -136,76 +141,6 @@ def read_run_json(path: Path) -> dict[str, Any]:
     if not isinstance(document, dict):
         raise InputError(f"{path}: the top level must be a JSON object")
     return document
-
-
-def _plots_path(entity: str) -> str:
-    return "plots" if entity == "world" else f"plots/{entity.removeprefix('world/')}"
-
-
-def eye_position(target: np.ndarray, toward: np.ndarray) -> np.ndarray:
-    """Where the 3-D view's eye starts: :data:`EYE_DISTANCE_M` from ``target``, turned
-    :data:`EYE_TURN_RAD` about +z from the direction ``toward`` (the camera), with the sine
-    of its elevation scaled by :data:`EYE_LOWER`."""
-    toward = np.asarray(toward, dtype=float) / np.linalg.norm(toward)
-    azimuth = np.arctan2(toward[1], toward[0]) + EYE_TURN_RAD
-    sin_elevation = EYE_LOWER * toward[2]
-    cos_elevation = np.sqrt(1.0 - sin_elevation**2)
-    direction = [cos_elevation * np.cos(azimuth), cos_elevation * np.sin(azimuth), sin_elevation]
-    return np.asarray(target, dtype=float) + EYE_DISTANCE_M * np.array(direction)
-
-
-def _blueprint(runs, camera: dict[str, Any] | None, plots: list[str]):
-    """The viewer layout: the 3-D scene (eye on the objects, from beside the camera), the
-    camera images, the IEKF state per iteration (plane, bias, gates) and the step log."""
-    import rerun.blueprint as rrb
-
-    references = [files.reference for files, _ in runs if files.reference is not None]
-    eye = None
-    if references:
-        target = np.vstack(references).mean(axis=0)
-        if camera is not None:
-            toward = np.asarray(camera["T_robot_camera"], dtype=float)[:3, 3] - target
-        else:
-            toward = np.array([-1.0, -1.0, 1.0])
-        position = eye_position(target, toward)
-        eye = rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
-
-    def series(name: str, part: str):
-        return rrb.TimeSeriesView(
-            origin="/", contents=[f"+ /{root}/{part}/**" for root in plots], name=name
-        )
-
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(
-                origin="world",
-                name="robot frame",
-                contents=["+ /**", "- /world/camera/image/depth"],
-                eye_controls=eye,
-            ),
-            rrb.Vertical(
-                rrb.Tabs(
-                    rrb.Spatial2DView(
-                        origin="world/camera/image",
-                        contents=["+ $origin/rgb"],
-                        name="colour",
-                    ),
-                    rrb.Spatial2DView(
-                        origin="world/camera/image",
-                        contents=["+ $origin/depth"],
-                        name="depth",
-                    ),
-                ),
-                series("bias (deg, mm)", "bias"),
-                series("plane (deg, mm)", "plane"),
-                series("gates", "gates"),
-                rrb.TextLogView(origin="log", name="steps"),
-                row_shares=[2.2, 1.2, 1.2, 1.2, 1.6],
-            ),
-            column_shares=[2.4, 1],
-        ),
-        collapse_panels=True,
-    )
 
 
 class _Timeline:
@@ -302,23 +237,6 @@ def _colours(values: np.ndarray, cmap: str, top: float) -> np.ndarray:
 
     rgba = matplotlib.colormaps[cmap](np.clip(values / top, 0.0, 1.0))
     return (rgba[:, :3] * 255).astype(np.uint8)
-
-
-def plane_quad(plane: SymmetryPlane, points: np.ndarray) -> np.ndarray:
-    """``(4, 3)`` corners of the part of a vertical plane that spans ``points``: along the
-    plane as far as the points reach plus :data:`PLANE_MARGIN_M`, from their lowest to their
-    highest point, centred on their centroid's projection."""
-    normal = plane.normal
-    along = np.array([-normal[1], normal[0], 0.0])
-    centre = points.mean(axis=0)
-    centre = centre - (centre @ normal - plane.offset_m) * normal
-    reach = np.abs((points - centre) @ along).max() + PLANE_MARGIN_M
-    low, high = points[:, 2].min(), points[:, 2].max()
-    corners = []
-    for side, z in ((-1, low), (1, low), (1, high), (-1, high)):
-        corner = centre + side * reach * along
-        corners.append([corner[0], corner[1], z])
-    return np.array(corners)
 
 
 class _RunRecorder:

@@ -50,18 +50,30 @@ class SymmetryGrid:
     ``quick`` keeps theta {0, 45} and r {-20, +20}.
 
     Attributes:
-        title: report title.
+        figure: the paper's figure number.
+        hand: the hand as the reports name it.
         gripper: ``"parallel"`` or ``"three_finger"``.
         tactile_angles_deg: the grasp angles relative to the view (deg).
         claims: the paper's statements, quoted in the report.
     """
 
     name: str
-    description: str
-    title: str
+    figure: int
+    hand: str
     gripper: str
     tactile_angles_deg: tuple[float, ...]
     claims: tuple[str, ...]
+
+    @property
+    def description(self) -> str:
+        return (
+            f"synthetic cylinder, {self.hand}: diameter error vs symmetry error "
+            f"(paper Fig. {self.figure})"
+        )
+
+    @property
+    def title(self) -> str:
+        return f"Fig. {self.figure}: {self.hand}, synthetic cylinder"
 
     @property
     def config_sections(self) -> tuple[str, ...]:
@@ -87,7 +99,7 @@ class SymmetryGrid:
         )
 
     def report(self, rows: list[dict], out_dir: Path) -> list[Path]:
-        from .synthetic_study import report_grid
+        from .synthetic_report import report_grid
 
         return report_grid(rows, out_dir, name=self.name, title=self.title, claims=self.claims)
 
@@ -102,8 +114,9 @@ class MeasureTable:
     initialiser.
 
     Attributes:
+        paper_table: the paper's table number.
+        label: the object as the reports name it.
         object: catalogue name.
-        title: report title.
         measure: ``"thickness"`` (box-like: with the side angle) or ``"diameter"``.
         true_mm: the object's true dimension (mm).
         paper_error_pct: init -> (Stage 0, Stage 2) error of the mean (%) in the paper.
@@ -112,15 +125,26 @@ class MeasureTable:
     """
 
     name: str
-    description: str
+    paper_table: int
+    label: str
     object: str
-    title: str
     measure: str
     true_mm: float
     paper_error_pct: Mapping[str, tuple[float, float]]
     target_pct: float
     inits: tuple[str, ...] = ("ps", "vc")
     config_sections = None
+
+    @property
+    def description(self) -> str:
+        return (
+            f"{self.label}, PG-70: {self.measure} per stage with PS and VC initialisation "
+            f"(paper Table {self.paper_table})"
+        )
+
+    @property
+    def title(self) -> str:
+        return f"Table {self.paper_table}: {self.label}, PG-70"
 
     @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]:
@@ -171,12 +195,22 @@ class ModuleExperiment:
         return self.module.report(rows, out_dir)
 
 
+#: Tables 1-3: name, paper table, object label, catalogue name, measure, true size (mm), the
+#: paper's error of the mean (%) at Stages 0 and 2 per initialiser, target after fusion (%).
+_MEASURE_TABLES = (
+    ("table1", 1, "CD drive", "cd_drive", "thickness", 42.0,
+     {"ps": (11.3, 1.9), "vc": (37.6, 1.4)}, 1.9),
+    ("table2", 2, "plastic case", "plastic_case", "thickness", 44.0,
+     {"ps": (11.9, 3.4), "vc": (35.8, 3.5)}, 3.4),
+    ("table3", 3, "salt cylinder", "salt_cylinder", "diameter", 53.0,
+     {"ps": (14.1, 4.4), "vc": (14.3, 4.6)}, 4.4),
+)  # fmt: skip
+
 _ROWS: tuple[Experiment, ...] = (
     SymmetryGrid(
         name="fig8",
-        description="synthetic cylinder, parallel jaw: diameter error vs symmetry error "
-        "(paper Fig. 8)",
-        title="Fig. 8: parallel jaw, synthetic cylinder",
+        figure=8,
+        hand="parallel jaw",
         gripper="parallel",
         tactile_angles_deg=(0.0, 45.0, -45.0, 90.0, -90.0),
         claims=(
@@ -187,9 +221,8 @@ _ROWS: tuple[Experiment, ...] = (
     ),
     SymmetryGrid(
         name="fig9",
-        description="synthetic cylinder, three fingers: diameter error vs symmetry error "
-        "(paper Fig. 9)",
-        title="Fig. 9: three fingers, synthetic cylinder",
+        figure=9,
+        hand="three fingers",
         gripper="three_finger",
         # At 0 the thumb touches the front and two fingers the back; at 180 two fingers
         # touch the front.
@@ -201,39 +234,7 @@ _ROWS: tuple[Experiment, ...] = (
         ),
     ),
     ModuleExperiment("fig10", "pipeline.experiments.fig10"),
-    MeasureTable(
-        name="table1",
-        description="CD drive, PG-70: thickness per stage with PS and VC initialisation "
-        "(paper Table 1)",
-        object="cd_drive",
-        title="Table 1: CD drive, PG-70",
-        measure="thickness",
-        true_mm=42.0,
-        paper_error_pct={"ps": (11.3, 1.9), "vc": (37.6, 1.4)},
-        target_pct=1.9,
-    ),
-    MeasureTable(
-        name="table2",
-        description="plastic case, PG-70: thickness per stage with PS and VC initialisation "
-        "(paper Table 2)",
-        object="plastic_case",
-        title="Table 2: plastic case, PG-70",
-        measure="thickness",
-        true_mm=44.0,
-        paper_error_pct={"ps": (11.9, 3.4), "vc": (35.8, 3.5)},
-        target_pct=3.4,
-    ),
-    MeasureTable(
-        name="table3",
-        description="salt cylinder, PG-70: diameter per stage with PS and VC initialisation "
-        "(paper Table 3)",
-        object="salt_cylinder",
-        title="Table 3: salt cylinder, PG-70",
-        measure="diameter",
-        true_mm=53.0,
-        paper_error_pct={"ps": (14.1, 4.4), "vc": (14.3, 4.6)},
-        target_pct=4.4,
-    ),
+    *(MeasureTable(*row) for row in _MEASURE_TABLES),
     ModuleExperiment("spray", "pipeline.experiments.spray"),
     ModuleExperiment("kth", "pipeline.experiments.kth"),
     ModuleExperiment("init", "pipeline.experiments.init"),

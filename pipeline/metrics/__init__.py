@@ -1,0 +1,69 @@
+"""Evaluation metrics of a completed object model (docs/method.md §6), by concern:
+
+* :mod:`.fits` - :func:`fit_circle_taubin` (diameter of cylinders), :func:`fit_line_irls`
+  (robust orthogonal line), :func:`box_thickness` (thickness and side angle of a box-like
+  object), :func:`diameter_error`;
+* :mod:`.deviation` - :func:`point_to_mesh_distances` / :class:`DeviationSummary`: the
+  geometric deviation of every completed point from the ground-truth mesh surface;
+* :mod:`.shape_scores` - :func:`surface_scores` (Chamfer distance, F-score at
+  :data:`FSCORE_THRESHOLDS_M`) and :func:`hull_iou` (volumetric IoU on a grid).
+
+Pure functions on point arrays in the robot frame ``R`` (metres, radians); open3d is loaded
+lazily (through :mod:`pipeline.open3d_loader`) for exact point-to-triangle distances and
+inside tests.
+"""
+
+from __future__ import annotations
+
+from .deviation import DeviationSummary, mesh_deviation, mesh_occupancy, point_to_mesh_distances
+from .fits import (
+    MAD_TO_SIGMA,
+    TUKEY_C,
+    CircleFit,
+    LineFit,
+    ThicknessFit,
+    box_thickness,
+    diameter_error,
+    fit_circle_taubin,
+    fit_line_irls,
+    plane_after_bias,
+    side_wall,
+)
+from .shape_scores import (
+    FSCORE_THRESHOLDS_M,
+    SolidGrid,
+    hull_iou,
+    nearest_distances,
+    sample_surface,
+    solid_grid,
+    support_faces,
+    surface_scores,
+    threshold_label,
+)
+
+__all__ = [
+    "FSCORE_THRESHOLDS_M",
+    "MAD_TO_SIGMA",
+    "TUKEY_C",
+    "CircleFit",
+    "DeviationSummary",
+    "LineFit",
+    "SolidGrid",
+    "ThicknessFit",
+    "box_thickness",
+    "diameter_error",
+    "fit_circle_taubin",
+    "fit_line_irls",
+    "hull_iou",
+    "mesh_deviation",
+    "mesh_occupancy",
+    "nearest_distances",
+    "plane_after_bias",
+    "point_to_mesh_distances",
+    "sample_surface",
+    "side_wall",
+    "solid_grid",
+    "support_faces",
+    "surface_scores",
+    "threshold_label",
+]
