@@ -27,7 +27,8 @@ def scan_trial_params(
     """Task params of one trial on a scanned mesh file (e.g. a YCB ``textured.obj``).
 
     The PG-70 is used when the object's narrowest horizontal width plus the default
-    planner's jaw clearance (its ``jaw_clearance_m``) fits the PG-70 aperture (PS
+    planner's jaw clearance (its ``jaw_clearance_m``) fits the PG-70 aperture (as the
+    default world describes the hand) (PS
     initialisation, the narrow direction turned toward the default sensor's camera so the
     jaws close along it); otherwise the SDH-2 (VC initialisation, three-finger top grasp,
     object yaw 0).
@@ -38,9 +39,9 @@ def scan_trial_params(
     """
     from ..catalogue import load_object
     from ..config import load_config
-    from ..sim.hands import GRIPPERS
 
-    defaults = load_config(plugin_registry())
+    registry = plugin_registry()
+    defaults = load_config(registry)
     clearance_m = getattr(defaults.stage_params("planner"), "jaw_clearance_m", None)
     if clearance_m is None:
         raise ConfigError(
@@ -49,7 +50,8 @@ def scan_trial_params(
         )
     mesh = load_object(mesh_path).mesh
     width_m, direction_rad = narrowest_width(np.asarray(mesh.vertices)[:, :2])
-    if width_m + clearance_m <= GRIPPERS["pg70"].max_aperture_m:
+    pg70 = defaults.create(registry, "world").gripper_spec("pg70")
+    if width_m + clearance_m <= pg70.max_aperture_m:
         gripper, init, overrides = "pg70", "ps", []
         azimuth_deg = camera_azimuth_deg(ExperimentOptions())
         yaw_deg = math.degrees(math.radians(azimuth_deg) - direction_rad)
