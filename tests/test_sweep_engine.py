@@ -214,16 +214,25 @@ def test_a_dying_worker_keeps_finished_rows_and_a_rerun_completes(tmp_path):
 
 def test_ctrl_c_during_a_pool_run_keeps_finished_rows_and_reraises(tmp_path):
     results = tmp_path / "results.jsonl"
-    # 3 s of work on two workers, interrupted after 1 s: the interrupt must land mid-run
-    # even when the pool starts at once on an idle machine.
+    # 3 s of work on two workers, interrupted once the first row is written: the interrupt
+    # lands mid-run however long the workers take to start on a busy machine.
     slow = [SweepTask(t.key, {**t.params, "sleep_s": 0.25}) for t in make_tasks(24)]
-    timer = threading.Timer(1.0, os.kill, args=(os.getpid(), signal.SIGINT))
-    timer.start()
+    done = threading.Event()
+
+    def interrupt_after_the_first_row():
+        while not done.wait(0.02):
+            if results.exists() and results.read_text():
+                os.kill(os.getpid(), signal.SIGINT)
+                return
+
+    watcher = threading.Thread(target=interrupt_after_the_first_row)
+    watcher.start()
     try:
         with pytest.raises(KeyboardInterrupt):
             run_sweep(slow, sweep_toy.run_one, results, workers=2, progress=False)
     finally:
-        timer.cancel()
+        done.set()
+        watcher.join()
     kept = read_rows(results)
     assert len(kept) < len(slow)
     assert all(row == expected_row(slow[int(row["key"][1:])]) for row in kept)
