@@ -81,6 +81,8 @@ def markdown(table: list[list[str]], failed: list[str], load_at_start: float) ->
         "every headline number of the benchmarks in `bench/` beside its target. Each",
         "benchmark prints a fuller table of its own; the numbers are wall times unless",
         "a row says otherwise, medians of several runs, and ratios are measured in one run.",
+        "Wall times stretch with the machine's load (named below); rows that give a",
+        "processor time (cpu) show what the work itself cost.",
         "",
         f"Machine: {machine(load_at_start)}.",
         f"Date: {datetime.date.today().isoformat()}.",
