@@ -90,8 +90,8 @@ def experiment_sweep(experiment: str, count: int, folder: Path, reuse: bool) -> 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tasks", type=int, default=200, help="tasks per executor")
-    parser.add_argument("--table3", type=int, default=20, help="table3 trials per sweep")
-    parser.add_argument("--fig10", type=int, default=200, help="fig10 trials")
+    parser.add_argument("--table3", type=int, default=16, help="table3 trials per sweep")
+    parser.add_argument("--fig10", type=int, default=120, help="fig10 trials")
     args = parser.parse_args()
     tasks = [SweepTask(f"t{i:05d}", {"x": i, "seed": i}) for i in range(args.tasks)]
 
