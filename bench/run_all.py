@@ -29,8 +29,9 @@ DEFAULT = ("commands", "trial", "estimator", "vc", "tactile", "sweep_overhead")
 NOT_BENCHMARKS = {"run_all", "summary"}
 
 
-def machine() -> str:
-    """One line: CPU model, cores, load, Python and numpy versions."""
+def machine(load_at_start: float | None = None) -> str:
+    """One line: CPU model, cores, load (at the start of the run too, when given: a busy
+    machine stretches every wall time), Python and numpy versions."""
     model = platform.processor() or platform.machine()
     cpuinfo = Path("/proc/cpuinfo")
     if cpuinfo.is_file():
@@ -40,11 +41,21 @@ def machine() -> str:
                 break
     import numpy
 
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    load = f"load average {load_average():.1f}"
+    if load_at_start is not None:
+        load = (
+            f"load average {load_at_start:.1f} at the start of the run, "
+            f"{load_average():.1f} at its end"
+        )
     return (
-        f"{model}, {os.cpu_count()} cores, load average {load:.1f}; {platform.system()} "
+        f"{model}, {os.cpu_count()} cores, {load}; {platform.system()} "
         f"{platform.release()}; Python {platform.python_version()}, numpy {numpy.__version__}"
     )
+
+
+def load_average() -> float:
+    """The one-minute load average (NaN where the system has none)."""
+    return os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
 
 
 def summary_rows(rows: list[dict]) -> list[list[str]]:
@@ -62,7 +73,7 @@ def summary_rows(rows: list[dict]) -> list[list[str]]:
     return table
 
 
-def markdown(table: list[list[str]], failed: list[str]) -> str:
+def markdown(table: list[list[str]], failed: list[str], load_at_start: float) -> str:
     lines = [
         "# Performance",
         "",
@@ -70,8 +81,10 @@ def markdown(table: list[list[str]], failed: list[str]) -> str:
         "every headline number of the benchmarks in `bench/` beside its target. Each",
         "benchmark prints a fuller table of its own; the numbers are wall times unless",
         "a row says otherwise, medians of several runs, and ratios are measured in one run.",
+        "Wall times stretch with the machine's load (named below); rows that give a",
+        "processor time (cpu) show what the work itself cost.",
         "",
-        f"Machine: {machine()}.",
+        f"Machine: {machine(load_at_start)}.",
         f"Date: {datetime.date.today().isoformat()}.",
         "",
         "| measure | measured | target | met |",
@@ -89,6 +102,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--markdown", type=Path, metavar="FILE", help="write the summary here")
     args = parser.parse_args(argv)
     failed = []
+    load_at_start = load_average()
     with tempfile.TemporaryDirectory() as folder:
         rows_file = Path(folder) / "summary.jsonl"
         rows_file.touch()
@@ -106,10 +120,10 @@ def main(argv: list[str]) -> int:
         rows = [json.loads(line) for line in rows_file.read_text().splitlines() if line]
     table = summary_rows(rows)
     print("\n=== summary ===")
-    print(f"machine: {machine()}")
+    print(f"machine: {machine(load_at_start)}")
     print(format_table(["measure", "measured", "target", "met"], table))
     if args.markdown:
-        args.markdown.write_text(markdown(table, failed), encoding="utf-8")
+        args.markdown.write_text(markdown(table, failed, load_at_start), encoding="utf-8")
         print(f"wrote {args.markdown}")
     if failed:
         print(f"\nfailed: {', '.join(failed)}")

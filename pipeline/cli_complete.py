@@ -154,7 +154,7 @@ def write_outputs(
         write_completed_clouds,
         write_json,
     )
-    from .perception.plots import SceneObjectView, plot_scene
+    from .plots import SceneObjectView, plot_scene
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

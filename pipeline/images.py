@@ -1,8 +1,8 @@
 """Saving camera images: ``rgb.png``, a colour-mapped ``depth.png`` and raw ``depth.npy``.
 
-Plots are drawn on a standalone matplotlib ``Figure`` with the Agg canvas (no pyplot state,
-no display needed). matplotlib is imported by the functions that draw, so a trial without
-pictures never loads it.
+``depth.png`` is drawn in image space (:mod:`pipeline.raster`, no display or plotting state
+needed); matplotlib (its colour tables) is imported by the functions that draw, so a trial
+without pictures never loads it.
 """
 
 from __future__ import annotations
@@ -33,44 +33,49 @@ def save_rgb(path: str | Path, rgb: np.ndarray) -> Path:
 
 
 def save_depth(path_png: str | Path, depth_m: np.ndarray, title: str = "depth") -> Path:
-    """Write a depth image as a colour-mapped PNG with a colourbar in metres; pixels
-    without depth (``NaN``) are drawn in magenta and named in a legend. Returns the path."""
-    import matplotlib
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Patch
+    """Write a depth image as a colour-mapped PNG (image space, :mod:`pipeline.raster`) with
+    pixel axes and a colour bar in metres; pixels without depth (``NaN``) are drawn in
+    magenta and named in a legend with their share. Returns the path."""
+    from matplotlib.colors import to_rgb
+
+    from .raster import SMALL, Frame, Sheet, colour_bar, colour_map
 
     depth = np.asarray(depth_m, dtype=np.float64)
     if depth.ndim != 2:
         raise ValueError(f"depth must be an (H, W) image, got shape {depth.shape}")
     height, width = depth.shape
-    figure = Figure(figsize=(width / 100 + 2.0, height / 100 + 0.8), dpi=100)
-    FigureCanvasAgg(figure)
-    axes = figure.add_subplot()
-    colormap = matplotlib.colormaps[DEPTH_COLORMAP].with_extremes(bad=MISSING_COLOUR)
     valid = np.isfinite(depth)
     low, high = (np.min(depth[valid]), np.max(depth[valid])) if valid.any() else (0.0, 1.0)
-    image = axes.imshow(
-        np.ma.masked_invalid(depth),
-        cmap=colormap,
-        vmin=low,
-        vmax=max(high, low + 1e-6),
-        interpolation="nearest",
+    high = max(high, low + 1e-6)
+    missing = tuple(round(255 * c) for c in to_rgb(MISSING_COLOUR))
+    image = colour_map(DEPTH_COLORMAP, depth.ravel(), low, high).reshape(height, width, 3)
+    image[~valid] = missing
+    # Small images (tests, thumbnails) are enlarged so the axes and labels fit around them.
+    zoom = max(1, int(np.ceil(240 / max(min(height, width), 1))))
+    image = np.repeat(np.repeat(image, zoom, axis=0), zoom, axis=1)
+    left, top = 70, 40
+    sheet = Sheet(left + width * zoom + 120, top + height * zoom + 55)
+    sheet.paste(image, left, top)
+    frame = Frame(left, top, width * zoom, height * zoom, (0.0, width), (height, 0.0))
+    frame.axes(sheet, xlabel="column (px)", ylabel="row (px)", title=title)
+    colour_bar(
+        sheet,
+        left + width * zoom + 15,
+        top,
+        height * zoom,
+        DEPTH_COLORMAP,
+        low,
+        high,
+        "depth along the optical axis (m)",
     )
-    colourbar = figure.colorbar(image, ax=axes, fraction=0.046, pad=0.03)
-    colourbar.set_label("depth along the optical axis (m)")
     missing_percent = 100.0 * (1.0 - valid.mean())
-    axes.legend(
-        handles=[Patch(color=MISSING_COLOUR, label=f"no depth ({missing_percent:.1f} %)")],
-        loc="lower right",
-        fontsize="small",
-    )
-    axes.set_title(title)
-    axes.set_xlabel("column (px)")
-    axes.set_ylabel("row (px)")
-    path = Path(path_png)
-    figure.savefig(path, pil_kwargs=PNG_OPTIONS)
-    return path
+    legend = f"no depth ({missing_percent:.1f} %)"
+    right, bottom = left + width * zoom - 8, top + height * zoom - 8
+    sheet.rectangle(right - 130, bottom - 22, 130, 22, (255, 255, 255))
+    sheet.outline(right - 130, bottom - 22, 130, 22, (200, 200, 200))
+    sheet.rectangle(right - 124, bottom - 16, 16, 10, missing)
+    sheet.text(right - 102, bottom - 11, legend, size=SMALL, anchor="lm")
+    return sheet.save(Path(path_png))
 
 
 def save_depth_npy(path: str | Path, depth_m: np.ndarray) -> Path:

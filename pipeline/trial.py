@@ -126,8 +126,7 @@ def draw_pictures(
 ) -> None:
     """``deviation.png`` (Stages 0-2 over the true mesh), ``topdown.png`` (cloud and initial
     plane) and, when the initialiser ranked hypotheses, ``vc_scores.png``."""
-    from .perception.plots import plot_cloud_with_plane, plot_vc_scores
-    from .plots import DeviationPanel, deviation_heatmap
+    from .plots import DeviationPanel, deviation_heatmap, plot_cloud_with_plane, plot_vc_scores
 
     name = config.trial.object
     panels = [

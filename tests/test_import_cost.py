@@ -46,3 +46,14 @@ def test_the_completion_plugins_modules_load_no_scipy():
     """Perception and the simulated sensors defer scipy to the functions that use it."""
     code = "import pipeline.completion, pipeline.perception, plugins.pybullet_kinect, plugins.vc"
     assert loaded_after(code, ("scipy", *HEAVY)) == []
+
+
+def test_a_trial_without_pictures_loads_no_plotting_or_statistics(tmp_path):
+    """A sweep's trials draw no pictures: they never pay for matplotlib or scipy.stats."""
+    code = (
+        "import contextlib, io\nfrom pipeline.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):"
+        f"\n    assert main(['trial', '--out', {str(tmp_path / 'trial')!r}, "
+        "'--set', 'trial.pictures=false']) == 0"
+    )
+    assert loaded_after(code, ("matplotlib", "scipy.stats", "plotly", "dash")) == []

@@ -32,6 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .indexsets import unique_inverse
+
 #: chi-square quantile, 3 degrees of freedom, 95 % (paper eq. 9).
 GATE_CHI2_3DOF_95 = 7.815
 #: Largest voxel extent in whitened gate units (see the module docstring).
@@ -79,8 +81,7 @@ def voxel_moments(
     label_shift = labels - labels.min(initial=0)
     extent = np.append(cells.max(axis=0, initial=0), label_shift.max(initial=0)) + 1
     keys = np.ravel_multi_index((*cells.T, label_shift), tuple(int(e) for e in extent))
-    unique_keys, voxel_of_point, count = np.unique(keys, return_inverse=True, return_counts=True)
-    voxel_of_point = voxel_of_point.ravel()
+    unique_keys, voxel_of_point, count = unique_inverse(keys)
     label = np.unravel_index(unique_keys, tuple(int(e) for e in extent))[3] + labels.min(initial=0)
     voxels = len(count)
     centroid = (

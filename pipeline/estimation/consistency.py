@@ -33,7 +33,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.stats import chi2, norm
+
+# The quantiles straight from scipy.special (what scipy.stats' norm.ppf and chi2.ppf
+# evaluate): importing scipy.stats would take longer than a trial's estimate.
+from scipy.special import gammaincinv, ndtri
 
 from ..errors import FELL_BACK_STATUSES, estimate_failed
 from ..perception.visibility import free_space_depths
@@ -66,7 +69,7 @@ class ConsistencySettings:
     @property
     def free_space_tolerance_m(self) -> float:
         """How far in front of the measured surface a model point may lie (m)."""
-        return float(norm.ppf(1.0 - self.alpha) * np.sqrt(2.0) * self.surface_std_m)
+        return float(ndtri(1.0 - self.alpha) * np.sqrt(2.0) * self.surface_std_m)
 
 
 def surface_residuals(
@@ -200,7 +203,7 @@ def pad_test(nis: np.ndarray, groups: np.ndarray, alpha: float) -> tuple[float, 
     _, group = np.unique(np.asarray(groups), return_inverse=True)
     pads = int(group.max()) + 1
     means = np.bincount(group, weights=nis, minlength=pads) / np.bincount(group, minlength=pads)
-    return float(means.mean()), float(chi2.ppf(1.0 - alpha, pads) / pads)
+    return float(means.mean()), float(2.0 * gammaincinv(pads / 2, 1.0 - alpha) / pads)
 
 
 def free_space_count(depths_m: np.ndarray, tolerance_m: float) -> int:

@@ -38,6 +38,7 @@ from .aggregation import GATE_CHI2_3DOF_95, VoxelMoments, gaussian_sums, voxel_e
 from .aggregation import voxel_moments as _voxel_moments
 from .covariances import correspondence_covariances
 from .geometry import apply_side, box_corners, invert_side, side_jacobian, side_linear_part
+from .indexsets import union, unique_inverse
 from .surface import any_azimuth, compatible, facing_labels, point_labels
 
 #: Object points whose vector median replaces the taxel in the alternative weights (eq. 13).
@@ -102,7 +103,7 @@ class PointIndex:
             cells = np.floor(self.reference / HULL_VOXEL_M).astype(np.int64)
             cells -= cells.min(axis=0)
             keys = np.ravel_multi_index(cells.T, tuple(int(e) + 1 for e in cells.max(axis=0)))
-            _, voxel, count = np.unique(keys, return_inverse=True, return_counts=True)
+            _, voxel, count = unique_inverse(keys)
             centroids = np.stack(
                 [np.bincount(voxel, self.reference[:, k]) / count for k in range(3)], axis=1
             )
@@ -116,12 +117,12 @@ class PointIndex:
 
     def note_moved(self, indices: np.ndarray) -> None:
         """Record that the points ``indices`` may now differ from their reference position."""
-        self._moved = np.union1d(self._moved, indices)
+        self._moved = union(self._moved, indices)
 
     def displacement_bound(self, points: np.ndarray, indices: np.ndarray | None = None) -> float:
         """Largest distance (m) between a point's current and reference position, over
         every point noted as moved plus ``indices``."""
-        moved = self._moved if indices is None else np.union1d(self._moved, indices)
+        moved = self._moved if indices is None else union(self._moved, indices)
         if moved.size == 0:
             return 0.0
         return float(np.max(np.linalg.norm(points[moved] - self.reference[moved], axis=1)))
@@ -180,7 +181,7 @@ class Correspondences:
     def active_points(self) -> np.ndarray:
         """Sorted indices of the points inside some taxel's gate (the active set A)."""
         listed = [side.point for side in self.sides()] + [s.wide_active for s in self.sides()]
-        return np.unique(np.concatenate(listed))
+        return union(*listed)
 
 
 def exclusive_sides(correspondences: Correspondences) -> Correspondences:

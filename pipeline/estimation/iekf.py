@@ -82,6 +82,7 @@ from .correspondences import (
     find_correspondences,
 )
 from .geometry import image_step_bound
+from .indexsets import union
 from .measurement import Linearisation, freeze, linearise
 from .structured import StructuredCovariance
 
@@ -321,7 +322,7 @@ def update_grasp(
         gain = covariance.gain(lin, measurement.noise)
         delta_g, step_points, delta_p = gain.step(innovation)
         g_next = g_prior + delta_g
-        touched = np.union1d(moved, step_points) if move_points else moved
+        touched = union(moved, step_points) if move_points else moved
         before = points_i[touched]
         target = points_prior[touched].copy()
         if move_points:

@@ -29,6 +29,7 @@ import scipy.sparse
 
 from .correspondences import Correspondences
 from .geometry import BIAS_PLANE_DIM, apply_side, side_jacobian, side_linear_part
+from .indexsets import union
 
 
 @dataclass(frozen=True)
@@ -171,7 +172,7 @@ class PointJacobian:
 
     def points(self) -> np.ndarray:
         """Sorted indices of the points with a non-zero column block."""
-        return np.unique(self.pair_point)
+        return union(self.pair_point)
 
     def times_displacement(self, points: np.ndarray, reference: np.ndarray) -> np.ndarray:
         """``H_p (points - reference)`` using only the rows of the pair points, (3B,)."""

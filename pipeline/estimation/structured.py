@@ -31,6 +31,7 @@ import scipy.linalg
 import scipy.sparse
 
 from .geometry import BIAS_PLANE_DIM
+from .indexsets import union
 from .measurement import Linearisation
 
 
@@ -98,7 +99,7 @@ class StructuredGain:
             self._cross.append(cross)
         self._cholesky = scipy.linalg.cho_factor(innovation, lower=True)
         #: Sorted indices of every point the gain can move: this A and earlier grasps' A.
-        self.points = np.unique(np.concatenate(coupled))
+        self.points = union(*coupled)
 
     def _point_columns(self) -> scipy.sparse.csr_matrix:
         """``H_p`` over the local points (3B, 3U), built on first use (several grasps only)."""

@@ -1,7 +1,7 @@
 """Perception kernels: from a depth image to a segmented object, its symmetry and a top grasp.
 
-Pure functions on numpy arrays (no PyBullet, no open3d, no file I/O except in
-:mod:`pipeline.perception.plots`), all in the robot frame ``R`` (z up) unless a name says
+Pure functions on numpy arrays (no PyBullet, no open3d, no file I/O; their pictures are in
+:mod:`pipeline.plots`), all in the robot frame ``R`` (z up) unless a name says
 otherwise:
 
 * :mod:`.depth` - back-projecting a depth image to points, projecting points into it;

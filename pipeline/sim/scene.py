@@ -66,6 +66,9 @@ class Scene:
         table_height_m: z of the table top in the robot frame (m).
         timestep_s: physics time step (s).
         vhacd_resolution: voxel count V-HACD uses for non-convex meshes.
+        client: a connected, empty DIRECT client to build the scene in (just reset with
+            ``pybullet.resetSimulation``); it stays the caller's: :meth:`close` leaves it
+            connected. None connects a new client that :meth:`close` disconnects.
     """
 
     def __init__(
@@ -73,11 +76,13 @@ class Scene:
         table_height_m: float = 0.0,
         timestep_s: float = 1.0 / 240.0,
         vhacd_resolution: int = 100_000,
+        client: int | None = None,
     ) -> None:
         self.table_height_m = float(table_height_m)
         self.timestep_s = float(timestep_s)
         self.vhacd_resolution = vhacd_resolution
-        self.client = pybullet.connect(pybullet.DIRECT)
+        self._owns_client = client is None
+        self.client = pybullet.connect(pybullet.DIRECT) if client is None else client
         pybullet.setGravity(0.0, 0.0, -9.81, physicsClientId=self.client)
         pybullet.setTimeStep(self.timestep_s, physicsClientId=self.client)
         pybullet.setPhysicsEngineParameter(
@@ -97,8 +102,8 @@ class Scene:
         self.close()
 
     def close(self) -> None:
-        """Disconnect the PyBullet client (idempotent)."""
-        if self.client >= 0 and pybullet.isConnected(self.client):
+        """Disconnect the PyBullet client if the scene connected it (idempotent)."""
+        if self._owns_client and self.client >= 0 and pybullet.isConnected(self.client):
             pybullet.disconnect(self.client)
         self.client = -1
 

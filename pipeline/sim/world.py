@@ -3,15 +3,23 @@ world plugin (:mod:`plugins.pybullet_world`) exposes it through the
 :class:`pipeline.stages.World` contract.
 
 The robot frame ``R`` is PyBullet's world frame.
+
+A process keeps the PyBullet client of a closed world and builds the next world in it after
+``pybullet.resetSimulation`` (which empties it; the scene then sets gravity, time step and
+engine parameters again), so a sweep worker connects once for all its trials. The results
+are the same as with a new client (``tests/test_sim_client_reuse.py``); ``SYMFUSE_PYBULLET_REUSE=0``
+connects a new client for every world.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING
 
 import numpy as np
+import pybullet
 import trimesh
 
 from pipeline.errors import ConfigError
@@ -23,6 +31,35 @@ if TYPE_CHECKING:
 
 #: Physics steps (1/240 s each) the object is left to settle after being placed (s * 240).
 SETTLE_STEPS = 24
+#: Environment variable: ``0`` gives every world a new PyBullet client (see the module doc).
+REUSE_VARIABLE = "SYMFUSE_PYBULLET_REUSE"
+#: Connected, empty clients of closed worlds, waiting for the next world of this process.
+_idle_clients: list[int] = []
+
+
+def _reuse_clients() -> bool:
+    return os.environ.get(REUSE_VARIABLE, "1") != "0"
+
+
+def _empty_client() -> int | None:
+    """A kept client, emptied; None when there is none (the scene then connects one)."""
+    while _idle_clients:
+        client = _idle_clients.pop()
+        if pybullet.isConnected(client):
+            pybullet.resetSimulation(physicsClientId=client)
+            return client
+    return None
+
+
+def _release_client(client: int) -> None:
+    """Keep ``client`` for the next world (at most one is kept), or disconnect it."""
+    if not pybullet.isConnected(client):
+        return
+    if _reuse_clients() and not _idle_clients:
+        pybullet.resetSimulation(physicsClientId=client)  # frees the bodies now
+        _idle_clients.append(client)
+    else:
+        pybullet.disconnect(client)
 
 
 class PybulletWorld:
@@ -80,7 +117,14 @@ class PybulletWorld:
         the frame ``obj.mesh`` is expressed in); otherwise it is built from ``obj.mesh``,
         ``obj.mass_kg`` and ``obj.friction``. The object is left to settle for 0.1 s.
         """
-        scene = Scene(table_height_m=table_height_m)
+        client = _empty_client() if _reuse_clients() else None
+        if client is None:
+            client = pybullet.connect(pybullet.DIRECT)
+        try:
+            scene = Scene(table_height_m=table_height_m, client=client)
+        except BaseException:
+            _release_client(client)
+            raise
         try:
             if urdf_path is None:
                 object_id = scene.add_object(obj.mesh, obj.mass_kg, obj.friction, x, y, yaw)
@@ -92,6 +136,7 @@ class PybulletWorld:
                 world.add_hand(gripper)
         except BaseException:
             scene.close()
+            _release_client(client)
             raise
         return world
 
@@ -121,8 +166,12 @@ class PybulletWorld:
         self.close()
 
     def close(self) -> None:
-        """Disconnect the PyBullet client."""
+        """Release the PyBullet client: kept (emptied) for the next world, see the module
+        doc. Idempotent."""
+        client = self.scene.client
         self.scene.close()
+        if client >= 0:
+            _release_client(client)
 
     def object_pose(self) -> ObjectPose:
         """The object's true pose now (its mesh frame in frame ``R``)."""
