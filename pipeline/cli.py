@@ -505,6 +505,21 @@ def _cmd_trial(args: argparse.Namespace) -> int:
 # --- symfuse sweep ---------------------------------------------------------------------
 
 
+def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
+    """``--scans DIR`` for an experiment that reads scans.
+
+    Raises:
+        ConfigError: the experiment reads none, or DIR holds no ``*/textured.obj``.
+    """
+    if args.scans is None:
+        return None
+    if not getattr(experiment, "READS_SCANS", False):
+        raise ConfigError(f"--scans: experiment '{args.experiment}' grasps no scans (explore does)")
+    if not any(Path(args.scans).glob("*/textured.obj")):
+        raise ConfigError(f"--scans {args.scans}: no */textured.obj in that folder")
+    return Path(args.scans).resolve()
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     import importlib
 
@@ -536,6 +551,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         seed=args.seed,
         repeats=args.repeats,
         out_dir=out.resolve(),
+        scans=_scans_folder(args, experiment),
     )
     tasks = experiment.tasks(options)
     read = {section: resolved[section] for section in sections}
@@ -593,6 +609,12 @@ def _add_sweep_parser(verbs) -> None:
     )
     sweep.add_argument("--estimator", metavar="NAME", help="estimator to run (default: config)")
     sweep.add_argument("--quick", action="store_true", help="a reduced grid (smoke test)")
+    sweep.add_argument(
+        "--scans",
+        type=Path,
+        metavar="DIR",
+        help="explore: also grasp every scanned mesh DIR/*/textured.obj (e.g. YCB scans)",
+    )
     sweep.add_argument("--seed", type=counting_number(0), default=0, help="base seed (default 0)")
     sweep.add_argument(
         "--repeats", type=counting_number(1), help="trials per grid point (default: paper's)"

@@ -371,3 +371,33 @@ def grasps_figure(
     axes.legend(loc="best", fontsize=8, markerscale=2)
     figure.tight_layout()
     return _save(figure, out_path)
+
+
+@dataclass(frozen=True)
+class LinePanel:
+    """One panel of :func:`line_figure`: a curve per label over the same ``x``."""
+
+    title: str
+    x_label: str
+    y_label: str
+    x: Sequence[float]
+    curves: dict[str, Sequence[float]]
+
+
+def line_figure(panels: Sequence[LinePanel], out_path: Path, title: str) -> Path:
+    """Panels side by side, each with one marked line per curve (NaN points left out)."""
+    figure = Figure(figsize=(4.8 * len(panels), 4.0), dpi=110)
+    for index, panel in enumerate(panels, start=1):
+        axes = figure.add_subplot(1, len(panels), index)
+        for label, values in panel.curves.items():
+            axes.plot(panel.x, values, marker="o", label=label)
+        axes.set_xticks(list(panel.x))
+        axes.set_xlabel(panel.x_label)
+        axes.set_ylabel(panel.y_label)
+        axes.set_title(panel.title, fontsize=10)
+        axes.set_ylim(bottom=0.0)
+        axes.grid(alpha=0.3)
+        axes.legend(fontsize=8)
+    figure.suptitle(title)
+    figure.tight_layout()
+    return _save(figure, out_path)

@@ -377,8 +377,9 @@ def _grasp_and_fuse(
 ) -> Fused:
     """Grasp, read the taxels and fuse every grasp so far, up to ``trial.grasps`` times:
     the hand releases and withdraws before each new grasp, which is planned on the current
-    model (:mod:`pipeline.next_grasp`); the stop rule may end it earlier. ``contacts.json``
-    and ``document["grasps"]`` grow by one grasp each time.
+    model (:mod:`pipeline.next_grasp`). The stop rule ends it earlier, and so does a later
+    grasp the planner cannot find, the hand cannot execute or that touches nothing (it is
+    not fused). ``contacts.json`` and ``document["grasps"]`` grow by one grasp each time.
 
     Raises:
         StageFailure: the first grasp was not executed or the initialiser rejected it.
@@ -431,6 +432,14 @@ def _grasp_and_fuse(
             break
         with timer.phase("tactile"):
             contacts = stages["tactile"].read(world, outcome)
+        if k > 0 and len(contacts) == 0:
+            # Nothing to fuse, and the object may have moved where no taxel saw it: the
+            # estimate stays the last one, scored against the object as it was then.
+            stop = (
+                f"grasp {k + 1} touched nothing (the object moved {1e3 * shift_m:.1f} mm "
+                f"and tilted {np.degrees(tilt_rad):.1f} deg); not fused"
+            )
+            break
         grasps.append(contacts)
         plans.append(plan)
         with timer.phase("write"):

@@ -5,6 +5,7 @@ Each experiment is a module in this package exposing::
     NAME: str                 # the name users type after ``symfuse sweep``
     DESCRIPTION: str          # one line for ``symfuse sweep --help``
     CONFIG_SECTIONS: tuple    # optional: the config sections its trials read (default all)
+    READS_SCANS: bool         # optional: it grasps the scans of ``--scans DIR`` too
     def tasks(options: ExperimentOptions) -> list[SweepTask]
     def run_one(params: dict) -> dict          # top-level, picklable, JSON in and out
     def report(rows: list[dict], out_dir: Path) -> list[Path]
@@ -39,6 +40,7 @@ EXPERIMENTS: dict[str, str] = {
     "spray": "pipeline.experiments.spray",
     "kth": "pipeline.experiments.kth",
     "init": "pipeline.experiments.init",
+    "explore": "pipeline.experiments.explore",
 }
 
 
@@ -78,6 +80,8 @@ class ExperimentOptions:
         repeats: trials per grid point where the experiment repeats (None: the paper's).
         out_dir: the sweep's output folder; experiments that run full trials keep each
             trial's files under ``out_dir/trials/<key>/`` (None: trials are not kept).
+        scans: a folder of scanned meshes (``*/textured.obj``) for the experiments that
+            read one (``READS_SCANS = True`` in their module), or None.
     """
 
     estimator: str = "iekf"
@@ -87,6 +91,7 @@ class ExperimentOptions:
     seed: int = 0
     repeats: int | None = None
     out_dir: Path | None = None
+    scans: Path | None = None
 
 
 def experiment_descriptions() -> dict[str, str]:
