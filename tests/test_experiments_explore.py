@@ -15,6 +15,9 @@ def test_grid_is_objects_by_yaws_by_strategies(tmp_path):
     assert [t.key for t in quick] == [
         f"{name}/yaw00/{s}" for name in ("cd_drive", "spray_bottle") for s in explore.STRATEGIES
     ]
+    # Yaw by yaw: every object's first pose comes before any second pose.
+    poses = [t.key.split("/")[1] for t in explore.tasks(ExperimentOptions(repeats=2))]
+    assert poses == sorted(poses)
     # The three strategies of a pose share its scene (seed, yaw) and differ in the rule.
     first = [t.params for t in quick[:3]]
     assert len({(p["seed"], p["yaw_deg"]) for p in first}) == 1

@@ -79,8 +79,9 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
     count = QUICK_YAWS if options.quick else (options.repeats or YAWS)
     root = trial_root(options)
     result = []
-    for label, name in objects(options):
-        for index, yaw in enumerate(yaws_deg(options.seed, count)):
+    # Yaw by yaw over every object: a sweep stopped early has covered every object alike.
+    for index, yaw in enumerate(yaws_deg(options.seed, count)):
+        for label, name in objects(options):
             pose = f"{label}/yaw{index:02d}"
             for strategy in STRATEGIES:
                 key = f"{pose}/{strategy}"
