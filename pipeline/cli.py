@@ -746,9 +746,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="grasp, release and grasp again N times, fusing after each (default 1)",
     )
+    from .config import NEXT_GRASP_STRATEGIES
+
     trial.add_argument(
         "--next-grasp",
-        choices=["paper", "random", "information"],
+        choices=NEXT_GRASP_STRATEGIES,
         help="how grasps after the first are chosen (default information)",
     )
     trial.add_argument(

@@ -25,7 +25,7 @@ import importlib.resources
 import tomllib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args, get_type_hints
 
 import tomli_w
 
@@ -74,6 +74,9 @@ class TrialSettings:
         at_least=0.0,
     )
 
+
+#: How the grasps after a trial's first may be chosen (:mod:`pipeline.next_grasp`).
+NEXT_GRASP_STRATEGIES: tuple[str, ...] = get_args(get_type_hints(TrialSettings)["next_grasp"])
 
 #: Sections that are not stages, and the dataclass each one is validated against.
 SETTINGS_SECTIONS: dict[str, type] = {"trial": TrialSettings}

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
@@ -43,8 +43,6 @@ from .types import (
     SymmetryInit,
 )
 
-NextGrasp = Literal["paper", "random", "information"]
-NEXT_GRASP_STRATEGIES: tuple[str, ...] = ("paper", "random", "information")
 #: A predicted taxel touches the model when the surface in front of it lies within this of
 #: the pad at its first touch (m): the planners' default touch tolerance.
 TOUCH_TOLERANCE_M = 0.003

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..catalogue import list_objects
+from ..config import NEXT_GRASP_STRATEGIES
 from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask
 from .init import yaws_deg
@@ -49,7 +50,7 @@ DESCRIPTION = (
 )
 #: The experiment reads the sweep's ``--scans`` folder.
 READS_SCANS = True
-STRATEGIES = ("paper", "random", "information")
+STRATEGIES = NEXT_GRASP_STRATEGIES
 GRASPS = 3
 YAWS = 10
 QUICK_YAWS = 1
