@@ -240,7 +240,8 @@ def information_scores(
 ) -> list[float]:
     """Each plan's expected reduction of the hidden side's mean squared positional std
     (m^2) if its predicted taxels were fused into ``stage`` (module docstring), from the
-    covariance the estimator will fuse them with: ``stage``'s plus the re-grasp noise."""
+    covariance the estimator will fuse them with: ``stage``'s plus the re-grasp noise. All
+    zero when ``stage`` has no finite covariance (the planner's best is then taken)."""
     from .estimation.correspondences import PointIndex
     from .estimation.problem import grasp_contacts
     from .estimation.uncertainty import (
@@ -250,6 +251,8 @@ def information_scores(
     )
 
     covariance = np.asarray(stage.covariance, dtype=float) + model.regrasp_noise
+    if not np.all(np.isfinite(covariance)):
+        return [0.0] * len(plans)  # an estimator without a covariance: nothing to rank by
     g, pivot, points = state_vector(stage), stage.bias.pivot_m, stage.points
     gram = hidden_side_gram(points, g, pivot)
     index = PointIndex(points)

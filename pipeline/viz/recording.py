@@ -452,7 +452,8 @@ class _RunRecorder:
         """Each hand link's shapes in frame R at the last grasp, from the URDF's forward
         kinematics; empty when the hand or its pose is unknown."""
         plan = self.files.plans[-1] if self.files.plans else None
-        grasp = self.files.document.get("grasp", {})
+        # A multi-grasp trial records each grasp's execution in "grasps"; one grasp, "grasp".
+        grasp = (self.files.document.get("grasps") or [self.files.document.get("grasp", {})])[-1]
         if plan is None:
             return {}
         T_robot_hand = np.asarray(grasp.get("T_robot_hand", plan.T_robot_hand), dtype=float)
