@@ -61,8 +61,8 @@ def test_report_counts_gains_and_worse_grasps(tmp_path):
         _row("b", "random", [1.0, 1.2, 1.1], [True, True, True], yaw=1.0),
         _row("b", "information", [1.0, 1.8, 1.0], [True, True, True], yaw=1.0),
     ]
-    assert explore.worse_counts(rows[1:2]) == (1, 1, 0)
-    assert explore.worse_counts(rows[5:6]) == (2, 0, 1)
+    assert explore.worse_counts(rows[1:2]) == (1, 1, 0, 1, 1)
+    assert explore.worse_counts(rows[5:6]) == (2, 0, 1, 1, 0)
     assert [r["key"] for r in explore.hard_rows(rows)] == ["a/paper", "a/random", "a/information"]
     assert explore.second_grasp_gain(rows[2:3]) == (2.0, 2.0)
     # A trial that stopped early keeps its last estimate.
@@ -72,8 +72,8 @@ def test_report_counts_gains_and_worse_grasps(tmp_path):
     text = (tmp_path / "report.md").read_text()
     assert "| information | 1 | 2.00 | 2.00 |" in text
     assert "Information's mean reduction is 2.00x random's (target >= 1.3x): yes." in text
-    assert "| random | 3 | 1 (33.3 %) | 0 (0.0 %) |" in text
-    assert "| information | 4 | 0 (0.0 %) | 1 (25.0 %) |" in text
+    assert "| random | 3 | 1 (33.3 %) | 0 (0.0 %) | 2 | 1 (50.0 %) |" in text
+    assert "| information | 4 | 0 (0.0 %) | 1 (25.0 %) | 2 | 0 (0.0 %) |" in text
 
 
 @pytest.mark.parametrize("experiment", ["table1"])
