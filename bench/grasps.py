@@ -32,6 +32,7 @@ from pipeline.hand_choice import candidate_to_json, choose_grasp
 from pipeline.registry import load_registry
 from pipeline.sweep import run_sweep
 from pipeline.tables import format_table
+from pipeline.types import SceneSetup
 
 YCB_ROOT = Path(__file__).resolve().parents[2] / "shared" / "ycb"
 #: Tilt below which a grasp counts as not tipping the object (deg).
@@ -40,9 +41,6 @@ TILT_LIMIT_DEG = 5.0
 
 def grasp_once(params: dict[str, Any]) -> dict[str, Any]:
     """One grasp of ``params["object"]`` at ``params["yaw_deg"]``; the row the table reads."""
-    from pipeline.sim.hands import GRIPPERS
-    from pipeline.sim.world import PybulletWorld
-
     registry = load_registry()
     config = load_config(
         registry,
@@ -54,21 +52,18 @@ def grasp_once(params: dict[str, Any]) -> dict[str, Any]:
     )
     stages = {s: config.create(registry, s) for s in ("sensor", "segmenter", "initialiser")}
     obj = load_object(params["object"])
-    with PybulletWorld.create(
-        obj,
-        None,
-        yaw=np.radians(params["yaw_deg"]),
-        seed=params["seed"],
-        urdf_path=obj.urdf_path,
-    ) as world:
+    world = config.create(registry, "world")
+    world.load_scene(SceneSetup(obj, yaw_rad=np.radians(params["yaw_deg"]), seed=params["seed"]))
+    try:
         observation = stages["sensor"].observe(world)
         try:
             cloud = stages["segmenter"].segment(observation)
         except StageFailure as exc:
             return {"refused": f"segmentation: {exc}"}
         proposal = stages["initialiser"].propose(cloud, observation)
+        grippers = {name: world.gripper_spec(name) for name in world.hands}
         choice = choose_grasp(
-            config, registry, cloud, proposal, GRIPPERS, observation.table_height_m
+            config, registry, cloud, proposal, grippers, observation.table_height_m
         )
         if choice.plan.status != "ok":
             return {"refused": choice.plan.reason}
@@ -78,6 +73,8 @@ def grasp_once(params: dict[str, Any]) -> dict[str, Any]:
             return {"gripper": choice.plan.gripper, "refused": outcome.reason}
         contacts = config.create(registry, "tactile").read(world, outcome)
         shift_m, tilt_rad = object_motion(obj.mesh, outcome.object_before, outcome.object_after)
+    finally:
+        world.close()
     best = choice.plan.candidates[0] if choice.plan.candidates else None
     return {
         "gripper": choice.plan.gripper,

@@ -47,7 +47,11 @@ def _world(gripper: str) -> tuple[SimpleNamespace, GraspPlan]:
     T[:3, 3] = [0.5, 0.1, palm_z]
     plan = GraspPlan(gripper, "ok", T, 0.06, opening, np.array([1.0, 0, 0]), spread_rad=spread)
     world = SimpleNamespace(
-        client=client, hand=hand, object_id=object_id, rng=np.random.default_rng(0)
+        client=client,
+        hand=hand,
+        object_id=object_id,
+        taxels=lambda behind_m, beyond_m: hand.taxel_state(object_id, behind_m, beyond_m),
+        rng=np.random.default_rng(0),
     )
     return world, plan
 

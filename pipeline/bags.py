@@ -4,9 +4,11 @@ The first message on the chosen topic is read: an organised ``sensor_msgs/PointC
 (fields ``x y z`` as float32/float64, optionally ``rgb``/``rgba`` packed in 32 bits; points
 in the camera's optical frame, NaN = no return), or a ``sensor_msgs/Image`` (``16UC1`` /
 ``mono16`` in millimetres, ``32FC1`` in metres) with the ``CameraInfo`` of its camera
-(``<namespace>/camera_info``, else the bag's first one). When ``/tf_static`` or ``/tf`` link
-the message's ``frame_id`` to a robot frame (by default the root of its tree), the first
-transform recorded on each link gives ``T_robot_camera``.
+(``<namespace>/camera_info``, else the bag's first one); a colour Image (``rgb8``, ``bgr8``,
+``rgba8``, ``bgra8``) of the same size in the same ``frame_id`` (a colour image registered to
+the depth, as ``depth_registered`` drivers publish) gives the view's colours. When
+``/tf_static`` or ``/tf`` link the message's ``frame_id`` to a robot frame (by default the
+root of its tree), the first transform recorded on each link gives ``T_robot_camera``.
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ TF_TOPICS = ("/tf_static", "/tf")
 POINT_FIELD_TYPES = {7: "f4", 8: "f8", 6: "u4"}
 #: Image encodings of depth, and the factor to metres.
 DEPTH_ENCODINGS = {"16UC1": ("u2", 1e-3), "mono16": ("u2", 1e-3), "32FC1": ("f4", 1.0)}
+#: Image encodings of colour, and the order of their channels' R, G, B.
+COLOUR_ENCODINGS = {"rgb8": (0, 1, 2), "rgba8": (0, 1, 2), "bgr8": (2, 1, 0), "bgra8": (2, 1, 0)}
 
 
 def _frame(name: str) -> str:
@@ -112,6 +116,34 @@ def image_depth(message: Any, where: str) -> np.ndarray:
     rows = _rows(message.data, height, message.step, width * dtype.itemsize, where)
     depth = rows[:, : width * dtype.itemsize].copy().view(dtype).astype(np.float64) * scale
     return depth
+
+
+def image_colour(message: Any, where: str) -> np.ndarray:
+    """``(H, W, 3) uint8`` RGB of a colour Image."""
+    order = COLOUR_ENCODINGS[message.encoding]
+    height, width = int(message.height), int(message.width)
+    channels = 4 if message.encoding.endswith("a8") else 3
+    rows = _rows(message.data, height, message.step, width * channels, where)
+    pixels = rows[:, : width * channels].reshape(height, width, channels)
+    return np.ascontiguousarray(pixels[..., list(order)])
+
+
+def registered_colour(
+    bag: Any, path: Path, depth: np.ndarray, frame: str
+) -> tuple[np.ndarray, str] | None:
+    """RGB of the first colour Image with ``depth``'s size and ``frame``, and its topic."""
+    for connection in bag.connections:
+        if connection.msgtype != IMAGE:
+            continue
+        message = _first(bag, connection)
+        if (
+            message is not None
+            and message.encoding in COLOUR_ENCODINGS
+            and (int(message.height), int(message.width)) == depth.shape
+            and _frame(message.header.frame_id) == frame
+        ):
+            return image_colour(message, f"{path} [{connection.topic}]"), connection.topic
+    return None
 
 
 def camera_intrinsics(info: Any, where: str) -> CameraIntrinsics:
@@ -199,6 +231,10 @@ def _read(bag: Any, path: Path, topic: str, robot_frame: str) -> Capture:
             raise InputError(f"{where}: image {depth.shape} != CameraInfo size")
         depth, rgb = checked_depth(depth, where), None
         kind = f"Image {message.encoding} {intrinsics.width}x{intrinsics.height}"
+        colour = registered_colour(bag, path, depth, frame)
+        if colour is not None:
+            rgb, colour_topic = colour
+            kind += f", colour from {colour_topic}"
     links: dict[str, tuple[str, np.ndarray]] = {}
     for tf in [c for c in bag.connections if c.topic in TF_TOPICS]:
         for conn, _, raw in bag.messages(connections=[tf]):

@@ -105,17 +105,19 @@ def _load(
     args: argparse.Namespace,
     extra_overrides: Sequence[str] = (),
     reads: Sequence[str] | None = None,
+    registry=None,
 ):
     """The registry and the config of ``--config``, ``--set`` and ``extra_overrides`` (what
     the verb's own options stand for, applied last).
 
     Args:
         reads: the config sections the verb reads (None: all); see :func:`check_overrides`.
+        registry: the installed plugins, when the caller has loaded them already.
     """
     from .config import load_config
     from .registry import load_registry
 
-    registry = load_registry()
+    registry = registry or load_registry()
     config = load_config(registry, args.config, [*args.overrides, *extra_overrides])
     check_overrides(args.verb, args.overrides, extra_overrides, reads)
     return registry, config
@@ -342,20 +344,21 @@ def _fuse_into(
 
 # --- symfuse trial ---------------------------------------------------------------------
 
-#: The planner ``--gripper`` selects along with the hand (``auto``: every planner for an
-#: available hand is asked, :mod:`pipeline.hand_choice`).
-PLANNER_FOR_GRIPPER = {"pg70": "top-parallel", "sdh": "top-three-finger"}
 
+def trial_overrides(args: argparse.Namespace, registry) -> list[str]:
+    """The ``--set`` overrides the trial's shortcut options stand for; a named
+    ``--gripper`` also selects the first installed planner that plans for that hand
+    (:attr:`pipeline.stages.GraspPlanner.grippers`)."""
+    from .hand_choice import AUTO, planner_for
 
-def trial_overrides(args: argparse.Namespace) -> list[str]:
-    """The ``--set`` overrides the trial's shortcut options stand for."""
     overrides = []
     if args.object or args.mesh:
         overrides.append(f"trial.object={json.dumps(str(args.object or args.mesh))}")
     if args.gripper:
         overrides.append(f"trial.gripper={args.gripper}")
-        if args.gripper in PLANNER_FOR_GRIPPER:
-            overrides.append(f"planner.use={PLANNER_FOR_GRIPPER[args.gripper]}")
+        planner = planner_for(registry, args.gripper) if args.gripper != AUTO else None
+        if planner is not None:
+            overrides.append(f"planner.use={planner}")
     if args.init:
         overrides.append(f"initialiser.use={args.init}")
     if args.seed is not None:
@@ -463,13 +466,15 @@ def _progress(message: str) -> None:
 
 
 def _cmd_trial(args: argparse.Namespace) -> int:
+    from .registry import load_registry
     from .trial import run_trial
 
     check_rerun(args)
-    overrides = trial_overrides(args)
+    registry = load_registry()
+    overrides = trial_overrides(args, registry)
     if args.units:
         overrides.append(f"trial.units={args.units}")
-    registry, config = _load(args, overrides)
+    registry, config = _load(args, overrides, registry=registry)
     settings = config.trial
     out = args.out or fresh_folder(
         Path("runs") / f"trial-{Path(settings.object).stem}-seed{settings.seed}"
@@ -733,9 +738,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     trial.add_argument(
         "--gripper",
-        choices=["auto", *sorted(PLANNER_FOR_GRIPPER)],
-        help="hand; pg70 and sdh also select their planner (top-parallel, "
-        "top-three-finger); auto (the default): the hand with the best feasible grasp",
+        metavar="NAME",
+        help="hand, one the world offers (pybullet: pg70, sdh), which also selects a planner "
+        "for it (pg70: top-parallel, sdh: top-three-finger); auto (the default): the hand "
+        "with the best feasible grasp",
     )
     trial.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
     trial.add_argument("--seed", type=counting_number(0), help="random seed of the trial")

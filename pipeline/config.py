@@ -42,14 +42,19 @@ class TrialSettings:
     object: str = param(
         "cd_drive", "catalogue name, or path of an OBJ/STL/PLY mesh or a URDF (metres)"
     )
-    gripper: Literal["auto", "pg70", "sdh"] = param(
+    gripper: str = param(
         "auto",
-        "hand: Schunk PG-70 or SDH-2, or auto: the hand whose planner finds the best "
-        "feasible grasp on this object",
+        "hand, one the world offers (pybullet: pg70, the Schunk PG-70, or sdh, the SDH-2), "
+        "or auto: the hand whose planner finds the best feasible grasp on this object",
     )
     seed: int = param(0, "seed of every random choice in the trial", at_least=0)
-    x_m: float = param(0.0, "object position on the table, robot frame x (m)")
-    y_m: float = param(0.0, "object position on the table, robot frame y (m)")
+    # The table is 2 m x 2 m about the robot origin: an object placed beyond it falls.
+    x_m: float = param(
+        0.0, "object position on the table, robot frame x (m)", above=-1.0, below=1.0
+    )
+    y_m: float = param(
+        0.0, "object position on the table, robot frame y (m)", above=-1.0, below=1.0
+    )
     yaw_deg: float = param(0.0, "object rotation about the table normal (deg)")
     pictures: bool = param(True, "write the PNG pictures (sweeps of many trials may skip them)")
     units: Literal["m", "mm"] = param(
@@ -218,7 +223,18 @@ def _validate(raw: Mapping[str, Any], registry: StageRegistry) -> Config:
         registration = _registration(registry, stage, use, f"{stage}.use")
         choices[stage] = use
         params[stage].setdefault(use, registration.cls.Params())
+    _check_gripper(settings["trial"].gripper, registry.get("world", choices["world"]).cls)
     return Config(settings=settings, choices=choices, params=params)
+
+
+def _check_gripper(gripper: str, world: Any) -> None:
+    """``trial.gripper`` must be ``auto`` or a hand of the selected world."""
+    allowed = ("auto", *world.hands)
+    if gripper not in allowed:
+        raise ConfigError(
+            f"config key 'trial.gripper': {gripper!r} is not one of "
+            + ", ".join(repr(name) for name in allowed)
+        )
 
 
 def changed_settings(config: Mapping[str, Any], base: Mapping[str, Any]) -> dict[str, Any]:

@@ -29,6 +29,19 @@ from .types import GraspCandidate, GraspPlan, GripperSpec, PointCloud, SymmetryI
 AUTO = "auto"
 
 
+def planner_for(registry: StageRegistry, gripper: str) -> str | None:
+    """The first installed planner (by name) that plans for the hand ``gripper``; None
+    when none does."""
+    return next(
+        (
+            name
+            for name in registry.names("planner")
+            if gripper in registry.get("planner", name).cls.grippers
+        ),
+        None,
+    )
+
+
 @dataclass(frozen=True)
 class PlannerAnswer:
     """One planner's plan for one hand."""

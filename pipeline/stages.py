@@ -1,4 +1,5 @@
-"""The six stage contracts, and the world a trial runs in.
+"""The seven stage contracts: the world a trial runs in, and the six stages that see it,
+grasp it and estimate the object.
 
 A stage implementation is a class derived from one of the contracts below. It sets
 ``name`` (the string users put in config), declares its parameters as a nested frozen
@@ -6,9 +7,9 @@ dataclass ``Params`` (see :mod:`pipeline.params`), takes an instance of it in ``
 and implements the contract's method(s). The first paragraph of its docstring is the
 one-line description ``symfuse plugins`` prints: keep it short.
 
-Order in a trial (``pipeline.runner``)::
+Order in a trial (``pipeline.trial``)::
 
-    sensor.observe -> segmenter.segment -> initialiser.propose -> planner.plan
+    world.load_scene -> sensor.observe -> segmenter.segment -> initialiser.propose -> planner.plan
       -> world.execute_grasp -> tactile.read -> initialiser.refine -> estimator.estimate
 
 Every initialiser has both a ``propose`` (before the grasp: enough of a plane to plan with)
@@ -19,12 +20,15 @@ and a ``refine`` (after it, with the contacts). PS initialisation does its real 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import ClassVar, Protocol
+from types import TracebackType
+from typing import ClassVar
 
 import numpy as np
 
 from .params import NoParams, check_bounds
 from .types import (
+    CameraImage,
+    CameraIntrinsics,
     Contacts,
     DepthObservation,
     EstimateResult,
@@ -34,32 +38,13 @@ from .types import (
     GripperSpec,
     ObjectPose,
     PointCloud,
+    SceneSetup,
     SymmetryInit,
+    TaxelState,
 )
 
 #: The stage kinds, in pipeline order; these are also the config section names.
-STAGES = ("sensor", "segmenter", "initialiser", "planner", "tactile", "estimator")
-
-
-class World(Protocol):
-    """A scene with one object on a table and one hand, that can be seen and grasped.
-
-    The PyBullet backend implements it; a robot driver could too. Sensor sources and
-    tactile models may require a particular implementation and must say so in a clear
-    error when given another.
-    """
-
-    gripper: GripperSpec
-    table_height_m: float
-    rng: np.random.Generator
-
-    def object_pose(self) -> ObjectPose:
-        """The object's true pose now."""
-        ...
-
-    def execute_grasp(self, plan: GraspPlan) -> GraspOutcome:
-        """Pre-grasp, descend, close until contact, settle; report what happened."""
-        ...
+STAGES = ("world", "sensor", "segmenter", "initialiser", "planner", "tactile", "estimator")
 
 
 class StageImplementation(ABC):
@@ -78,6 +63,132 @@ class StageImplementation(ABC):
         """The first paragraph of the class docstring, on one line."""
         paragraph = (cls.__doc__ or "").strip().split("\n\n")[0]
         return " ".join(line.strip() for line in paragraph.splitlines())
+
+
+class World(StageImplementation):
+    """One object on a table and one hand: what sensors see, tactile models feel and
+    grasps move.
+
+    The built-in ``pybullet`` world simulates it; an analytic scene
+    (:mod:`pipeline.testing`), another simulator or a robot driver can implement it too.
+    Sensors and tactile models reach the world only through this contract, so they run in
+    any world. A world is used as::
+
+        world.load_scene(SceneSetup(obj, x_m, y_m, yaw_rad, seed))
+        try:
+            ...sense, world.add_hand(name), world.execute_grasp(plan), world.taxels(...)
+            ...world.release(), world.execute_grasp(another_plan), ...
+        finally:
+            world.close()
+
+    Attributes (valid after :meth:`load_scene`):
+        table_height_m: z of the table top in frame R (m).
+        rng: the trial's random generator, seeded from ``SceneSetup.seed``; sensor and
+            tactile noise draw from it, so a trial is repeatable from its seed.
+        gripper: the hand's :class:`GripperSpec` once :meth:`add_hand` ran, else None.
+    """
+
+    stage = "world"
+    #: Names of the hands :meth:`add_hand` accepts (``trial.gripper`` is checked against
+    #: them, and hand choice asks every planner naming one of them).
+    hands: ClassVar[tuple[str, ...]] = ()
+
+    table_height_m: float
+    rng: np.random.Generator
+    gripper: GripperSpec | None = None
+
+    @abstractmethod
+    def load_scene(self, setup: SceneSetup) -> None:
+        """Build the scene: the table, and ``setup.obj`` standing at rest on it; no hand."""
+
+    def close(self) -> None:
+        """Release what the world holds (simulator connection, robot); idempotent."""
+
+    def __enter__(self) -> World:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    @abstractmethod
+    def gripper_spec(self, name: str) -> GripperSpec:
+        """What planners need to know about the hand ``name`` (one of :attr:`hands`).
+
+        Raises:
+            ConfigError: the world has no such hand.
+        """
+
+    @abstractmethod
+    def add_hand(self, name: str) -> None:
+        """Bring the hand ``name`` into the scene, parked where the camera cannot see it.
+
+        Raises:
+            ConfigError: unknown hand, or the world has a hand already.
+        """
+
+    @abstractmethod
+    def object_pose(self) -> ObjectPose:
+        """The object's true pose now (its mesh frame in frame R)."""
+
+    @abstractmethod
+    def render(
+        self,
+        intrinsics: CameraIntrinsics,
+        T_robot_camera: np.ndarray,
+        near_m: float,
+        far_m: float,
+    ) -> CameraImage:
+        """A noise-free picture from a pinhole camera at ``T_robot_camera`` (OpenCV optical
+        frame in R): colour, depth along the optical axis, and the object's mask; nothing
+        nearer than ``near_m`` or farther than ``far_m`` (m) is seen."""
+
+    @abstractmethod
+    def taxels(self, behind_m: float, beyond_m: float) -> TaxelState:
+        """Every taxel of the hand now, with the object's distance along each taxel normal
+        probed from ``behind_m`` inside the pad to ``beyond_m`` past its surface (m).
+
+        Raises:
+            ConfigError: the world has no hand.
+        """
+
+    @abstractmethod
+    def execute_grasp(self, plan: GraspPlan) -> GraspOutcome:
+        """Pre-grasp, descend, close each finger until it touches (a guarded close),
+        settle; report what happened. A hand still holding the object releases it first.
+
+        Raises:
+            ConfigError: no hand, or the plan is for another hand.
+        """
+
+    @classmethod
+    def hand_meshes(
+        cls,
+        gripper: str,
+        joint_positions: dict[str, float] | None,
+        T_robot_hand: np.ndarray,
+        plan: GraspPlan,
+    ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """``link -> (vertices (V, 3), faces (F, 3), vertex normals (V, 3))`` of the hand
+        ``gripper`` in frame R, with its palm at ``T_robot_hand`` and its joints at
+        ``joint_positions`` (or, when a run did not record them, opened as ``plan``
+        says), to draw a recorded grasp. Empty (the default) when the world cannot draw
+        its hands; nothing else depends on it."""
+        return {}
+
+    @abstractmethod
+    def release(self) -> ObjectPose:
+        """Open the hand and withdraw it from the object (the object stays where it is let
+        go, free to settle); return the object's pose once it has. A hand that holds
+        nothing is withdrawn all the same. After it, :meth:`execute_grasp` may run again.
+
+        Raises:
+            ConfigError: the world has no hand.
+        """
 
 
 class SensorSource(StageImplementation):
@@ -182,6 +293,7 @@ class Estimator(StageImplementation):
 
 
 CONTRACTS: dict[str, type[StageImplementation]] = {
+    "world": World,
     "sensor": SensorSource,
     "segmenter": Segmenter,
     "initialiser": SymmetryInitialiser,

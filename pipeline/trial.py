@@ -1,10 +1,11 @@
 """One full simulated grasp trial, from the camera to the evaluated estimate.
 
-    sensor -> segmenter -> initialiser.propose -> planner (and hand choice) -> grasp
-      -> tactile -> initialiser.refine -> estimator -> evaluation
+    world -> sensor -> segmenter -> initialiser.propose -> planner (and hand choice)
+      -> grasp -> tactile -> initialiser.refine -> estimator -> evaluation
 
-The scene is sensed before its hand is chosen (:mod:`pipeline.hand_choice`); the chosen
-hand is then added to it.
+The configured world (a stage like the others, :class:`pipeline.stages.World`) builds the
+scene; it is sensed before its hand is chosen (:mod:`pipeline.hand_choice`) among the hands
+the world offers, and the chosen hand is then added to it.
 
 Every file the trial writes goes into one output folder (see :data:`TRIAL_FILES`); the
 stages are timed one by one, and the resolved config is written next to the results.
@@ -49,6 +50,7 @@ from .next_grasp import (
 )
 from .registry import StageRegistry
 from .runner import estimate
+from .stages import World
 from .types import (
     Contacts,
     DepthObservation,
@@ -56,6 +58,7 @@ from .types import (
     GraspPlan,
     ObjectPose,
     PointCloud,
+    SceneSetup,
     SymmetryInit,
     SymmetryPlane,
 )
@@ -254,22 +257,21 @@ def _simulate(
 ) -> TrialRecord:
     """The body of :func:`run_trial`: simulate, estimate, evaluate, write."""
     from .images import save_depth, save_rgb
-    from .sim.hands import GRIPPERS
-    from .sim.world import PybulletWorld
 
     settings = config.trial
+    world = stages["world"]
     report(f"scene: {settings.object} with {settings.gripper}")
-    with timer.phase("scene"):
-        world = PybulletWorld.create(
-            obj,
-            None,
-            x=settings.x_m,
-            y=settings.y_m,
-            yaw=np.radians(settings.yaw_deg),
-            seed=settings.seed,
-            urdf_path=obj.urdf_path,
-        )
-    with world:
+    try:
+        with timer.phase("scene"):
+            world.load_scene(
+                SceneSetup(
+                    obj,
+                    x_m=settings.x_m,
+                    y_m=settings.y_m,
+                    yaw_rad=float(np.radians(settings.yaw_deg)),
+                    seed=settings.seed,
+                )
+            )
         pose_before = world.object_pose()
         document["object_pose_before"] = pose_to_json(pose_before)
         report("sensing")
@@ -292,8 +294,9 @@ def _simulate(
         with timer.phase("initialiser"):
             proposal = stages["initialiser"].propose(cloud, observation)
         with timer.phase("planner"):
+            grippers = {name: world.gripper_spec(name) for name in world.hands}
             choice = choose_grasp(
-                config, registry, cloud, proposal, GRIPPERS, observation.table_height_m
+                config, registry, cloud, proposal, grippers, observation.table_height_m
             )
         plan = choice.plan
         document["gripper"] = choice.answer.gripper
@@ -322,6 +325,8 @@ def _simulate(
             document,
             report,
         )
+    finally:
+        world.close()
 
     result, truth, evaluated = fused.result, fused.truth, fused.evaluated
     metrics = [stage_metrics for stage_metrics, _ in evaluated]
@@ -365,7 +370,7 @@ def _grasp_and_fuse(
     registry: StageRegistry,
     stages: dict[str, Any],
     obj: CatalogueObject,
-    world: Any,
+    world: World,
     observation: DepthObservation,
     cloud: PointCloud,
     proposal: SymmetryInit,
@@ -376,7 +381,8 @@ def _grasp_and_fuse(
     report: Callable[[str], None],
 ) -> Fused:
     """Grasp, read the taxels and fuse every grasp so far, up to ``trial.grasps`` times:
-    the hand releases and withdraws before each new grasp, which is planned on the current
+    the hand releases the object and withdraws (:meth:`World.release`) before each new
+    grasp, which is planned on the current
     model (:mod:`pipeline.next_grasp`). The stop rule ends it earlier, and so does a later
     grasp the planner cannot find, the hand cannot execute or that touches nothing (it is
     not fused). ``contacts.json`` and ``document["grasps"]`` grow by one grasp each time.
@@ -384,12 +390,10 @@ def _grasp_and_fuse(
     Raises:
         StageFailure: the first grasp was not executed or the initialiser rejected it.
     """
-    from .sim.hands import GRIPPERS
-
     settings = config.trial
     until_m = 1e-3 * settings.until_std_mm if settings.until_std_mm > 0 else None
     planner = create_planner(config, registry, choice.answer.planner)
-    gripper = GRIPPERS[choice.plan.gripper]
+    gripper = world.gripper_spec(choice.plan.gripper)
     model = measurement_model(config, registry)
     # The next-grasp draws have their own stream: the world's noise does not depend on them.
     rng = np.random.default_rng([settings.seed, 15])
@@ -411,9 +415,12 @@ def _grasp_and_fuse(
                 break
         report(f"grasp {k + 1} with {plan.gripper}")
         with timer.phase("grasp"):
+            if k > 0:
+                released = world.release()
             outcome = world.execute_grasp(plan)
         shift_m, tilt_rad = object_motion(obj.mesh, outcome.object_before, outcome.object_after)
         executed = {
+            **({"object_pose_released": pose_to_json(released)} if k > 0 else {}),
             "executed": outcome.executed,
             "aperture_m": outcome.aperture_m,
             "joint_positions": outcome.joint_positions,

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from pathlib import Path
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
@@ -522,3 +523,107 @@ class GraspOutcome:
     object_before: ObjectPose
     object_after: ObjectPose
     reason: str = ""
+
+
+class SceneObject(Protocol):
+    """What a world needs to place an object (a :class:`pipeline.catalogue.CatalogueObject`
+    satisfies it).
+
+    Attributes:
+        name: the object's name.
+        mesh: ``trimesh.Trimesh``, its surface in the object frame (metres, base on z = 0).
+        mass_kg: mass (kg).
+        friction: Coulomb friction coefficient (-).
+        urdf_path: a URDF to load the body from (its base frame is the mesh's frame), or
+            None to build the body from ``mesh``, ``mass_kg`` and ``friction``.
+    """
+
+    name: str
+    mesh: Any
+    mass_kg: float
+    friction: float
+    urdf_path: Path | None
+
+
+@dataclass(frozen=True)
+class SceneSetup:
+    """The scene a world builds (:meth:`pipeline.stages.World.load_scene`): one object
+    standing on the table, its mesh origin at ``(x_m, y_m)`` of frame ``R`` turned by
+    ``yaw_rad`` about +z, and the seed of the world's random generator."""
+
+    obj: SceneObject
+    x_m: float = 0.0
+    y_m: float = 0.0
+    yaw_rad: float = 0.0
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class CameraImage:
+    """A noise-free picture of the world from a pinhole camera
+    (:meth:`pipeline.stages.World.render`); sensor models add their noise to it.
+
+    Attributes:
+        rgb: ``(H, W, 3) uint8`` colour image.
+        depth_m: ``(H, W) float32`` true depth along the optical axis (m), ``NaN`` where
+            nothing was hit between the near and far planes.
+        object_mask: ``(H, W) bool``, True where the first surface along the pixel's ray
+            is the object.
+    """
+
+    rgb: np.ndarray
+    depth_m: np.ndarray
+    object_mask: np.ndarray
+
+    def __post_init__(self) -> None:
+        shape = self.depth_m.shape
+        if self.rgb.shape != (*shape, 3) or self.object_mask.shape != shape:
+            raise ValueError(
+                f"CameraImage: rgb {self.rgb.shape} and object_mask {self.object_mask.shape} "
+                f"must match depth {shape}"
+            )
+
+
+@dataclass(frozen=True)
+class TaxelState:
+    """Every taxel of the world's hand now, in frame ``R`` (:meth:`pipeline.stages.World.
+    taxels`): where it is and how far the object is from it.
+
+    Attributes:
+        positions: ``(N, 3)`` taxel centres on the pad surfaces, metres.
+        normals: ``(N, 3)`` unit normals pointing out of the pads.
+        pads: ``(N,)`` pad id of each taxel (str).
+        taxel_indices: ``(N,)`` row-major index of each taxel within its pad.
+        gaps_m: ``(N,)`` signed distance from the taxel's surface to the object along its
+            normal, metres: positive a gap, negative pressed in; ``+inf`` where the object
+            is not within the probed range or something else is in front of it.
+        pad_forces_N: ``(N,)`` total normal force between the taxel's pad and the object,
+            newtons (the same value for every taxel of a pad).
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray
+    pads: np.ndarray
+    taxel_indices: np.ndarray
+    gaps_m: np.ndarray
+    pad_forces_N: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(_as_points(self.positions, "TaxelState.positions"))
+        sizes = {len(_as_points(self.normals, "TaxelState.normals"))}
+        sizes |= {len(np.asarray(getattr(self, f))) for f in ("pads", "taxel_indices")}
+        sizes |= {len(np.asarray(getattr(self, f))) for f in ("gaps_m", "pad_forces_N")}
+        if sizes != {n}:
+            raise ValueError("TaxelState fields must all have one row per taxel")
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    def contacts(self, keep: np.ndarray) -> Contacts:
+        """The taxels selected by the boolean or index array ``keep`` as :class:`Contacts`."""
+        return Contacts(
+            positions=self.positions[keep],
+            normals=self.normals[keep],
+            pads=np.asarray(self.pads)[keep],
+            taxel_indices=np.asarray(self.taxel_indices)[keep],
+        )

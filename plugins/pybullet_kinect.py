@@ -16,12 +16,12 @@ from pipeline.types import CameraIntrinsics, DepthObservation
 
 
 class PybulletKinect(SensorSource):
-    """Kinect v1 depth + colour from PyBullet (Nguyen 2012 noise, 1/8-px disparity, shadows).
+    """Kinect v1 depth + colour (Nguyen 2012 noise, 1/8-px disparity, shadows), any world.
 
-    Renders the world with TinyRenderer at the Kinect's 640x480 intrinsics (575.8 px,
-    principal point (314.5, 235.5)) from a viewpoint given by distance, elevation and azimuth
-    toward a target, then applies :func:`pipeline.sim.depth_noise.simulate_kinect_v1` with
-    ``world.rng``. Needs a :class:`pipeline.sim.world.PybulletWorld`.
+    Asks the world for a noise-free rendering (PyBullet: TinyRenderer) at the Kinect's
+    640x480 intrinsics (575.8 px, principal point (314.5, 235.5)) from a viewpoint given by
+    distance, elevation and azimuth toward a target, then applies
+    :func:`pipeline.sim.depth_noise.simulate_kinect_v1` with ``world.rng``.
     """
 
     name = "pybullet-kinect"
@@ -55,7 +55,7 @@ class PybulletKinect(SensorSource):
         return simulate_kinect_v1(depth_m, intrinsics, rng, noise)
 
     def observe(self, world: World) -> DepthObservation:
-        return observe(world, self.params, self.name, self._corrupt)
+        return observe(world, self.params, self._corrupt)
 
 
 @hookimpl

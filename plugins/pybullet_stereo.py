@@ -15,13 +15,13 @@ from pipeline.types import CameraIntrinsics, DepthObservation
 
 
 class PybulletStereo(SensorSource):
-    """Stereo depth + colour from PyBullet (z^2 sigma_d / (f B) noise, occlusions, edges).
+    """Stereo depth + colour (z^2 sigma_d / (f B) noise, occlusions, edges), any world.
 
     Models the narrow-angle camera pair of an Armar III-like head: 640x480 images, a 90 mm
     baseline and a 12 mm lens on 7.4 um pixels (f about 1600 px, 22 deg horizontal field
     of view) -- the lens and pixel figures are unconfirmed estimates; all are parameters.
     Depth is registered to the left camera. Matching failures on untextured surfaces are
-    not modelled. Needs a :class:`pipeline.sim.world.PybulletWorld`.
+    not modelled. Works in any world (it asks the world for a noise-free rendering).
     """
 
     name = "pybullet-stereo"
@@ -49,7 +49,7 @@ class PybulletStereo(SensorSource):
         return simulate_stereo(depth_m, intrinsics, rng, noise)
 
     def observe(self, world: World) -> DepthObservation:
-        return observe(world, self.params, self.name, self._corrupt)
+        return observe(world, self.params, self._corrupt)
 
 
 @hookimpl

@@ -1,30 +1,31 @@
-"""Per-taxel tactile model for the PyBullet world: one probing ray along each taxel normal."""
+"""Built-in tactile model ``pybullet-taxels``: a taxel is in contact when the object is within
+a threshold of its surface along its normal."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from pipeline import hookimpl
-from pipeline.errors import ConfigError, PluginError
+from pipeline.errors import ConfigError
 from pipeline.params import param
 from pipeline.stages import TactileModel, World
 from pipeline.types import Contacts, GraspOutcome
 
 
 class PybulletTaxels(TactileModel):
-    """Taxel contacts from batched ray probes along each taxel normal (PyBullet world only).
+    """Taxel contacts from the object's distance along each taxel normal (any world).
 
-    Every taxel of every pad casts one ray along its outward normal, from ``ray_behind_m``
-    behind the pad surface to ``ray_length_m`` past it (one ``rayTestBatch`` for the whole
-    hand, the hand itself excluded). A taxel reports contact when the first thing its ray
-    hits is the object, no farther than ``contact_threshold_m`` beyond the pad surface
-    (surfaces pressed into the pad always count). Reported positions are the taxel centres
-    and normals from forward kinematics of the hand's current configuration, in frame R,
-    optionally with isotropic Gaussian position noise; each contact taxel is independently
-    dropped with ``dead_taxel_probability``. Randomness comes from ``world.rng``.
-
-    Needs a world with ``client`` (PyBullet client id), ``hand``
-    (:class:`pipeline.sim.hands.Hand`) and ``object_id``, as ``PybulletWorld`` has.
+    Asks the world for every taxel of its hand with the object's signed distance along the
+    taxel's outward normal, probed from ``ray_behind_m`` behind the pad surface to
+    ``ray_length_m`` past it (the PyBullet world casts one ray per taxel, the hand itself
+    excluded). A taxel reports contact when the object is the first thing along that
+    probe, no farther than ``contact_threshold_m`` beyond the pad surface (surfaces pressed
+    into the pad always count). Reported positions are the taxel centres and normals of
+    the hand's current configuration, in frame R, optionally with isotropic Gaussian
+    position noise; each contact taxel is independently dropped with
+    ``dead_taxel_probability``. Randomness comes from ``world.rng``. (The name is kept from
+    when it needed the PyBullet world.)
     """
 
     name = "pybullet-taxels"
@@ -66,26 +67,16 @@ class PybulletTaxels(TactileModel):
     def read(self, world: World, outcome: GraspOutcome) -> Contacts:
         """Taxels touching the object now, in frame R (``outcome`` is not needed: the
         hand's current state is what the sensors see)."""
-        hand = getattr(world, "hand", None)
-        if hand is None or not hasattr(world, "client") or not hasattr(world, "object_id"):
-            raise PluginError(
-                f"tactile model '{self.name}' needs a PyBullet world with client, hand and "
-                f"object_id; got {type(world).__name__}"
-            )
         p = self.params
-        frames, gaps = hand.taxel_gaps(world.object_id, p.ray_behind_m, p.ray_length_m)
-        keep = gaps <= p.contact_threshold_m
+        taxels = world.taxels(p.ray_behind_m, p.ray_length_m)
+        keep = taxels.gaps_m <= p.contact_threshold_m
         if p.dead_taxel_probability > 0.0:
             keep &= world.rng.random(len(keep)) >= p.dead_taxel_probability
-        positions = frames.positions[keep]
+        contacts = taxels.contacts(keep)
         if p.position_noise_std_m > 0.0:
-            positions = positions + world.rng.normal(0.0, p.position_noise_std_m, positions.shape)
-        return Contacts(
-            positions=positions,
-            normals=frames.normals[keep],
-            pads=frames.pads[keep],
-            taxel_indices=frames.taxel_indices[keep],
-        )
+            noise = world.rng.normal(0.0, p.position_noise_std_m, contacts.positions.shape)
+            contacts = dataclasses.replace(contacts, positions=contacts.positions + noise)
+        return contacts
 
 
 @hookimpl

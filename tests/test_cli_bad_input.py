@@ -124,6 +124,14 @@ def test_a_float_setting_is_finite(run, value):
     assert "'trial.yaw_deg': expected a finite number" in one_error_line(err)
 
 
+@pytest.mark.parametrize("key", ["trial.x_m", "trial.y_m"])
+def test_an_object_placed_off_the_table_is_refused(run, tmp_path, key):
+    code, _, err = run("trial", "--set", f"{key}=5", "--out", str(tmp_path / "out"))
+    assert code == EXIT_BAD_INPUT
+    assert f"'{key}': must be < 1, got 5.0" in one_error_line(err)
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_negative_seed_is_refused_before_anything_runs(run, capsys, tmp_path):
     code, _, err = run("config", "--set", "trial.seed=-1")
     assert code == EXIT_BAD_INPUT

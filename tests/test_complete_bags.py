@@ -15,7 +15,7 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from scipy.spatial.transform import Rotation
 
-from pipeline.bags import camera_intrinsics
+from pipeline.bags import camera_intrinsics, read_bag
 from pipeline.captures import read_pcd
 from pipeline.cli import main
 from pipeline.errors import InputError
@@ -95,6 +95,20 @@ class Messages:
             is_bigendian=0,
             step=4 * width,
             data=np.frombuffer(depth_m.astype("<f4").tobytes(), dtype=np.uint8),
+        )
+
+    def colour(self, rgb: np.ndarray, encoding: str, frame: str = FRAME):
+        height, width = rgb.shape[:2]
+        order = {"rgb8": [0, 1, 2], "bgr8": [2, 1, 0], "bgra8": [2, 1, 0, 0]}[encoding]
+        pixels = np.ascontiguousarray(rgb[..., order])
+        return self.types["sensor_msgs/msg/Image"](
+            header=self.header(frame),
+            height=height,
+            width=width,
+            encoding=encoding,
+            is_bigendian=0,
+            step=len(order) * width,
+            data=np.frombuffer(pixels.tobytes(), dtype=np.uint8),
         )
 
     def camera_info(self, k):
@@ -206,6 +220,27 @@ def test_a_bag_completes_as_the_files_it_was_made_from(
         np.testing.assert_allclose(ours["centroid"], theirs["centroid"], atol=1e-9)
         assert ours["plane"]["theta_deg"] == pytest.approx(theirs["plane"]["theta_deg"], abs=1e-6)
         assert ours["plane"]["offset"] == pytest.approx(theirs["plane"]["offset"], abs=1e-9)
+
+
+@pytest.mark.parametrize("encoding", ["rgb8", "bgr8", "bgra8"])
+def test_a_colour_image_registered_to_the_depth_gives_the_colours(source, tmp_path, encoding):
+    capture, _ = source
+    factory = Messages(False)
+    other_frame = factory.colour(capture.rgb[:, ::-1], "rgb8", frame="kinect_rgb_frame")
+    bag = write_bag(
+        tmp_path / "scene",
+        False,
+        [
+            ("/camera/rgb/unregistered", "sensor_msgs/msg/Image", other_frame),
+            ("/camera/depth/image", "sensor_msgs/msg/Image", factory.image(capture.depth_m)),
+            ("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo",
+             factory.camera_info(capture.intrinsics)),
+            ("/camera/rgb/image", "sensor_msgs/msg/Image", factory.colour(capture.rgb, encoding)),
+        ],
+    )  # fmt: skip
+    got = read_bag(bag, topic="/camera/depth/image")
+    np.testing.assert_array_equal(got.rgb, capture.rgb)
+    assert got.source.endswith("colour from /camera/rgb/image")
 
 
 def test_a_bag_without_a_depth_topic_is_one_line_exit_2(tmp_path, capsys):

@@ -17,7 +17,7 @@ from pipeline.evaluation import object_motion, opposing_contacts
 from pipeline.hand_choice import choose_grasp
 from pipeline.registry import load_registry
 from pipeline.sim.hands import GRIPPERS
-from pipeline.sim.world import PybulletWorld
+from plugins.pybullet_world import Pybullet
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +38,7 @@ def _auto_grasp(registry, obj, yaw_deg: float, seed: int = 0, hand: str = "auto"
         overrides.append("planner.use=top-three-finger")
     config = load_config(registry, overrides=overrides)
     stages = {s: config.create(registry, s) for s in ("sensor", "segmenter", "initialiser")}
-    with PybulletWorld.create(obj, None, yaw=np.radians(yaw_deg), seed=seed) as world:
+    with Pybullet.create(obj, None, yaw=np.radians(yaw_deg), seed=seed) as world:
         observation = stages["sensor"].observe(world)
         cloud = stages["segmenter"].segment(observation)
         proposal = stages["initialiser"].propose(cloud, observation)

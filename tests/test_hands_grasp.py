@@ -11,9 +11,9 @@ import pytest
 import yourdfpy
 
 from pipeline.errors import ConfigError
+from pipeline.pad_layout import pad_grid
 from pipeline.sim.grasping import execute_grasp, object_pose
 from pipeline.sim.hands import GRIPPERS, Hand
-from pipeline.sim.taxels import pad_grid
 from pipeline.types import GraspPlan
 from robots import ROOT
 

@@ -14,9 +14,9 @@ import pytest
 import trimesh
 
 from pipeline.metrics import point_to_mesh_distances
-from pipeline.sim.world import PybulletWorld
 from pipeline.types import GraspPlan
 from plugins.pybullet_taxels import PybulletTaxels
+from plugins.pybullet_world import Pybullet
 
 MM = 1e-3
 TOP_DOWN = np.diag([1.0, -1.0, -1.0])
@@ -50,7 +50,7 @@ def _can(body_radius: float, body_height: float, lid_height: float) -> _Can:
 
 
 def _grasp(gripper: str, can: _Can, palm_z: float, opening: float, spread: float):
-    with PybulletWorld.create(can, gripper, 0.5, 0.0) as world:
+    with Pybullet.create(can, gripper, 0.5, 0.0) as world:
         T = np.eye(4)
         T[:3, :3] = TOP_DOWN
         T[:3, 3] = [0.5, 0.0, palm_z]
@@ -60,8 +60,8 @@ def _grasp(gripper: str, can: _Can, palm_z: float, opening: float, spread: float
         assert outcome.executed, outcome.reason
         taxels = PybulletTaxels()
         contacts = taxels.read(world, outcome)
-        frames, gaps = world.hand.taxel_gaps(
-            world.object_id, taxels.params.ray_behind_m, taxels.params.ray_length_m
+        frames, gaps = world.sim.hand.taxel_gaps(
+            world.sim.object_id, taxels.params.ray_behind_m, taxels.params.ray_length_m
         )
         # Rays that start inside the object (pressed in) measure nothing but the press.
         touching = (gaps <= taxels.params.contact_threshold_m) & (

@@ -1,4 +1,4 @@
-"""Pure taxel-layout geometry (pipeline.sim.taxels) against analytic values and scipy."""
+"""Pure taxel geometry (pipeline.pad_layout, pipeline.sim.taxels) against analytic values."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from pipeline.pad_layout import pad_grid
 from pipeline.sim.taxels import (
-    pad_grid,
     ray_segments,
     rotations_from_quaternions,
     segments_near_box,

@@ -10,7 +10,7 @@ import pybullet as pb
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import ConfigError, PluginError
+from pipeline.errors import ConfigError
 from pipeline.registry import StageRegistry
 from pipeline.sim.grasping import execute_grasp
 from pipeline.sim.hands import Hand
@@ -38,8 +38,10 @@ def _top_down(x: float, y: float, z: float) -> np.ndarray:
 
 
 def _world(client: int, hand: Hand, object_id: int, seed: int = 0) -> SimpleNamespace:
+    """The part of the World contract a tactile model uses, over a bare PyBullet scene."""
     return SimpleNamespace(
-        client=client, hand=hand, object_id=object_id, rng=np.random.default_rng(seed)
+        taxels=lambda behind_m, beyond_m: hand.taxel_state(object_id, behind_m, beyond_m),
+        rng=np.random.default_rng(seed),
     )
 
 
@@ -53,8 +55,6 @@ def test_registers_and_validates_its_parameters():
         registry.create("tactile", "pybullet-taxels", {"ray_length_m": 0.0005})
     with pytest.raises(ConfigError, match="dead_taxel_probability"):
         registry.create("tactile", "pybullet-taxels", {"dead_taxel_probability": 1.5})
-    with pytest.raises(PluginError, match="needs a PyBullet world"):
-        PybulletTaxels().read(SimpleNamespace(rng=np.random.default_rng(0)), None)
 
 
 def test_flat_pads_on_a_cylinder_report_exactly_the_analytic_contact_set(client):

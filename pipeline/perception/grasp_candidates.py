@@ -36,8 +36,8 @@ from typing import Literal
 
 import numpy as np
 
+from ..pad_layout import pad_grid
 from ..params import param
-from ..sim.taxels import pad_grid
 from ..stages import GraspPlanner
 from ..types import (
     GraspCandidate,

@@ -11,15 +11,18 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import pybullet
 
-from pipeline.errors import ConfigError, PluginError
+from pipeline.errors import ConfigError
 from pipeline.params import param
 from pipeline.sim.depth_noise import SimulatedDepth
 from pipeline.types import CameraIntrinsics, DepthObservation
+
+if TYPE_CHECKING:
+    from pipeline.stages import World
 
 #: OpenCV optical frame -> OpenGL eye frame (flip y and z).
 T_CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -203,34 +206,19 @@ class CameraParams:
         return CameraIntrinsics(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
 
 
-def _require_pybullet_world(world: Any, sensor: str) -> None:
-    missing = [
-        name
-        for name in ("client", "object_id", "table_height_m", "rng")
-        if not hasattr(world, name)
-    ]
-    if missing:
-        raise PluginError(
-            f"sensor '{sensor}' needs a PybulletWorld (missing: {', '.join(missing)}), "
-            f"got {type(world).__name__}"
-        )
-
-
 def observe(
-    world: Any,
+    world: World,
     params: CameraParams,
-    sensor: str,
     corrupt: Callable[[np.ndarray, CameraIntrinsics, np.random.Generator], SimulatedDepth],
 ) -> DepthObservation:
     """Render ``world`` from the viewpoint in ``params`` and pass the true depth through the
     sensor model ``corrupt`` (skipped when ``params.noise`` is False).
 
-    ``world`` must have ``client``, ``object_id``, ``table_height_m`` and ``rng`` (a
-    :class:`~pipeline.sim.world.PybulletWorld`). The observation carries the *believed*
-    camera pose (with the calibration error), the table height and the ground-truth object
-    mask registered to the returned depth image.
+    Uses only the :class:`~pipeline.stages.World` contract (``render``, ``object_pose``,
+    ``table_height_m``, ``rng``), so it works in any world. The observation carries the
+    *believed* camera pose (with the calibration error), the table height and the
+    ground-truth object mask registered to the returned depth image.
     """
-    _require_pybullet_world(world, sensor)
     target_robot = np.array(params.target_m, dtype=np.float64)
     if params.target_relative_to == "object":
         target_robot = target_robot + world.object_pose().position_m
@@ -238,13 +226,13 @@ def observe(
         target_robot, params.distance_m, params.elevation_deg, params.azimuth_deg
     )
     intrinsics = params.intrinsics
-    rendering = render(world.client, intrinsics, T_robot_camera, params.near_m, params.far_m)
-    segmentation = rendering.segmentation
-    depth_m = rendering.depth_m
+    image = world.render(intrinsics, T_robot_camera, params.near_m, params.far_m)
+    object_mask = image.object_mask
+    depth_m = image.depth_m
     if params.noise:
         simulated = corrupt(depth_m, intrinsics, world.rng)
         depth_m = simulated.depth_m
-        segmentation = segmentation[simulated.source_rows, simulated.source_cols]
+        object_mask = object_mask[simulated.source_rows, simulated.source_cols]
     T_believed = calibration_error(
         T_robot_camera,
         np.deg2rad(params.calibration_yaw_deg),
@@ -253,9 +241,9 @@ def observe(
     )
     return DepthObservation(
         depth_m=depth_m,
-        rgb=rendering.rgb,
+        rgb=image.rgb,
         intrinsics=intrinsics,
         T_robot_camera=T_believed,
         table_height_m=float(world.table_height_m),
-        object_mask=segmentation == world.object_id,
+        object_mask=object_mask,
     )

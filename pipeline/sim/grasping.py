@@ -146,6 +146,31 @@ def _release(client: int, hand: Hand, opening_m: float, settings: GraspSettings)
         pb.stepSimulation(physicsClientId=client)
 
 
+def release(
+    client: int,
+    hand: Hand,
+    object_id: int,
+    opening_m: float,
+    settings: GraspSettings | None = None,
+) -> ObjectPose:
+    """Open the hand to ``opening_m``, back it off, let the object settle for
+    ``settings.settle_s`` and park the hand out of sight; the object's pose then.
+
+    A hand that touches nothing is parked at once.
+    """
+    s = settings or HAND_GRASP_SETTINGS.get(hand.spec.name, GraspSettings())
+    previous_timestep_s = pb.getPhysicsEngineParameters(physicsClientId=client)["fixedTimeStep"]
+    pb.setTimeStep(s.timestep_s, physicsClientId=client)
+    try:
+        if hand.touches(object_id):
+            _release(client, hand, opening_m, s)
+        hand.park()
+        _step(client, max(1, round(s.settle_s / s.timestep_s)))
+    finally:
+        pb.setTimeStep(previous_timestep_s, physicsClientId=client)
+    return object_pose(client, object_id)
+
+
 def _finger_targets(
     hand: Hand, open_targets: dict[str, float], closure: np.ndarray, touching: np.ndarray
 ) -> dict[str, float]:

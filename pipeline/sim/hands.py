@@ -39,10 +39,10 @@ from scipy.spatial.transform import Rotation
 from robots import ROOT as ROBOTS_ROOT
 
 from ..errors import ConfigError
+from ..pad_layout import pad_grid
 from ..perception import sdh_geometry
-from ..types import GripperSpec, PadLayout
+from ..types import GripperSpec, PadLayout, TaxelState
 from .taxels import (
-    pad_grid,
     ray_segments,
     rotations_from_quaternions,
     segments_near_box,
@@ -73,7 +73,7 @@ HAND_COLLISION_GROUP = 1 << 5
 
 @dataclass(frozen=True)
 class PadGeometry:
-    """A pad's layout plus the shape of its surface (see :func:`taxels.pad_grid`)."""
+    """A pad's layout plus the shape of its surface (see :func:`pipeline.pad_layout.pad_grid`)."""
 
     layout: PadLayout
     curved_rows: int = 0
@@ -318,12 +318,16 @@ class Hand:
             )
         for link in hand._pad_links:
             pb.changeDynamics(body_id, link, lateralFriction=1.0, physicsClientId=client)
+        hand.park(park_position_m)
+        return hand
+
+    def park(self, park_position_m: tuple[float, float, float] = PARK_POSITION_M) -> None:
+        """Teleport the hand, fully open and pointing down, to ``park_position_m``."""
         T_park = np.eye(4)
         T_park[:3, :3] = np.diag([1.0, -1.0, -1.0])
         T_park[:3, 3] = park_position_m
-        hand.reset_pose(T_park)
-        hand.set_opening(model.spec.max_aperture_m, 0.0)
-        return hand
+        self.reset_pose(T_park)
+        self.set_opening(self.spec.max_aperture_m, 0.0)
 
     # ------------------------------------------------------------------ base pose
     def pose(self) -> np.ndarray:
@@ -479,6 +483,21 @@ class Hand:
             hit_fractions = np.fromiter((h[2] for h in hits), dtype=np.float64, count=len(hits))
             fractions[candidates] = np.where(bodies == object_id, hit_fractions, 1.0)
         return frames, surface_gaps(fractions, behind_m, beyond_m)
+
+    def taxel_state(self, object_id: int, behind_m: float, beyond_m: float) -> TaxelState:
+        """:meth:`taxel_gaps` with each taxel's pad force (:meth:`pad_contact_forces`), as
+        the :class:`pipeline.stages.World` contract hands them to tactile models."""
+        frames, gaps = self.taxel_gaps(object_id, behind_m, beyond_m)
+        pad_row = {pad: i for i, pad in enumerate(self.pad_ids)}
+        forces = self.pad_contact_forces(object_id)
+        return TaxelState(
+            positions=frames.positions,
+            normals=frames.normals,
+            pads=frames.pads,
+            taxel_indices=frames.taxel_indices,
+            gaps_m=gaps,
+            pad_forces_N=forces[[pad_row[pad] for pad in frames.pads]],
+        )
 
     def _object_aabb(self, object_id: int) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounds of all of a body's links in frame R."""

@@ -1,38 +1,28 @@
-"""The PyBullet world: one object on the table and one hand (the :class:`pipeline.stages.World`
-protocol for simulation trials).
+"""The PyBullet world: one object on the table and one hand, as the built-in ``pybullet``
+world plugin (:mod:`plugins.pybullet_world`) exposes it through the
+:class:`pipeline.stages.World` contract.
 
-The robot frame ``R`` is PyBullet's world frame. Sensor sources read ``client``,
-``object_id``, ``table_height_m`` and ``rng``; tactile models read ``client``, ``hand`` and
-``object_id``.
+The robot frame ``R`` is PyBullet's world frame.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 import trimesh
 
 from pipeline.errors import ConfigError
 from pipeline.sim.scene import Scene
-from pipeline.types import GraspOutcome, GraspPlan, GripperSpec, ObjectPose
+from pipeline.types import GraspOutcome, GraspPlan, GripperSpec, ObjectPose, SceneObject
 
 if TYPE_CHECKING:
     from pipeline.sim.hands import Hand
 
 #: Physics steps (1/240 s each) the object is left to settle after being placed (s * 240).
 SETTLE_STEPS = 24
-
-
-class SceneObject(Protocol):
-    """What the world needs of an object (a catalogue entry satisfies it)."""
-
-    name: str
-    mesh: trimesh.Trimesh
-    mass_kg: float
-    friction: float
 
 
 class PybulletWorld:

@@ -452,50 +452,32 @@ class _RunRecorder:
         """Each hand link's shapes in frame R at the last grasp, from the URDF's forward
         kinematics; empty when the hand or its pose is unknown."""
         plan = self.files.plans[-1] if self.files.plans else None
-        # A multi-grasp trial records each grasp's execution in "grasps"; one grasp, "grasp".
-        grasp = (self.files.document.get("grasps") or [self.files.document.get("grasp", {})])[-1]
+        # A trial records every grasp's execution in "grasps" (fuse: their taxel counts).
+        executed = self.files.document.get("grasps") or [None]
+        grasp = executed[-1] if isinstance(executed[-1], dict) else None
+        grasp = grasp or self.files.document.get("grasp", {})
         if plan is None:
             return {}
         T_robot_hand = np.asarray(grasp.get("T_robot_hand", plan.T_robot_hand), dtype=float)
-        return hand_link_meshes(plan.gripper, grasp.get("joint_positions"), T_robot_hand, plan)
+        world = _world_class(self.files.document)
+        if world is None:
+            return {}
+        return world.hand_meshes(plan.gripper, grasp.get("joint_positions"), T_robot_hand, plan)
 
 
-def hand_link_meshes(
-    gripper: str, joint_positions: dict[str, float] | None, T_robot_hand: np.ndarray, plan
-) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """``link -> (vertices, faces, normals)`` of a shipped hand in frame R.
+def _world_class(document: dict[str, Any]):
+    """The installed world class a run was made in (a run from before the world was a
+    stage: the shipped default), or None when it is not installed."""
+    from ..config import load_config
+    from ..errors import PluginError
+    from ..registry import load_registry
 
-    The joints are at ``joint_positions`` (after the grasp closed) or, when the run did not
-    record them, at the plan's opening. Each face gets its own vertices, so the boxes and
-    cylinders of the URDF shade flat.
-    """
-    import trimesh
-    import yourdfpy
-
-    from robots import ROOT
-
-    from ..sim.hands import HAND_MODELS
-
-    model = HAND_MODELS.get(gripper)
-    if model is None:
-        return {}
-    urdf = yourdfpy.URDF.load(str(ROOT / model.urdf))
-    if joint_positions is None:
-        joint_positions = model.open_configuration(plan.opening_m, plan.spread_rad)
-    urdf.update_cfg({k: v for k, v in joint_positions.items() if k in urdf.actuated_joint_names})
-    scene = urdf.scene
-    shapes: dict[str, list[trimesh.Trimesh]] = {}
-    for node in scene.graph.nodes_geometry:
-        T_hand_shape, geometry = scene.graph[node]
-        link = scene.graph.transforms.parents[node]
-        shape = trimesh.Trimesh(scene.geometry[geometry].vertices, scene.geometry[geometry].faces)
-        shapes.setdefault(link, []).append(shape.apply_transform(T_robot_hand @ T_hand_shape))
-    meshes = {}
-    for link, parts in shapes.items():
-        mesh = trimesh.util.concatenate(parts)
-        mesh.unmerge_vertices()
-        meshes[link] = (np.asarray(mesh.vertices), np.asarray(mesh.faces), mesh.vertex_normals)
-    return meshes
+    registry = load_registry()
+    name = document.get("stages_used", {}).get("world") or load_config(registry).choices["world"]
+    try:
+        return registry.get("world", name).cls
+    except PluginError:
+        return None
 
 
 def _plane(document: dict[str, Any]) -> SymmetryPlane:
