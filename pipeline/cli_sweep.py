@@ -11,6 +11,21 @@ from .cli import _add_config_options, _load, counting_number
 from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError
 
 
+def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
+    """``--scans DIR`` for an experiment that reads scans.
+
+    Raises:
+        ConfigError: the experiment reads none, or DIR holds no ``*/textured.obj``.
+    """
+    if args.scans is None:
+        return None
+    if not experiment.reads_scans:
+        raise ConfigError(f"--scans: experiment '{args.experiment}' grasps no scans (explore does)")
+    if not any(Path(args.scans).glob("*/textured.obj")):
+        raise ConfigError(f"--scans {args.scans}: no */textured.obj in that folder")
+    return Path(args.scans).resolve()
+
+
 def run(args: argparse.Namespace) -> int:
     from .config import changed_settings, load_config
     from .experiments import EXPERIMENTS, ExperimentOptions
@@ -40,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         repeats=args.repeats,
         out_dir=out.resolve(),
+        scans=_scans_folder(args, experiment),
     )
     tasks = experiment.tasks(options)
     read = {section: resolved[section] for section in sections}
@@ -98,6 +114,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("--estimator", metavar="NAME", help="estimator to run (default: config)")
     parser.add_argument("--quick", action="store_true", help="a reduced grid (smoke test)")
+    parser.add_argument(
+        "--scans",
+        type=Path,
+        metavar="DIR",
+        help="explore: also grasp every scanned mesh DIR/*/textured.obj (e.g. YCB scans)",
+    )
     parser.add_argument("--seed", type=counting_number(0), default=0, help="base seed (default 0)")
     parser.add_argument(
         "--repeats", type=counting_number(1), help="trials per grid point (default: paper's)"

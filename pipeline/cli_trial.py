@@ -18,6 +18,8 @@ from .tables import format_table
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """The ``trial`` verb's options."""
+    from .config import NEXT_GRASP_STRATEGIES
+
     parser = subparsers.add_parser(
         "trial",
         help="run one full simulated grasp trial (the default: CD drive, PG-70)",
@@ -40,6 +42,23 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
     parser.add_argument("--seed", type=counting_number(0), help="random seed of the trial")
     parser.add_argument("--yaw", type=float, metavar="DEG", help="object yaw on the table")
+    parser.add_argument(
+        "--grasps",
+        type=counting_number(1),
+        metavar="N",
+        help="grasp, release and grasp again N times, fusing after each (default 1)",
+    )
+    parser.add_argument(
+        "--next-grasp",
+        choices=NEXT_GRASP_STRATEGIES,
+        help="how grasps after the first are chosen (default information)",
+    )
+    parser.add_argument(
+        "--until-std",
+        type=float,
+        metavar="MM",
+        help="stop once the plane offset and hidden side posterior stds are <= MM",
+    )
     _add_units_option(parser, "the --mesh file")
     _add_config_options(parser)
     _add_output_options(parser, default="runs/trial-OBJECT-seedN[-K]")
@@ -67,6 +86,12 @@ def trial_overrides(args: argparse.Namespace, registry) -> list[str]:
         overrides.append(f"trial.seed={args.seed}")
     if args.yaw is not None:
         overrides.append(f"trial.yaw_deg={args.yaw}")
+    if args.grasps is not None:
+        overrides.append(f"trial.grasps={args.grasps}")
+    if args.next_grasp:
+        overrides.append(f"trial.next_grasp={args.next_grasp}")
+    if args.until_std is not None:
+        overrides.append(f"trial.until_std_mm={args.until_std}")
     return overrides
 
 
@@ -115,6 +140,48 @@ def trial_summary(record) -> str:
     return format_table(header + CONSISTENCY_HEADER, rows)
 
 
+def grasps_summary(document: dict) -> str:
+    """One row per grasp of a multi-grasp trial: how it was chosen, where it touched, the
+    selected stage after fusing it with its deviation and consistency, and the two
+    uncertainties of the stop rule; then why the trial stopped."""
+    rows = []
+    for entry in document["grasps"]:
+        stage = entry["stages"][entry["selected_stage"]]
+        metrics, consistency = stage["metrics"], stage.get("consistency") or {}
+        angle = metrics.get("plane_angle_error_deg")
+        rows.append(
+            [
+                entry["grasp"],
+                entry["chosen_by"]["strategy"],
+                " ".join(entry["pads_in_contact"]),
+                entry["taxels_in_contact"],
+                entry["selected_stage"],
+                stage["status"],
+                f"{metrics['deviation_m']['median'] * 1e3:.1f}",
+                "-" if angle is None else f"{angle:.1f}",
+                f"{metrics['plane_offset_error_mm']:.1f}",
+                "yes" if consistency.get("consistent") else "NO",
+                f"{entry['uncertainty']['plane_offset_std_mm']:.2f}",
+                f"{entry['uncertainty']['hidden_side_std_mm']:.2f}",
+            ]
+        )
+    header = [
+        "grasp",
+        "chosen by",
+        "pads",
+        "taxels",
+        "stage",
+        "status",
+        "dev median mm",
+        "plane err °",
+        "offset err mm",
+        "consistent",
+        "offset std mm",
+        "hidden std mm",
+    ]
+    return format_table(header, rows) + f"\nstopped: {document['stop_reason']}"
+
+
 def _progress(message: str) -> None:
     print(f"... {message}", flush=True)
 
@@ -144,6 +211,8 @@ def run(args: argparse.Namespace) -> int:
         f"grasp: {record.document['hand']['reason']}; the object moved "
         f"{grasp['object_shift_mm']:.1f} mm and tilted {grasp['object_tilt_deg']:.1f} deg"
     )
+    if len(record.document["grasps"]) > 1 or settings.until_std_mm > 0:
+        print(grasps_summary(record.document))
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())
     print(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s")
     pictures = ", pictures" if settings.pictures else ""

@@ -25,7 +25,7 @@ import importlib.resources
 import tomllib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args, get_type_hints
 
 import tomli_w
 
@@ -60,7 +60,28 @@ class TrialSettings:
     units: Literal["m", "mm"] = param(
         "m", "length unit of a mesh file given as object (a URDF states its own scale)"
     )
+    grasps: int = param(
+        1,
+        "grasps per trial: after each the hand releases and withdraws, the estimator fuses "
+        "every grasp so far and the next grasp is planned on its model",
+        at_least=1,
+    )
+    next_grasp: Literal["paper", "random", "information"] = param(
+        "information",
+        "how grasps after the first are chosen among the planner's feasible ones: paper "
+        "(the planner's own best), random (seeded), information (largest expected reduction "
+        "of the hidden side's uncertainty)",
+    )
+    until_std_mm: float = param(
+        0.0,
+        "stop grasping once the plane offset's and the hidden side's posterior stds are both "
+        "at most this (mm); 0: make all the grasps",
+        at_least=0.0,
+    )
 
+
+#: How the grasps after a trial's first may be chosen (:mod:`pipeline.next_grasp`).
+NEXT_GRASP_STRATEGIES: tuple[str, ...] = get_args(get_type_hints(TrialSettings)["next_grasp"])
 
 #: Sections that are not stages, and the dataclass each one is validated against.
 SETTINGS_SECTIONS: dict[str, type] = {"trial": TrialSettings}

@@ -22,6 +22,7 @@ from .config import Config
 from .params import to_toml
 from .perception.grasp_geometry import narrowest_width
 from .registry import StageRegistry
+from .stages import GraspPlanner
 from .types import GraspCandidate, GraspPlan, GripperSpec, PointCloud, SymmetryInit
 
 #: ``trial.gripper`` value that lets the planners choose the hand.
@@ -92,11 +93,9 @@ def choose_grasp(
 
     answers = []
     for name in registry.names("planner"):
-        cls = registry.get("planner", name).cls
-        params = config.params["planner"].get(name, cls.Params())
-        for gripper in cls.grippers:
+        for gripper in registry.get("planner", name).cls.grippers:
             if gripper in grippers:
-                planner = registry.create("planner", name, to_toml(params))
+                planner = create_planner(config, registry, name)
                 plan = planner.plan(cloud, proposal, grippers[gripper])
                 answers.append(PlannerAnswer(gripper, name, plan))
     feasible = [a for a in answers if a.plan.status == "ok"]
@@ -116,6 +115,13 @@ def choose_grasp(
         f"score {_score(best.plan):.2f}"
     )
     return HandChoice(best, reason + (f"; {others}" if others else ""), tuple(answers))
+
+
+def create_planner(config: Config, registry: StageRegistry, name: str) -> GraspPlanner:
+    """The planner ``name`` with its configured parameters (its defaults when the config
+    has none: with ``trial.gripper = "auto"`` a planner other than ``planner.use`` plans)."""
+    params = config.params["planner"].get(name, registry.get("planner", name).cls.Params())
+    return registry.create("planner", name, to_toml(params))
 
 
 def _score(plan: GraspPlan) -> float:

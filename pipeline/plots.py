@@ -513,3 +513,93 @@ def plot_scene(
     path = Path(path)
     figure.savefig(path, dpi=110, bbox_inches="tight", pil_kwargs=PNG_OPTIONS)
     return path
+
+
+@dataclass(frozen=True)
+class GraspMarks:
+    """One grasp's taxels in contact for :func:`grasps_figure`: their ``(M, 3)`` positions
+    (frame R, m), the pad of each, and the legend text (e.g. the deviation after it)."""
+
+    label: str
+    taxels_m: np.ndarray
+    pads: np.ndarray
+
+
+def grasps_figure(
+    out_path: Path,
+    model_m: np.ndarray,
+    truth_vertices_m: np.ndarray,
+    grasps: Sequence[GraspMarks],
+    title: str,
+) -> Path:
+    """The object from above: the true footprint (the convex hull of the mesh, grey), the
+    final completed model (blue), and each grasp's taxels in contact in its own colour,
+    every pad numbered with its grasp at the centroid of its taxels; the legend carries
+    each grasp's label. Axes in mm, frame R."""
+    from matplotlib.figure import Figure
+    from scipy.spatial import ConvexHull
+
+    figure = Figure(figsize=(6.4, 6.0), dpi=110)
+    axes = figure.add_subplot(1, 1, 1)
+
+    truth = 1e3 * np.asarray(truth_vertices_m)[:, :2]
+    outline = truth[ConvexHull(truth).vertices]
+    axes.fill(*outline.T, fc="0.9", ec="0.5", label="true footprint (hull)")
+    model = 1e3 * np.asarray(model_m)[:, :2]
+    axes.scatter(*model.T, s=1, c="tab:blue", alpha=0.4, label="final model")
+    colours = ("tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink")
+    for number, grasp in enumerate(grasps, start=1):
+        colour = colours[(number - 1) % len(colours)]
+        taxels = 1e3 * np.asarray(grasp.taxels_m)[:, :2]
+        axes.scatter(*taxels.T, s=10, c=colour, marker="s", label=f"{number}: {grasp.label}")
+        for pad in np.unique(grasp.pads):
+            centre = taxels[grasp.pads == pad].mean(axis=0)
+            axes.annotate(
+                str(number),
+                centre,
+                fontsize=11,
+                fontweight="bold",
+                color="white",
+                ha="center",
+                va="center",
+                bbox={"boxstyle": "circle,pad=0.2", "fc": colour, "ec": "none"},
+            )
+    axes.set_aspect("equal")
+    axes.set_xlabel("x (mm)")
+    axes.set_ylabel("y (mm)")
+    axes.set_title(title)
+    axes.legend(loc="best", fontsize=8, markerscale=2)
+    figure.tight_layout()
+    return _save(figure, out_path)
+
+
+@dataclass(frozen=True)
+class LinePanel:
+    """One panel of :func:`line_figure`: a curve per label over the same ``x``."""
+
+    title: str
+    x_label: str
+    y_label: str
+    x: Sequence[float]
+    curves: dict[str, Sequence[float]]
+
+
+def line_figure(panels: Sequence[LinePanel], out_path: Path, title: str) -> Path:
+    """Panels side by side, each with one marked line per curve (NaN points left out)."""
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(4.8 * len(panels), 4.0), dpi=110)
+    for index, panel in enumerate(panels, start=1):
+        axes = figure.add_subplot(1, len(panels), index)
+        for label, values in panel.curves.items():
+            axes.plot(panel.x, values, marker="o", label=label)
+        axes.set_xticks(list(panel.x))
+        axes.set_xlabel(panel.x_label)
+        axes.set_ylabel(panel.y_label)
+        axes.set_title(panel.title, fontsize=10)
+        axes.set_ylim(bottom=0.0)
+        axes.grid(alpha=0.3)
+        axes.legend(fontsize=8)
+    figure.suptitle(title)
+    figure.tight_layout()
+    return _save(figure, out_path)

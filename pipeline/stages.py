@@ -268,6 +268,15 @@ class GraspPlanner(StageImplementation):
     def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         """Return a plan; an infeasible one has ``status="refused"`` and a reason."""
 
+    def alternatives(
+        self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
+    ) -> tuple[GraspPlan, ...]:
+        """Every feasible grasp the planner considers, best first, each as a plan: the
+        next grasp of a multi-grasp trial is chosen among them (:mod:`pipeline.next_grasp`).
+        By default the one plan of :meth:`plan`, when it is feasible."""
+        plan = self.plan(cloud, proposal, gripper)
+        return (plan,) if plan.status == "ok" else ()
+
 
 class TactileModel(StageImplementation):
     """Turns the hand's state after a grasp into taxel contacts."""

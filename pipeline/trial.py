@@ -27,6 +27,7 @@ from .camera_file import camera_to_json
 from .catalogue import CatalogueObject, load_object
 from .config import Config
 from .errors import StageFailure, SymfuseError
+from .estimation.problem import diagonal_covariance
 from .evaluation import GroundTruth, evaluate_stage, object_motion
 from .formats import (
     bias_to_json,
@@ -39,13 +40,31 @@ from .formats import (
     write_completed_clouds,
     write_json,
 )
-from .hand_choice import choice_to_json, choose_grasp
+from .hand_choice import HandChoice, choice_to_json, choose_grasp, create_planner
+from .next_grasp import (
+    MeasurementModel,
+    Uncertainty,
+    choose_next_grasp,
+    stop_reason,
+    uncertainty,
+)
 from .registry import StageRegistry
 from .runner import estimate
-from .types import EstimateResult, ObjectPose, SceneSetup, SymmetryInit, SymmetryPlane
+from .stages import World
+from .types import (
+    Contacts,
+    DepthObservation,
+    EstimateResult,
+    GraspPlan,
+    ObjectPose,
+    PointCloud,
+    SceneSetup,
+    SymmetryInit,
+    SymmetryPlane,
+)
 
 #: The pictures a trial draws unless ``trial.pictures = false`` (VC adds ``vc_scores.png``).
-PICTURE_FILES = ("rgb.png", "depth.png", "topdown.png", "deviation.png")
+PICTURE_FILES = ("rgb.png", "depth.png", "topdown.png", "deviation.png", "grasps.png")
 #: The data every completed trial writes into its output folder.
 TRIAL_FILES = (
     "depth.npy",
@@ -149,6 +168,33 @@ def draw_pictures(
     )
     if init.hypotheses:
         plot_vc_scores(init.hypotheses, points.mean(axis=0), out_dir / "vc_scores.png")
+
+
+def draw_grasps(
+    out_path: Path,
+    name: str,
+    result: EstimateResult,
+    truth: GroundTruth,
+    fused: Fused,
+    document: dict[str, Any],
+) -> None:
+    """``grasps.png``: the object from above with every grasp's pads numbered and the
+    selected stage's median deviation after each grasp."""
+    from .plots import GraspMarks, grasps_figure
+
+    marks = []
+    for contacts, entry in zip(fused.contacts, document["grasps"], strict=True):
+        stage = entry["selected_stage"]
+        median_mm = 1e3 * entry["stages"][stage]["metrics"]["deviation_m"]["median"]
+        label = f"{entry['chosen_by']['strategy']}, then {median_mm:.1f} mm (Stage {stage})"
+        marks.append(GraspMarks(label, contacts.positions, contacts.pads))
+    grasps_figure(
+        out_path,
+        result.selected.completed,
+        truth.vertices,
+        marks,
+        title=f"{name}: grasps from above, median deviation after each",
+    )
 
 
 def run_trial(
@@ -261,13 +307,119 @@ def _simulate(
             if not choice.answer.planner:
                 raise StageFailure(plan.reason)
             raise StageFailure(f"grasp planner '{choice.answer.planner}' refused: {plan.reason}")
-        report(f"grasping with {plan.gripper}")
         with timer.phase("grasp"):
             world.add_hand(plan.gripper)
+        fused = _grasp_and_fuse(
+            config,
+            registry,
+            stages,
+            obj,
+            world,
+            observation,
+            cloud,
+            proposal,
+            choice,
+            out_dir,
+            timer,
+            document,
+            report,
+        )
+    finally:
+        world.close()
+
+    result, truth, evaluated = fused.result, fused.truth, fused.evaluated
+    metrics = [stage_metrics for stage_metrics, _ in evaluated]
+    with timer.phase("write"):
+        write_completed_clouds(out_dir, result)
+        truth_mesh = obj.mesh.copy().apply_transform(fused.object_after.transform)
+        truth_mesh.export(out_dir / "object_final.ply")
+    if settings.pictures:
+        with timer.phase("pictures"):
+            draw_pictures(out_dir, config, cloud.points, fused.init, result, evaluated, truth)
+            draw_grasps(out_dir / "grasps.png", settings.object, result, truth, fused, document)
+    document.update(
+        status=result.final.status,
+        stages=[
+            {**stage_json, "metrics": stage_metrics}
+            for stage_json, stage_metrics in zip(estimate_to_json(result), metrics, strict=True)
+        ],
+        **selection_to_json(result),
+        timings=timer.seconds,
+    )
+    write_json(out_dir / "result.json", document)
+    return TrialRecord(out_dir, result, metrics, dict(timer.seconds), document)
+
+
+@dataclass(frozen=True)
+class Fused:
+    """What the grasps of a trial left: the estimate after the last grasp fused, the truth
+    it is scored against (the object after that grasp), each stage's evaluation, the
+    initial state and every grasp's contacts."""
+
+    init: SymmetryInit
+    result: EstimateResult
+    truth: GroundTruth
+    evaluated: list[tuple[dict[str, Any], np.ndarray]]
+    object_after: ObjectPose
+    contacts: tuple[Contacts, ...]
+
+
+def _grasp_and_fuse(
+    config: Config,
+    registry: StageRegistry,
+    stages: dict[str, Any],
+    obj: CatalogueObject,
+    world: World,
+    observation: DepthObservation,
+    cloud: PointCloud,
+    proposal: SymmetryInit,
+    choice: HandChoice,
+    out_dir: Path,
+    timer: PhaseTimer,
+    document: dict[str, Any],
+    report: Callable[[str], None],
+) -> Fused:
+    """Grasp, read the taxels and fuse every grasp so far, up to ``trial.grasps`` times:
+    the hand releases the object and withdraws (:meth:`World.release`) before each new
+    grasp, which is planned on the current
+    model (:mod:`pipeline.next_grasp`). The stop rule ends it earlier, and so does a later
+    grasp the planner cannot find, the hand cannot execute or that touches nothing (it is
+    not fused). ``contacts.json`` and ``document["grasps"]`` grow by one grasp each time.
+
+    Raises:
+        StageFailure: the first grasp was not executed or the initialiser rejected it.
+    """
+    settings = config.trial
+    until_m = 1e-3 * settings.until_std_mm if settings.until_std_mm > 0 else None
+    planner = create_planner(config, registry, choice.answer.planner)
+    gripper = world.gripper_spec(choice.plan.gripper)
+    model = measurement_model(config, registry)
+    # The next-grasp draws have their own stream: the world's noise does not depend on them.
+    rng = np.random.default_rng([settings.seed, 15])
+    grasps: list[Contacts] = []
+    plans: list[GraspPlan] = []
+    document["grasps"] = []
+    document["next_grasp"] = settings.next_grasp if settings.grasps > 1 else None
+    plan, chosen_by, fused, stop = choice.plan, {"strategy": "first"}, None, ""
+    for k in range(settings.grasps):
+        if k > 0:
+            report(f"planning grasp {k + 1} ({settings.next_grasp})")
+            with timer.phase("planner"):
+                following = choose_next_grasp(
+                    settings.next_grasp, planner, fused.result.selected, gripper, model, rng
+                )
+            plan, chosen_by = following.plan, following.to_json()
+            if plan.status != "ok":
+                stop = f"no feasible grasp {k + 1}: {plan.reason}"
+                break
+        report(f"grasp {k + 1} with {plan.gripper}")
+        with timer.phase("grasp"):
+            if k > 0:
+                released = world.release()
             outcome = world.execute_grasp(plan)
-        document["object_pose_after"] = pose_to_json(outcome.object_after)
         shift_m, tilt_rad = object_motion(obj.mesh, outcome.object_before, outcome.object_after)
-        document["grasp"] = {
+        executed = {
+            **({"object_pose_released": pose_to_json(released)} if k > 0 else {}),
             "executed": outcome.executed,
             "aperture_m": outcome.aperture_m,
             "joint_positions": outcome.joint_positions,
@@ -276,20 +428,68 @@ def _simulate(
             "object_shift_mm": 1e3 * shift_m,
             "object_tilt_deg": float(np.degrees(tilt_rad)),
         }
-        if not outcome.executed:
-            raise StageFailure(f"grasp not executed: {outcome.reason}")
+        if k == 0:
+            document["grasp"] = executed
+            document["object_pose_after"] = pose_to_json(outcome.object_after)
+            if not outcome.executed:
+                raise StageFailure(f"grasp not executed: {outcome.reason}")
+        elif not outcome.executed:
+            stop = f"grasp {k + 1} not executed: {outcome.reason}"
+            break
         with timer.phase("tactile"):
             contacts = stages["tactile"].read(world, outcome)
+        if k > 0 and len(contacts) == 0:
+            # Nothing to fuse, and the object may have moved where no taxel saw it: the
+            # estimate stays the last one, scored against the object as it was then.
+            stop = (
+                f"grasp {k + 1} touched nothing (the object moved {1e3 * shift_m:.1f} mm "
+                f"and tilted {np.degrees(tilt_rad):.1f} deg); not fused"
+            )
+            break
+        grasps.append(contacts)
+        plans.append(plan)
         with timer.phase("write"):
-            write_json(out_dir / "contacts.json", contacts_to_json([contacts], [plan]))
+            write_json(out_dir / "contacts.json", contacts_to_json(grasps, plans))
+        if k == 0:
+            init = _initial_state(config, stages, proposal, cloud, plan, contacts, timer, document)
+        report(f"fusing {len(grasps)} grasp(s)")
+        with timer.phase("estimator"):
+            result = estimate(config, registry, cloud, init, grasps, observation)
+        with timer.phase("evaluation"):
             truth = ground_truth(obj, outcome.object_after)
-            mesh_after = obj.mesh.copy().apply_transform(outcome.object_after.transform)
-            mesh_after.export(out_dir / "object_final.ply")
-        document["taxels_in_contact"] = len(contacts)
-    finally:
-        world.close()
+            centre = np.asarray(plan.T_robot_hand)[:2, 3]
+            evaluated = [evaluate_stage(stage, truth, centre) for stage in result.stages]
+        known = uncertainty(result.selected)
+        fused = Fused(init, result, truth, evaluated, outcome.object_after, tuple(grasps))
+        document["grasps"].append(
+            grasp_to_json(
+                k, plan, choice.answer.planner, chosen_by, executed, contacts, fused, known
+            )
+        )
+        document["object_pose_after"] = pose_to_json(outcome.object_after)
+        stop = stop_reason(known, k + 1, settings.grasps, until_m)
+        if stop:
+            break
+    document["taxels_in_contact"] = sum(len(c) for c in grasps)
+    document["stop_reason"] = stop
+    return fused
 
-    report("estimating")
+
+def _initial_state(
+    config: Config,
+    stages: dict[str, Any],
+    proposal: SymmetryInit,
+    cloud: PointCloud,
+    plan: GraspPlan,
+    contacts: Contacts,
+    timer: PhaseTimer,
+    document: dict[str, Any],
+) -> SymmetryInit:
+    """Stage 0 from the proposal and the first grasp (``document["init"]``).
+
+    Raises:
+        StageFailure: the initialiser rejected every hypothesis.
+    """
     with timer.phase("initialiser"):
         init = stages["initialiser"].refine(proposal, cloud, plan, contacts)
     document["init"] = {
@@ -303,27 +503,57 @@ def _simulate(
     }
     if init.status != "ok":
         raise StageFailure(f"initialiser '{config.choices['initialiser']}' rejected: {init.reason}")
-    with timer.phase("estimator"):
-        result = estimate(config, registry, cloud, init, [contacts], observation)
+    return init
 
-    report("evaluating")
-    with timer.phase("evaluation"):
-        grasp_centre = np.asarray(plan.T_robot_hand)[:2, 3]
-        evaluated = [evaluate_stage(stage, truth, grasp_centre) for stage in result.stages]
-        metrics = [stage_metrics for stage_metrics, _ in evaluated]
-    with timer.phase("write"):
-        write_completed_clouds(out_dir, result)
-    if settings.pictures:
-        with timer.phase("pictures"):
-            draw_pictures(out_dir, config, cloud.points, init, result, evaluated, truth)
-    document.update(
-        status=result.final.status,
-        stages=[
-            {**stage_json, "metrics": stage_metrics}
-            for stage_json, stage_metrics in zip(estimate_to_json(result), metrics, strict=True)
-        ],
-        **selection_to_json(result),
-        timings=timer.seconds,
+
+def measurement_model(config: Config, registry: StageRegistry) -> MeasurementModel:
+    """The taxel model the information score predicts with: the ``iekf`` estimator's
+    parameters (whichever estimator fuses, the score is the IEKF's)."""
+    params = config.params["estimator"].get("iekf")
+    if params is None:
+        params = registry.get("estimator", "iekf").cls.Params()
+    return MeasurementModel(
+        window_std_m=(params.window_along_normal_m, params.window_across_normal_m),
+        noise_std_m=(params.noise_along_normal_m, params.noise_across_normal_m),
+        point_std_m=params.point_std_m,
+        facing_filter=params.facing_filter,
+        regrasp_noise=diagonal_covariance(
+            (params.regrasp_b_theta_rad, *[params.regrasp_b_xyz_m] * 3, 0.0, 0.0)
+        ),
     )
-    write_json(out_dir / "result.json", document)
-    return TrialRecord(out_dir, result, metrics, dict(timer.seconds), document)
+
+
+def grasp_to_json(
+    k: int,
+    plan: GraspPlan,
+    planner: str,
+    chosen_by: dict[str, Any],
+    executed: dict[str, Any],
+    contacts: Contacts,
+    fused: Fused,
+    known: Uncertainty,
+) -> dict[str, Any]:
+    """One entry of ``result.json``'s ``grasps``: how the grasp was chosen and went, and
+    the estimate after fusing it and every grasp before (each stage without its iteration
+    trace, with its metrics against the object after this grasp)."""
+    stages = [
+        {key: value for key, value in stage_json.items() if key != "trace"}
+        | {"metrics": stage_metrics}
+        for stage_json, (stage_metrics, _) in zip(
+            estimate_to_json(fused.result), fused.evaluated, strict=True
+        )
+    ]
+    return {
+        "grasp": k + 1,
+        "gripper": plan.gripper,
+        "planner": planner,
+        "chosen_by": chosen_by,
+        "plan": plan_to_json(plan),
+        **executed,
+        "taxels_in_contact": len(contacts),
+        "pads_in_contact": sorted(set(contacts.pads.tolist())),
+        "status": fused.result.final.status,
+        **selection_to_json(fused.result),
+        "uncertainty": known.to_json(),
+        "stages": stages,
+    }

@@ -10,7 +10,9 @@ from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.params import param
 from pipeline.perception.grasp_candidates import (
+    Candidate,
     CandidateParams,
+    CandidatePlanner,
     ParallelHand,
     candidate_frame,
     closing_angles,
@@ -24,11 +26,10 @@ from pipeline.perception.grasp_geometry import (
     parallel_top_grasp,
     rotate_z,
 )
-from pipeline.stages import GraspPlanner
 from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
 
 
-class TopParallel(GraspPlanner):
+class TopParallel(CandidatePlanner):
     """Parallel-jaw top grasp: the best of many closing directions and heights, or the paper's.
 
     With ``strategy = "candidates"`` (the default) the closing direction is tried every
@@ -99,13 +100,14 @@ class TopParallel(GraspPlanner):
 
     def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params
-        if gripper.fingers != 2:
-            raise ConfigError(
-                f"planner 'top-parallel' needs a two-finger gripper, got '{gripper.name}' with "
-                f"{gripper.fingers} fingers (use planner 'top-three-finger')"
-            )
+        self._check_hand(gripper)
         if p.strategy == "candidates":
-            return self._ranked(cloud, proposal, gripper)
+            return plan_from_candidates(
+                gripper.name,
+                self._candidates(cloud, proposal, gripper),
+                p.pregrasp_height_m,
+                gripper.max_aperture_m,
+            )
         points = cloud.points
         plane = proposal.plane
         normal = plane.normal
@@ -163,7 +165,16 @@ class TopParallel(GraspPlanner):
             ),
         )
 
-    def _ranked(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
+    def _check_hand(self, gripper: GripperSpec) -> None:
+        if gripper.fingers != 2:
+            raise ConfigError(
+                f"planner 'top-parallel' needs a two-finger gripper, got '{gripper.name}' with "
+                f"{gripper.fingers} fingers (use planner 'top-three-finger')"
+            )
+
+    def _candidates(
+        self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
+    ) -> list[Candidate]:
         p = self.params
         points = cloud.points
         pad = gripper.pads[0]
@@ -208,9 +219,7 @@ class TopParallel(GraspPlanner):
             for angle, direction in directions
             for height in frame.heights_m
         ]
-        return plan_from_candidates(
-            gripper.name, candidates, p.pregrasp_height_m, gripper.max_aperture_m
-        )
+        return candidates
 
 
 @hookimpl

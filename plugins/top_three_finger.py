@@ -11,7 +11,9 @@ from pipeline.errors import ConfigError
 from pipeline.params import param
 from pipeline.perception.grasp_candidates import (
     SDH_SPREADS,
+    Candidate,
     CandidateParams,
+    CandidatePlanner,
     candidate_frame,
     closing_angles,
     plan_from_candidates,
@@ -29,11 +31,10 @@ from pipeline.perception.grasp_geometry import (
     pad_band,
     rotate_z,
 )
-from pipeline.stages import GraspPlanner
 from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
 
 
-class TopThreeFinger(GraspPlanner):
+class TopThreeFinger(CandidatePlanner):
     """Three-finger top grasp: pre-shaped and ranked on the completed cloud, or the paper's.
 
     With ``strategy = "candidates"`` (the default) the palm's x axis is tried every
@@ -110,13 +111,14 @@ class TopThreeFinger(GraspPlanner):
 
     def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params
-        if gripper.fingers != 3:
-            raise ConfigError(
-                f"planner 'top-three-finger' needs a three-finger hand, got '{gripper.name}' "
-                f"with {gripper.fingers} fingers (use planner 'top-parallel')"
-            )
+        self._check_hand(gripper)
         if p.strategy == "candidates":
-            return self._ranked(cloud, proposal, gripper)
+            return plan_from_candidates(
+                gripper.name,
+                self._candidates(cloud, proposal, gripper),
+                p.pregrasp_height_m,
+                gripper.max_aperture_m,
+            )
         points = cloud.points
         completed = np.concatenate([points, proposal.plane.mirror(points)])
         direction = front_to_back(
@@ -168,7 +170,16 @@ class TopThreeFinger(GraspPlanner):
             ),
         )
 
-    def _ranked(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
+    def _check_hand(self, gripper: GripperSpec) -> None:
+        if gripper.fingers != 3:
+            raise ConfigError(
+                f"planner 'top-three-finger' needs a three-finger hand, got '{gripper.name}' "
+                f"with {gripper.fingers} fingers (use planner 'top-parallel')"
+            )
+
+    def _candidates(
+        self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
+    ) -> list[Candidate]:
         p = self.params
         points = cloud.points
         pad = next(pad for pad in gripper.pads if pad.name.endswith("distal"))
@@ -204,9 +215,7 @@ class TopThreeFinger(GraspPlanner):
             for angle, direction in directions
             for height in frame.heights_m
         ]
-        return plan_from_candidates(
-            gripper.name, candidates, p.pregrasp_height_m, gripper.max_aperture_m
-        )
+        return candidates
 
 
 @hookimpl

@@ -53,7 +53,8 @@ def test_unknown_key_is_named(registry, tmp_path):
         load_config(registry, [path])
     assert str(error.value) == (
         "unknown config key 'trial.sede' "
-        "(known keys: object, gripper, seed, x_m, y_m, yaw_deg, pictures, units)"
+        "(known keys: object, gripper, seed, x_m, y_m, yaw_deg, pictures, units, grasps, "
+        "next_grasp, until_std_mm)"
     )
 
 

@@ -66,6 +66,8 @@ class ExperimentOptions:
         repeats: trials per grid point where the experiment repeats (None: the paper's).
         out_dir: the sweep's output folder; experiments that run full trials keep each
             trial's files under ``out_dir/trials/<key>/`` (None: trials are not kept).
+        scans: a folder of scanned meshes (``*/textured.obj``) for the experiments that
+            read one (``READS_SCANS = True`` in their module), or None.
     """
 
     estimator: str = "iekf"
@@ -75,3 +77,4 @@ class ExperimentOptions:
     seed: int = 0
     repeats: int | None = None
     out_dir: Path | None = None
+    scans: Path | None = None

@@ -8,7 +8,8 @@ initialiser). The experiments with their own grid or report are modules
 initialisers).
 
 Every row offers what the sweep engine needs: ``name``, ``description``,
-``config_sections`` (the config sections its trials read; None: all), ``tasks(options)``,
+``config_sections`` (the config sections its trials read; None: all), ``reads_scans``
+(whether it grasps the scans of ``symfuse sweep --scans DIR``), ``tasks(options)``,
 ``run_one`` (a top-level, picklable function from a task's JSON params to its JSON row) and
 ``report(rows, out_dir)`` (the CSV, figures and ``report.md``). Nothing heavy is imported
 until a row is run, so listing the experiments stays cheap.
@@ -35,6 +36,8 @@ class Experiment(Protocol):
     def description(self) -> str: ...
     @property
     def config_sections(self) -> tuple[str, ...] | None: ...
+    @property
+    def reads_scans(self) -> bool: ...
     @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]: ...
     def tasks(self, options: ExperimentOptions) -> list[SweepTask]: ...
@@ -80,6 +83,8 @@ class SymmetryGrid:
         from .synthetic_study import CONFIG_SECTIONS
 
         return CONFIG_SECTIONS
+
+    reads_scans = False
 
     @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]:
@@ -134,6 +139,7 @@ class MeasureTable:
     target_pct: float
     inits: tuple[str, ...] = ("ps", "vc")
     config_sections = None
+    reads_scans = False
 
     @property
     def description(self) -> str:
@@ -167,7 +173,8 @@ class MeasureTable:
 @dataclass(frozen=True)
 class ModuleExperiment:
     """An experiment with its own grid or report, implemented by a module exposing
-    ``DESCRIPTION``, ``tasks``, ``run_one``, ``report`` and optionally ``CONFIG_SECTIONS``."""
+    ``DESCRIPTION``, ``tasks``, ``run_one``, ``report`` and optionally ``CONFIG_SECTIONS``
+    and ``READS_SCANS``."""
 
     name: str
     module_name: str
@@ -183,6 +190,10 @@ class ModuleExperiment:
     @property
     def config_sections(self) -> tuple[str, ...] | None:
         return getattr(self.module, "CONFIG_SECTIONS", None)
+
+    @property
+    def reads_scans(self) -> bool:
+        return getattr(self.module, "READS_SCANS", False)
 
     @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]:
@@ -238,6 +249,7 @@ _ROWS: tuple[Experiment, ...] = (
     ModuleExperiment("spray", "pipeline.experiments.spray"),
     ModuleExperiment("kth", "pipeline.experiments.kth"),
     ModuleExperiment("init", "pipeline.experiments.init"),
+    ModuleExperiment("explore", "pipeline.experiments.explore"),
 )
 
 #: Experiment name -> its definition.

@@ -153,12 +153,13 @@ PAPER_GRASP = ("planner.top-parallel.strategy=paper", "planner.top-three-finger.
 def trial_overrides(params: Mapping[str, Any]) -> list[str]:
     """The ``--set`` strings that turn the sweep's config into the trial of ``params``: its
     object, hand, seed, yaw and initialiser, the paper's grasp strategy
-    (:data:`PAPER_GRASP`), the experiment's overrides and the estimator."""
+    (:data:`PAPER_GRASP`, unless ``paper_grasp`` is false: the planners' own), the
+    experiment's overrides and the estimator."""
     estimator = params["estimator"]
     overrides = [
         f"trial.object={toml_value(params['object'])}",
         f"trial.gripper={params['gripper']}",
-        *PAPER_GRASP,
+        *(PAPER_GRASP if params.get("paper_grasp", True) else ()),
         f"trial.seed={int(params['seed'])}",
         f"trial.yaw_deg={toml_value(float(params['yaw_deg']))}",
         f"initialiser.use={params['init']}",

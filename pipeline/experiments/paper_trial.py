@@ -88,7 +88,42 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
             elif isinstance(value, int | float):
                 row[f"{prefix}_{name}"] = float(value)
     row["diverged"] = is_diverged(row)
+    if document.get("next_grasp"):
+        row["stop_reason"] = document.get("stop_reason")
+        row["grasps_made"] = len(document["grasps"])
+        for entry in document["grasps"]:
+            row.update(grasp_fields(entry))
     return row
+
+
+def grasp_fields(entry: Mapping[str, Any]) -> dict[str, Any]:
+    """The row fields of one grasp of a multi-grasp trial (``grasp{k}_...``): how it was
+    chosen, its taxels, and Stage 2's and the selected stage's deviation, plane errors,
+    status and consistency after fusing it, with the stop rule's two stds (mm)."""
+    prefix = f"grasp{entry['grasp']}"
+    fields: dict[str, Any] = {
+        f"{prefix}_strategy": entry["chosen_by"]["strategy"],
+        f"{prefix}_taxels": entry["taxels_in_contact"],
+        f"{prefix}_selected_stage": entry["selected_stage"],
+        f"{prefix}_offset_std_mm": entry["uncertainty"]["plane_offset_std_mm"],
+        f"{prefix}_hidden_std_mm": entry["uncertainty"]["hidden_side_std_mm"],
+    }
+    for label, stage in (
+        ("stage2", entry["stages"][-1]),
+        ("selected", entry["stages"][entry["selected_stage"]]),
+    ):
+        metrics = stage["metrics"]
+        consistency = stage.get("consistency") or {}
+        fields.update(
+            {
+                f"{prefix}_{label}_status": stage["status"],
+                f"{prefix}_{label}_consistent": consistency.get("consistent"),
+                f"{prefix}_{label}_deviation_median_mm": 1e3 * metrics["deviation_m"]["median"],
+                f"{prefix}_{label}_plane_angle_error_deg": metrics.get("plane_angle_error_deg"),
+                f"{prefix}_{label}_plane_offset_error_mm": metrics.get("plane_offset_error_mm"),
+            }
+        )
+    return fields
 
 
 def is_diverged(row: Mapping[str, Any]) -> bool:

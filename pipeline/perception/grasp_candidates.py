@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import functools
 import math
+from abc import abstractmethod
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Literal
@@ -37,7 +38,16 @@ import numpy as np
 
 from ..pad_layout import pad_grid
 from ..params import param
-from ..types import GraspCandidate, GraspPlan, PadLayout, SymmetryPlane
+from ..stages import GraspPlanner
+from ..types import (
+    GraspCandidate,
+    GraspPlan,
+    GripperSpec,
+    PadLayout,
+    PointCloud,
+    SymmetryInit,
+    SymmetryPlane,
+)
 from . import sdh_geometry as sdh
 from .grasp_geometry import front_to_back, hand_pose
 
@@ -738,3 +748,40 @@ def plan_from_candidates(
         score=best.summary.score,
         candidates=summaries,
     )
+
+
+def feasible_plans(
+    gripper: str, candidates: list[Candidate], pregrasp_height_m: float, aperture_m: float
+) -> tuple[GraspPlan, ...]:
+    """Every feasible candidate as a plan of its own, best first (the choices of a next
+    grasp, :mod:`pipeline.next_grasp`)."""
+    feasible = sorted((c for c in candidates if c.summary.feasible), key=lambda c: -c.summary.score)
+    return tuple(
+        plan_from_candidates(gripper, [c], pregrasp_height_m, aperture_m) for c in feasible
+    )
+
+
+class CandidatePlanner(GraspPlanner):
+    """A planner that ranks candidates: its feasible ones are the alternatives a next grasp
+    is chosen among, whatever its ``strategy``. A subclass provides ``_check_hand`` (raise
+    :class:`~pipeline.errors.ConfigError` for a hand it cannot plan for) and
+    ``_candidates`` (every candidate it considers on the cloud)."""
+
+    @abstractmethod
+    def _check_hand(self, gripper: GripperSpec) -> None: ...
+
+    @abstractmethod
+    def _candidates(
+        self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
+    ) -> list[Candidate]: ...
+
+    def alternatives(
+        self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
+    ) -> tuple[GraspPlan, ...]:
+        self._check_hand(gripper)
+        return feasible_plans(
+            gripper.name,
+            self._candidates(cloud, proposal, gripper),
+            self.params.pregrasp_height_m,
+            gripper.max_aperture_m,
+        )

@@ -370,7 +370,10 @@ class _RunRecorder:
         """Each hand link's shapes in frame R at the last grasp, from the URDF's forward
         kinematics; empty when the hand or its pose is unknown."""
         plan = self.files.plans[-1] if self.files.plans else None
-        grasp = self.files.document.get("grasp", {})
+        # A trial records every grasp's execution in "grasps" (fuse: their taxel counts).
+        executed = self.files.document.get("grasps") or [None]
+        grasp = executed[-1] if isinstance(executed[-1], dict) else None
+        grasp = grasp or self.files.document.get("grasp", {})
         if plan is None:
             return {}
         T_robot_hand = np.asarray(grasp.get("T_robot_hand", plan.T_robot_hand), dtype=float)

@@ -1,0 +1,292 @@
+"""Several grasps per object, the later ones chosen by ``paper``, ``random`` or
+``information`` (docs/method.md §11): how the model improves grasp by grasp.
+
+Every catalogue object, and every scanned mesh ``DIR/*/textured.obj`` when the sweep is
+given ``--scans DIR`` (the YCB scans, for instance), stands at 10 object yaws uniform over a
+full turn (seeded; ``--repeats`` changes the count, ``--quick`` keeps one yaw of two
+objects). At each pose one trial per strategy grasps it three times (``trial.grasps = 3``)
+with the hand the planners choose (``trial.gripper = "auto"``, their ranked candidates) and
+VC initialisation; the three trials share the seed, so their scene, view and first grasp
+are the same and they differ from the second grasp on. A trial stops early when no feasible
+grasp remains; its later grasps then count with the estimate it ended with.
+
+The report gives, per strategy and grasp, the median over trials of Stage 2's median
+deviation from the true surface and of its plane errors (all trials, and the trials whose
+first grasp leaves more than :data:`HARD_MM`); how much the second grasp reduced the
+deviation on those; and how often a grasp made the estimate worse than the grasp before it,
+by the estimator's own consistency check (Stage 2 consistent before, flagged after) and by
+the truth (Stage 2's median deviation up by more than :data:`WORSE_MM`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..catalogue import list_objects
+from ..config import NEXT_GRASP_STRATEGIES
+from ..sweep import write_csv
+from . import ExperimentOptions, SweepTask
+from .common import failures_section, fmt, task_seed
+from .init import yaws_deg
+from .paper_tasks import paper_task, trial_root, user_settings
+from .paper_trial import run_paper_trial
+from .rows import count_rows, failure_lines, finished_rows, value
+
+NAME = "explore"
+DESCRIPTION = (
+    "three grasps per pose, later ones chosen by paper, random or information: deviation "
+    "after each grasp (catalogue, and --scans DIR)"
+)
+#: The experiment reads the sweep's ``--scans`` folder.
+READS_SCANS = True
+STRATEGIES = NEXT_GRASP_STRATEGIES
+GRASPS = 3
+YAWS = 10
+QUICK_YAWS = 1
+QUICK_OBJECTS = ("cd_drive", "spray_bottle")
+#: Trials whose first grasp leaves Stage 2 more than this far from the truth (median, mm).
+HARD_MM = 2.0
+#: A grasp made the estimate worse by the truth when Stage 2's median deviation grew by
+#: more than this (mm): above the run-to-run jitter of the deviation itself.
+WORSE_MM = 0.5
+
+
+def objects(options: ExperimentOptions) -> list[tuple[str, str]]:
+    """``(label, trial.object)`` of every object the sweep grasps."""
+    names = [info.name for info in list_objects()]
+    if options.quick:
+        names = [name for name in names if name in QUICK_OBJECTS]
+    found = [(name, name) for name in names]
+    if options.scans is not None:
+        found += [
+            (path.parent.name, str(path))
+            for path in sorted(Path(options.scans).glob("*/textured.obj"))
+        ]
+    return found
+
+
+def tasks(options: ExperimentOptions) -> list[SweepTask]:
+    count = QUICK_YAWS if options.quick else (options.repeats or YAWS)
+    root = trial_root(options)
+    result = []
+    # Yaw by yaw over every object: a sweep stopped early has covered every object alike.
+    for index, yaw in enumerate(yaws_deg(options.seed, count)):
+        for label, name in objects(options):
+            pose = f"{label}/yaw{index:02d}"
+            for strategy in STRATEGIES:
+                key = f"{pose}/{strategy}"
+                params = {
+                    "object": name,
+                    "label": label,
+                    "strategy": strategy,
+                    "init": "vc",
+                    "gripper": "auto",
+                    "paper_grasp": False,
+                    "yaw_deg": float(yaw),
+                    "seed": task_seed(options.seed, pose),
+                    "overrides": [
+                        "trial.pictures=false",
+                        f"trial.grasps={GRASPS}",
+                        f"trial.next_grasp={strategy}",
+                    ],
+                    "config": user_settings(options),
+                    "estimator": options.estimator,
+                    "estimator_params": dict(options.estimator_params),
+                    "trial_dir": None if root is None else str(root / key),
+                }
+                result.append(paper_task(key, params))
+    return result
+
+
+def run_one(params: dict) -> dict[str, Any]:
+    return run_paper_trial(params)
+
+
+def after_grasp(row: Mapping[str, Any], k: int, field: str) -> float:
+    """``grasp{k}_{field}`` of a row; a trial that stopped before grasp ``k`` keeps the
+    estimate of its last grasp."""
+    made = int(row.get("grasps_made") or 0)
+    return value(row, f"grasp{min(k, made)}_{field}") if made else float("nan")
+
+
+def _median(rows: Sequence[Mapping[str, Any]], k: int, field: str) -> float:
+    values = np.array([after_grasp(row, k, field) for row in rows])
+    return float(np.nanmedian(values)) if np.isfinite(values).any() else float("nan")
+
+
+def _flagged(row: Mapping[str, Any], k: int) -> bool:
+    return row.get(f"grasp{k}_stage2_consistent") is not True
+
+
+def worse_grasps(row: Mapping[str, Any]) -> tuple[list[bool], list[bool]]:
+    """For each grasp after the first of a trial: whether it made the estimate worse by the
+    consistency check (Stage 2 consistent after the grasp before, flagged after this one)
+    and by the truth (Stage 2's median deviation up by more than :data:`WORSE_MM`)."""
+    by_check, by_truth = [], []
+    for k in range(2, int(row.get("grasps_made") or 0) + 1):
+        by_check.append((not _flagged(row, k - 1)) and _flagged(row, k))
+        before = value(row, f"grasp{k - 1}_stage2_deviation_median_mm")
+        after = value(row, f"grasp{k}_stage2_deviation_median_mm")
+        by_truth.append(bool(after - before > WORSE_MM))
+    return by_check, by_truth
+
+
+def worse_counts(rows: Sequence[Mapping[str, Any]]) -> tuple[int, int, int, int, int]:
+    """Over ``rows``: ``(grasps after the first, of them worse by the check, worse by the
+    truth, trials, trials with some grasp worse by the check)`` (:func:`worse_grasps`)."""
+    grasps = by_check = by_truth = trials = trials_by_check = 0
+    for row in rows:
+        check, truth = worse_grasps(row)
+        grasps += len(check)
+        by_check += sum(check)
+        by_truth += sum(truth)
+        trials += 1
+        trials_by_check += any(check)
+    return grasps, by_check, by_truth, trials, trials_by_check
+
+
+def hard_rows(rows: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
+    """Finished trials whose first grasp leaves Stage 2 more than :data:`HARD_MM` off."""
+    return [
+        row
+        for row in finished_rows(rows)
+        if value(row, "grasp1_stage2_deviation_median_mm") > HARD_MM
+    ]
+
+
+def _by_strategy(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str, Any]]]:
+    return {s: [row for row in rows if row["params"]["strategy"] == s] for s in STRATEGIES}
+
+
+def second_grasp_gain(rows: Sequence[Mapping[str, Any]]) -> tuple[float, float]:
+    """Mean and median reduction of Stage 2's median deviation (mm) from grasp 1 to 2."""
+    gains = np.array(
+        [
+            after_grasp(row, 1, "stage2_deviation_median_mm")
+            - after_grasp(row, 2, "stage2_deviation_median_mm")
+            for row in rows
+        ]
+    )
+    gains = gains[np.isfinite(gains)]
+    if not gains.size:
+        return float("nan"), float("nan")
+    return float(gains.mean()), float(np.median(gains))
+
+
+def _share(count: int, total: int) -> str:
+    return f"{count} ({100.0 * count / total:.1f} %)" if total else str(count)
+
+
+def report(rows: list[dict], out_dir: Path) -> list[Path]:
+    """``results.csv``, ``explore.png`` (median deviation and plane errors after each
+    grasp per strategy, all trials and the hard ones) and ``report.md``."""
+    from ..plots import LinePanel, line_figure
+
+    out_dir = Path(out_dir)
+    csv_path = write_csv(rows, out_dir / "results.csv")
+    finished = finished_rows(rows)
+    hard = hard_rows(rows)
+    hard_keys = {(row["params"]["label"], row["params"]["yaw_deg"]) for row in hard}
+    # A pose is hard by its first grasp, which every strategy shares: keep all three.
+    hard = [
+        row for row in finished if (row["params"]["label"], row["params"]["yaw_deg"]) in hard_keys
+    ]
+    grasps = range(1, GRASPS + 1)
+    lines = [
+        "# Several grasps: where to grasp next",
+        "",
+        f"Trials: {count_rows(rows).text()}. Three grasps per trial; per grasp, the median "
+        "over trials of Stage 2's median deviation from the true surface (mm) and of its "
+        "plane angle (deg) and offset (mm) errors. A trial that stopped early keeps its last "
+        "estimate.",
+        "",
+        "| trials | strategy | n | "
+        + " | ".join(f"grasp {k}: dev / angle / offset" for k in grasps)
+        + " |",
+        "|---|---|---|" + "---|" * GRASPS,
+    ]
+    panels = []
+    for subset, group in (("all", finished), (f"first grasp > {HARD_MM:g} mm", hard)):
+        curves = {}
+        for strategy, members in _by_strategy(group).items():
+            cells = [
+                f"{fmt(_median(members, k, 'stage2_deviation_median_mm'), 2)} / "
+                f"{fmt(_median(members, k, 'stage2_plane_angle_error_deg'))} / "
+                f"{fmt(_median(members, k, 'stage2_plane_offset_error_mm'))}"
+                for k in grasps
+            ]
+            lines.append(f"| {subset} | {strategy} | {len(members)} | " + " | ".join(cells) + " |")
+            curves[strategy] = [_median(members, k, "stage2_deviation_median_mm") for k in grasps]
+        panels.append(
+            LinePanel(
+                f"{subset} ({len(group) // len(STRATEGIES)} poses)",
+                "grasps",
+                "median deviation, Stage 2 (mm)",
+                list(grasps),
+                curves,
+            )
+        )
+    figure = line_figure(panels, out_dir / "explore.png", title="Deviation after each grasp")
+
+    lines += ["", f"## The second grasp on poses whose first leaves more than {HARD_MM:g} mm", ""]
+    gains = {s: second_grasp_gain(members) for s, members in _by_strategy(hard).items()}
+    lines += [
+        "| strategy | trials | mean reduction (mm) | median reduction (mm) |",
+        "|---|---|---|---|",
+    ]
+    for strategy, (mean, median) in gains.items():
+        trials = len(_by_strategy(hard)[strategy])
+        lines.append(f"| {strategy} | {trials} | {fmt(mean, 2)} | {fmt(median, 2)} |")
+    informed, drawn = gains["information"][0], gains["random"][0]
+    if np.isfinite(informed) and np.isfinite(drawn) and drawn > 0:
+        verdict = "yes" if informed >= 1.3 * drawn else "no"
+        lines += [
+            "",
+            f"Information's mean reduction is {informed / drawn:.2f}x random's "
+            f"(target >= 1.3x): {verdict}.",
+        ]
+    lines += [
+        "",
+        "## Grasps that made the estimate worse",
+        "",
+        f"By the consistency check: Stage 2 consistent after the grasp before and flagged after "
+        f"this one. By the truth: Stage 2's median deviation up by more than {WORSE_MM:g} mm. "
+        "Target: at most 5 % of the trials, per strategy.",
+        "",
+        "| strategy | grasps after the first | worse by the check | worse by the truth "
+        "| trials | trials with a grasp worse by the check |",
+        "|---|---|---|---|---|---|",
+    ]
+    for strategy, members in _by_strategy(finished).items():
+        total, by_check, by_truth, trials, bad_trials = worse_counts(members)
+        lines.append(
+            f"| {strategy} | {total} | {_share(by_check, total)} | {_share(by_truth, total)} "
+            f"| {trials} | {_share(bad_trials, trials)} |"
+        )
+    lines += [
+        "",
+        "## Per object (Stage 2 median deviation, mm: after grasp 1 -> after grasp 3)",
+        "",
+    ]
+    lines += [
+        "| object | poses | " + " | ".join(STRATEGIES) + " |",
+        "|---|---|" + "---|" * len(STRATEGIES),
+    ]
+    by_object: dict[str, list[Mapping[str, Any]]] = {}
+    for row in finished:
+        by_object.setdefault(row["params"]["label"], []).append(row)
+    for label, members in by_object.items():
+        cells = []
+        for group in _by_strategy(members).values():
+            first = _median(group, 1, "stage2_deviation_median_mm")
+            last = _median(group, GRASPS, "stage2_deviation_median_mm")
+            cells.append(f"{fmt(first, 2)} -> {fmt(last, 2)}")
+        lines.append(f"| {label} | {len(members) // len(STRATEGIES)} | " + " | ".join(cells) + " |")
+    lines += failures_section(failure_lines(rows))
+    report_path = out_dir / "report.md"
+    report_path.write_text("\n".join(lines) + "\n")
+    return [csv_path, figure, report_path]

@@ -1,0 +1,324 @@
+"""Where to grasp next: the next grasp of a multi-grasp trial, planned on the current estimate
+(``trial.next_grasp``; docs/method.md §11).
+
+After each grasp the estimator has a completed model (its selected stage: points, plane,
+bias) and the covariance of the plane and bias. The hand's planner is asked for every
+feasible grasp on that model (:meth:`pipeline.stages.GraspPlanner.alternatives`), and one
+strategy picks among them:
+
+* ``paper``: the first grasp's rule again, the planner's own best plan on the current model;
+* ``random``: a feasible alternative drawn uniformly (seeded by the trial);
+* ``information``: the alternative with the largest expected reduction of the hidden side's
+  uncertainty (:func:`pipeline.estimation.uncertainty.hidden_side_gain_m2`), from the
+  taxels it is predicted to touch on the current model (:func:`predicted_contacts`) and the
+  estimator's own measurement model.
+
+The stop rule (:func:`stop_reason`) ends the trial once the plane offset and the hidden side
+are known well enough, or when the grasps run out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .metrics import plane_after_bias
+from .perception.grasp_candidates import (
+    PadTaxels,
+    flat_pad_taxels,
+    pad_coverage,
+    sdh_distal_taxels,
+)
+from .perception.sdh_geometry import FINGER_BASES_M, FINGERS, finger_facings
+from .types import (
+    Bias,
+    Contacts,
+    GraspPlan,
+    GripperSpec,
+    PointCloud,
+    StageEstimate,
+    SymmetryInit,
+)
+
+#: A predicted taxel touches the model when the surface in front of it lies within this of
+#: the pad at its first touch (m): the planners' default touch tolerance.
+TOUCH_TOLERANCE_M = 0.003
+#: Depth of the surface layer a pad meets in each taxel cell (m): over twice the cloud's
+#: depth noise, thinner than any graspable object's wall-to-wall depth.
+LAYER_M = 0.006
+
+
+@dataclass(frozen=True)
+class MeasurementModel:
+    """The estimator's model the information score predicts with (``estimator.iekf``'s
+    parameters): ``C_t`` and ``R`` as (along, across) the taxel normal (m), each point's
+    prior std (m), whether the correspondences filter by facing, and the re-grasp noise
+    ``Q`` (``(6, 6)`` over ``g``) the object's motion adds before every grasp after the
+    first."""
+
+    window_std_m: tuple[float, float]
+    noise_std_m: tuple[float, float]
+    point_std_m: float
+    facing_filter: bool
+    regrasp_noise: np.ndarray
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """How well the current estimate knows the object (m): the plane's offset std at the
+    object and the hidden side's RMS positional std, both from the plane-and-bias
+    covariance (:mod:`pipeline.estimation.uncertainty`)."""
+
+    plane_offset_std_m: float
+    hidden_side_std_m: float
+
+    def to_json(self) -> dict[str, float]:
+        return {
+            "plane_offset_std_mm": 1e3 * self.plane_offset_std_m,
+            "hidden_side_std_mm": 1e3 * self.hidden_side_std_m,
+        }
+
+
+def state_vector(stage: StageEstimate) -> np.ndarray:
+    """``g = (b_theta, b_x, b_y, b_z, m_r, m_theta)`` of a stage (about its bias pivot)."""
+    bias, plane = stage.bias, stage.plane
+    return np.array([bias.yaw_rad, *bias.translation_m, plane.offset_m, plane.theta_rad])
+
+
+def uncertainty(stage: StageEstimate) -> Uncertainty:
+    """The stop rule's two stds of ``stage`` (infinite when it has no covariance)."""
+    from .estimation.uncertainty import hidden_side_gram, hidden_side_std_m, plane_offset_std_m
+
+    covariance = np.asarray(stage.covariance, dtype=float)
+    if not np.all(np.isfinite(covariance)):
+        return Uncertainty(math.inf, math.inf)
+    g, pivot = state_vector(stage), stage.bias.pivot_m
+    gram = hidden_side_gram(stage.points, g, pivot)
+    return Uncertainty(
+        plane_offset_std_m(covariance, g, pivot), hidden_side_std_m(covariance, gram)
+    )
+
+
+def stop_reason(
+    known: Uncertainty, grasps_done: int, grasps_allowed: int, until_std_m: float | None
+) -> str:
+    """Why the trial stops after ``grasps_done`` grasps, or ``""`` to grasp again.
+
+    It stops when both stds of ``known`` are at most ``until_std_m`` (when given), else
+    when ``grasps_allowed`` grasps were made.
+    """
+    if until_std_m is not None and (
+        known.plane_offset_std_m <= until_std_m and known.hidden_side_std_m <= until_std_m
+    ):
+        return (
+            f"uncertainty reached: plane offset std {1e3 * known.plane_offset_std_m:.2f} mm and "
+            f"hidden side std {1e3 * known.hidden_side_std_m:.2f} mm <= "
+            f"{1e3 * until_std_m:g} mm after {grasps_done} grasp(s)"
+        )
+    if grasps_done >= grasps_allowed:
+        return f"grasps done: {grasps_done} of {grasps_allowed}"
+    return ""
+
+
+def model_for_planning(stage: StageEstimate) -> tuple[PointCloud, SymmetryInit]:
+    """The current model as a planner takes it: the visible points where the object was at
+    the last grasp (moved by the bias) and the symmetry plane moved with them; the
+    planner's completion mirrors the one through the other, which is the stage's model."""
+    cloud = PointCloud(stage.completed[: len(stage.points)])
+    plane = plane_after_bias(stage.plane, stage.bias)
+    return cloud, SymmetryInit(plane=plane, bias=Bias(pivot_m=cloud.points.mean(axis=0)))
+
+
+@dataclass(frozen=True)
+class PadApproach:
+    """A pad closing horizontally along ``direction`` through ``origin_m`` (frame R)."""
+
+    name: str
+    origin_m: np.ndarray
+    direction: np.ndarray
+    taxels: PadTaxels
+
+
+def pad_approaches(plan: GraspPlan, gripper: GripperSpec) -> list[PadApproach]:
+    """How each tactile pad of ``plan`` closes on the object: the PG-70's two jaws along
+    the hand's x axis (front pad ``left`` forward, ``right`` back), the SDH-2's three
+    distal pads along their fingers' facings from their bases. The pads' centre height is
+    that of the plan's predicted contacts (the hand's pad height is the planner's)."""
+    T = np.asarray(plan.T_robot_hand, dtype=float)
+    if len(plan.predicted_contacts) == 0:
+        return []
+    height_m = float(np.mean(np.asarray(plan.predicted_contacts)[:, 2]))
+    x_hand = np.array([T[0, 0], T[1, 0], 0.0]) / np.hypot(T[0, 0], T[1, 0])
+    pads = {pad.name: pad for pad in gripper.pads}
+    if gripper.fingers == 2:
+        front, back = (pads[name] for name in ("left", "right"))
+        origin = np.array([T[0, 3], T[1, 3], height_m])
+        return [
+            PadApproach(front.name, origin, x_hand, flat_pad_taxels(front, height_m)),
+            PadApproach(back.name, origin, -x_hand, flat_pad_taxels(back, height_m)),
+        ]
+    rotation = np.column_stack([x_hand[:2], [x_hand[1], -x_hand[0]]])
+    bases = T[:2, 3] + FINGER_BASES_M @ rotation.T
+    facings = finger_facings(plan.spread_rad) @ rotation.T
+    approaches = []
+    for finger, base, facing in zip(FINGERS, bases, facings, strict=True):
+        pad = pads[f"{finger}_distal"]
+        approaches.append(
+            PadApproach(
+                pad.name,
+                np.array([base[0], base[1], height_m]),
+                np.array([facing[0], facing[1], 0.0]),
+                sdh_distal_taxels(pad, height_m),
+            )
+        )
+    return approaches
+
+
+def _taxel_cells(points_m: np.ndarray, approach: PadApproach) -> np.ndarray:
+    """The row-major taxel cell (a pitch across the motion and in height) each point lies
+    in front of, -1 outside the pad's footprint."""
+    taxels = approach.taxels
+    lateral = np.array([-approach.direction[1], approach.direction[0], 0.0])
+    u = (points_m - approach.origin_m) @ lateral
+    cols = len(taxels.col_u)
+    col = np.round((u - taxels.col_u[0]) / taxels.pitch_m).astype(int)
+    gaps = np.abs(points_m[:, 2, None] - taxels.row_z[None, :])
+    row = np.argmin(gaps, axis=1)
+    inside = (col >= 0) & (col < cols) & (gaps[np.arange(len(row)), row] <= taxels.pitch_m / 2)
+    return np.where(inside, row * cols + col, -1)
+
+
+def facing_layer(points_m: np.ndarray, approach: PadApproach) -> np.ndarray:
+    """The points of ``points_m`` a pad can meet: in each of its taxel cells those within
+    :data:`LAYER_M` of the nearest one along its motion (a z-buffer seen from the pad), so
+    the far side of the model never counts as the surface in front of it."""
+    cells = _taxel_cells(points_m, approach)
+    inside = np.flatnonzero(cells >= 0)
+    depth = (points_m[inside] - approach.origin_m) @ approach.direction
+    nearest = np.full(cells.max(initial=-1) + 1, np.inf)
+    np.minimum.at(nearest, cells[inside], depth)
+    return points_m[inside[depth <= nearest[cells[inside]] + LAYER_M]]
+
+
+def predicted_contacts(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarray) -> Contacts:
+    """The taxels ``plan`` is predicted to touch on the completed model ``model_m``
+    (``(K, 3)``, frame R): each pad closes on the layer of the model facing it
+    (:func:`facing_layer`) until its first taxel meets it
+    (:func:`pipeline.perception.grasp_candidates.pad_coverage`), and every taxel whose cell
+    holds a touched model point reads a contact at the centroid of those points, its normal
+    the pad's closing direction."""
+    positions, normals, pads, indices = [], [], [], []
+    for approach in pad_approaches(plan, gripper):
+        contact = pad_coverage(
+            facing_layer(model_m, approach),
+            approach.origin_m,
+            approach.direction,
+            approach.taxels,
+            TOUCH_TOLERANCE_M,
+        )
+        if contact is None:
+            continue
+        cell = _taxel_cells(contact.points, approach)
+        for index in np.unique(cell[cell >= 0]):
+            positions.append(contact.points[cell == index].mean(axis=0))
+            normals.append(approach.direction)
+            pads.append(approach.name)
+            indices.append(int(index))
+    if not positions:
+        return Contacts(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, str), np.zeros(0, int))
+    return Contacts(np.array(positions), np.array(normals), pads, indices)
+
+
+def information_scores(
+    stage: StageEstimate,
+    plans: tuple[GraspPlan, ...],
+    gripper: GripperSpec,
+    model: MeasurementModel,
+) -> list[float]:
+    """Each plan's expected reduction of the hidden side's mean squared positional std
+    (m^2) if its predicted taxels were fused into ``stage`` (module docstring), from the
+    covariance the estimator will fuse them with: ``stage``'s plus the re-grasp noise. All
+    zero when ``stage`` has no finite covariance (the planner's best is then taken)."""
+    from .estimation.correspondences import PointIndex
+    from .estimation.problem import grasp_contacts
+    from .estimation.uncertainty import (
+        hidden_side_gain_m2,
+        hidden_side_gram,
+        predicted_measurement,
+    )
+
+    covariance = np.asarray(stage.covariance, dtype=float) + model.regrasp_noise
+    if not np.all(np.isfinite(covariance)):
+        return [0.0] * len(plans)  # an estimator without a covariance: nothing to rank by
+    g, pivot, points = state_vector(stage), stage.bias.pivot_m, stage.points
+    gram = hidden_side_gram(points, g, pivot)
+    index = PointIndex(points)
+    variance = np.full(len(points), model.point_std_m**2)
+    scores = []
+    for plan in plans:
+        contacts = predicted_contacts(plan, gripper, stage.completed)
+        if len(contacts) == 0:
+            scores.append(0.0)
+            continue
+        taxels = grasp_contacts(
+            contacts, model.window_std_m, model.noise_std_m, model.facing_filter
+        )
+        jacobian, nuisance = predicted_measurement(
+            index, points, g, pivot, taxels, covariance, variance
+        )
+        scores.append(hidden_side_gain_m2(covariance, jacobian, nuisance, gram))
+    return scores
+
+
+@dataclass(frozen=True)
+class NextGraspChoice:
+    """The next grasp and why.
+
+    Attributes:
+        plan: the plan to execute (refused when the planner found none).
+        strategy: the strategy that chose it.
+        alternatives: the feasible plans it chose among.
+        scores: the information score of each alternative (m^2), ``information`` only.
+        chosen: index of ``plan`` among ``alternatives`` (None when refused).
+    """
+
+    plan: GraspPlan
+    strategy: str
+    alternatives: tuple[GraspPlan, ...] = ()
+    scores: tuple[float, ...] = ()
+    chosen: int | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "strategy": self.strategy,
+            "alternatives": len(self.alternatives),
+            "chosen": self.chosen,
+            "scores_mm2": [1e6 * s for s in self.scores],
+        }
+
+
+def choose_next_grasp(
+    strategy: str,
+    planner: Any,
+    stage: StageEstimate,
+    gripper: GripperSpec,
+    model: MeasurementModel,
+    rng: np.random.Generator,
+) -> NextGraspChoice:
+    """Plan the next grasp on ``stage``'s model with ``planner`` (a
+    :class:`pipeline.stages.GraspPlanner`) and pick it by ``strategy``."""
+    cloud, proposal = model_for_planning(stage)
+    if strategy == "paper":
+        return NextGraspChoice(planner.plan(cloud, proposal, gripper), strategy)
+    alternatives = tuple(planner.alternatives(cloud, proposal, gripper))
+    if not alternatives:
+        return NextGraspChoice(planner.plan(cloud, proposal, gripper), strategy)
+    if strategy == "random":
+        chosen = int(rng.integers(len(alternatives)))
+        return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
+    scores = tuple(information_scores(stage, alternatives, gripper, model))
+    chosen = int(np.argmax(scores))
+    return NextGraspChoice(alternatives[chosen], strategy, alternatives, scores, chosen)

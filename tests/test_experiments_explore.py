@@ -1,0 +1,83 @@
+"""`symfuse sweep explore`: its grid and its report on hand-made rows."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from pipeline.cli import main
+from pipeline.experiments import ExperimentOptions, explore
+
+
+def test_grid_is_objects_by_yaws_by_strategies(tmp_path):
+    quick = explore.tasks(ExperimentOptions(quick=True))
+    assert [t.key for t in quick] == [
+        f"{name}/yaw00/{s}" for name in ("cd_drive", "spray_bottle") for s in explore.STRATEGIES
+    ]
+    # Yaw by yaw: every object's first pose comes before any second pose.
+    poses = [t.key.split("/")[1] for t in explore.tasks(ExperimentOptions(repeats=2))]
+    assert poses == sorted(poses)
+    # The three strategies of a pose share its scene (seed, yaw) and differ in the rule.
+    first = [t.params for t in quick[:3]]
+    assert len({(p["seed"], p["yaw_deg"]) for p in first}) == 1
+    assert [p["overrides"][2] for p in first] == [
+        f"trial.next_grasp={s}" for s in explore.STRATEGIES
+    ]
+    scan = tmp_path / "scans" / "007_thing" / "textured.obj"
+    scan.parent.mkdir(parents=True)
+    scan.write_text("v 0 0 0\n")
+    full = explore.tasks(ExperimentOptions(repeats=2, scans=tmp_path / "scans"))
+    labels = {t.params["label"] for t in full}
+    assert "007_thing" in labels and "sedan" in labels
+    assert len(full) == len(labels) * 2 * len(explore.STRATEGIES)
+    assert {t.params["object"] for t in full if t.params["label"] == "007_thing"} == {str(scan)}
+
+
+def _row(label, strategy, deviations, consistent, yaw=0.0):
+    row = {
+        "key": f"{label}/{strategy}",
+        "params": {"label": label, "strategy": strategy, "yaw_deg": yaw},
+        "failed": None,
+        "status": "converged",
+        "grasps_made": len(deviations),
+    }
+    for k, (dev, ok) in enumerate(zip(deviations, consistent, strict=True), start=1):
+        row[f"grasp{k}_stage2_deviation_median_mm"] = dev
+        row[f"grasp{k}_stage2_consistent"] = ok
+        row[f"grasp{k}_stage2_plane_angle_error_deg"] = 1.0
+        row[f"grasp{k}_stage2_plane_offset_error_mm"] = 1.0
+    return row
+
+
+def test_report_counts_gains_and_worse_grasps(tmp_path):
+    rows = [
+        # A hard pose (4 mm after the first grasp); the random trial stopped after grasp 2.
+        _row("a", "paper", [4.0, 3.5, 3.0], [True, True, True]),
+        _row("a", "random", [4.0, 3.0], [True, False]),
+        _row("a", "information", [4.0, 2.0, 1.0], [True, True, True]),
+        # An easy pose: not in the second-grasp table; information worse by the truth once.
+        _row("b", "paper", [1.0, 1.0, 1.0], [True, True, True], yaw=1.0),
+        _row("b", "random", [1.0, 1.2, 1.1], [True, True, True], yaw=1.0),
+        _row("b", "information", [1.0, 1.8, 1.0], [True, True, True], yaw=1.0),
+    ]
+    assert explore.worse_counts(rows[1:2]) == (1, 1, 0, 1, 1)
+    assert explore.worse_counts(rows[5:6]) == (2, 0, 1, 1, 0)
+    assert [r["key"] for r in explore.hard_rows(rows)] == ["a/paper", "a/random", "a/information"]
+    assert explore.second_grasp_gain(rows[2:3]) == (2.0, 2.0)
+    # A trial that stopped early keeps its last estimate.
+    assert explore.after_grasp(rows[1], 3, "stage2_deviation_median_mm") == 3.0
+    written = explore.report(rows, tmp_path)
+    assert [Path(p).name for p in written] == ["results.csv", "explore.png", "report.md"]
+    text = (tmp_path / "report.md").read_text()
+    assert "| information | 1 | 2.00 | 2.00 |" in text
+    assert "Information's mean reduction is 2.00x random's (target >= 1.3x): yes." in text
+    assert "| random | 3 | 1 (33.3 %) | 0 (0.0 %) | 2 | 1 (50.0 %) |" in text
+    assert "| information | 4 | 0 (0.0 %) | 1 (25.0 %) | 2 | 0 (0.0 %) |" in text
+
+
+@pytest.mark.parametrize("experiment", ["table1"])
+def test_scans_only_for_experiments_that_read_them(experiment, tmp_path, capsys):
+    code = main(["sweep", experiment, "--scans", str(tmp_path), "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert "grasps no scans" in capsys.readouterr().err

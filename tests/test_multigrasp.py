@@ -1,0 +1,198 @@
+"""Several grasps per trial: the loop in PyBullet, `fuse` replaying it, the stop rule, the
+predicted taxels and the choice of the next grasp."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.cli import main
+from pipeline.next_grasp import (
+    MeasurementModel,
+    Uncertainty,
+    choose_next_grasp,
+    predicted_contacts,
+    stop_reason,
+)
+from pipeline.perception.grasp_geometry import hand_pose
+from pipeline.sim.hands import GRIPPERS
+from pipeline.types import Bias, GraspPlan, StageEstimate, SymmetryPlane
+
+
+@pytest.fixture(scope="module")
+def two_grasps(tmp_path_factory):
+    out = tmp_path_factory.mktemp("two-grasps")
+    code = main(["trial", "--grasps", "2", "--next-grasp", "information", "--out", str(out)])
+    assert code == 0
+    return out
+
+
+def test_two_grasp_trial_records_each_grasp(two_grasps):
+    document = json.loads((two_grasps / "result.json").read_text())
+    grasps = document["grasps"]
+    assert [g["grasp"] for g in grasps] == [1, 2]
+    assert grasps[0]["chosen_by"] == {"strategy": "first"}
+    assert grasps[1]["chosen_by"]["strategy"] == "information"
+    assert grasps[1]["chosen_by"]["alternatives"] >= 1
+    scores = grasps[1]["chosen_by"]["scores_mm2"]
+    assert scores[grasps[1]["chosen_by"]["chosen"]] == max(scores) > 0.0
+    for grasp in grasps:
+        assert grasp["executed"] and grasp["taxels_in_contact"] > 20
+        assert grasp["pads_in_contact"] == ["left", "right"]
+        assert [s["stage"] for s in grasp["stages"]] == [0, 1, 2]
+        assert "deviation_m" in grasp["stages"][2]["metrics"]
+        assert grasp["uncertainty"]["plane_offset_std_mm"] > 0.0
+    # Fusing grasps never loses what the first taught: the second estimate is as good.
+    after = [g["stages"][g["selected_stage"]]["metrics"]["deviation_m"]["median"] for g in grasps]
+    assert after[1] < after[0] + 0.0005
+    assert document["stop_reason"] == "grasps done: 2 of 2"
+    assert document["taxels_in_contact"] == sum(g["taxels_in_contact"] for g in grasps)
+    # The result's stages are the estimate after the last grasp.
+    assert document["stages"][2]["plane"] == grasps[1]["stages"][2]["plane"]
+    contacts = json.loads((two_grasps / "contacts.json").read_text())
+    assert [len(g["taxels"]) for g in contacts["grasps"]] == [
+        g["taxels_in_contact"] for g in grasps
+    ]
+    assert (two_grasps / "grasps.png").is_file()
+
+
+def test_fuse_on_a_multi_grasp_contacts_file_reproduces_the_final_estimate(two_grasps, tmp_path):
+    init = json.loads((two_grasps / "result.json").read_text())["init"]
+    plane = ",".join(repr(v) for v in (*init["plane"]["normal"], init["plane"]["offset"]))
+    code = main(
+        [
+            "fuse",
+            "--cloud", str(two_grasps / "cloud.ply"),
+            "--contacts", str(two_grasps / "contacts.json"),
+            "--config", str(two_grasps / "config.toml"),
+            "--plane", plane,
+            "--out", str(tmp_path / "fused"),
+        ]
+    )  # fmt: skip
+    assert code == 0
+    trial = json.loads((two_grasps / "result.json").read_text())["stages"]
+    fused = json.loads((tmp_path / "fused" / "result.json").read_text())["stages"]
+    assert [len({t["grasp"] for t in s["trace"]}) for s in fused[1:]] == [2, 2]
+    for a, b in zip(trial, fused, strict=True):
+        assert a["plane"]["normal"] == pytest.approx(b["plane"]["normal"], abs=1e-9)
+        assert a["plane"]["offset"] == pytest.approx(b["plane"]["offset"], abs=1e-9)
+        assert a["bias"]["translation"] == pytest.approx(b["bias"]["translation"], abs=1e-9)
+        assert a["bias"]["yaw"] == pytest.approx(b["bias"]["yaw"], abs=1e-9)
+        assert np.allclose(a["covariance"], b["covariance"], atol=1e-12)
+
+
+def test_until_std_stops_once_the_model_is_known_well_enough(tmp_path):
+    out = tmp_path / "stop"
+    code = main(
+        ["trial", "--grasps", "3", "--until-std", "20", "--set", "trial.pictures=false",
+         "--out", str(out)]
+    )  # fmt: skip
+    assert code == 0
+    document = json.loads((out / "result.json").read_text())
+    assert len(document["grasps"]) == 1
+    assert document["stop_reason"].startswith("uncertainty reached: ")
+    assert "after 1 grasp(s)" in document["stop_reason"]
+
+
+def test_stop_rule():
+    known = Uncertainty(plane_offset_std_m=0.0008, hidden_side_std_m=0.0015)
+    assert stop_reason(known, 1, 3, None) == ""
+    assert stop_reason(known, 1, 3, 0.001) == ""  # the hidden side is not known well enough
+    assert stop_reason(known, 1, 3, 0.0015).startswith("uncertainty reached: ")
+    assert stop_reason(known, 3, 3, 0.001) == "grasps done: 3 of 3"
+    unknown = Uncertainty(math.inf, math.inf)
+    assert stop_reason(unknown, 2, 3, 0.05) == ""
+
+
+def _box_stage(thickness=0.04, length=0.12, height=0.08, centre=(0.5, 0.0)):
+    """Stage 0 of a box seen from -x: its front face and a plane through the middle."""
+    y, z = np.meshgrid(np.linspace(-length / 2, length / 2, 81), np.linspace(0.0, height, 55))
+    x0 = centre[0] - thickness / 2
+    points = np.column_stack([np.full(y.size, x0), centre[1] + y.ravel(), z.ravel()])
+    plane = SymmetryPlane(theta_rad=0.0, offset_m=centre[0])
+    completed = np.vstack([points, plane.mirror(points)])
+    return StageEstimate(
+        stage=0,
+        plane=plane,
+        bias=Bias(pivot_m=points.mean(axis=0)),
+        covariance=np.diag([0.05, 0.01, 0.01, 0.002, 0.03, 0.4]) ** 2,
+        points=points,
+        completed=completed,
+        iterations=0,
+        status="initial",
+        seconds=0.0,
+    )
+
+
+def _plan(y_m, height_m=0.04, gripper="pg70"):
+    position = np.array([0.5, y_m, height_m + 0.125])
+    return GraspPlan(
+        gripper=gripper,
+        status="ok",
+        T_robot_hand=hand_pose(position, np.array([1.0, 0.0, 0.0])),
+        pregrasp_height_m=0.1,
+        opening_m=0.065,
+        closing_direction=np.array([1.0, 0.0, 0.0]),
+        predicted_contacts=np.array([[0.48, y_m, height_m]]),
+    )
+
+
+def test_predicted_taxels_lie_on_both_faces_of_the_model():
+    stage = _box_stage()
+    contacts = predicted_contacts(_plan(0.0), GRIPPERS["pg70"], stage.completed)
+    left, right = contacts.pads == "left", contacts.pads == "right"
+    # The PG-70's pads are 6 x 14 taxels of 3.4 mm: all of them on faces this large.
+    assert left.sum() == right.sum() == 84
+    assert np.allclose(contacts.positions[left, 0], 0.48, atol=1e-6)
+    assert np.allclose(contacts.positions[right, 0], 0.52, atol=1e-6)
+    assert np.allclose(contacts.normals[left], [1.0, 0.0, 0.0])
+    assert np.allclose(contacts.normals[right], [-1.0, 0.0, 0.0])
+    assert np.all(np.abs(contacts.positions[:, 2] - 0.04) < 0.025)
+    # Past the end of the box only part of each pad touches.
+    edge = predicted_contacts(_plan(0.06), GRIPPERS["pg70"], stage.completed)
+    assert 0 < len(edge) < len(contacts)
+
+
+class _Planner:
+    """A planner stand-in: fixed alternatives, and the first as its own plan."""
+
+    def __init__(self, plans):
+        self.plans = tuple(plans)
+
+    def plan(self, cloud, proposal, gripper):
+        return self.plans[0]
+
+    def alternatives(self, cloud, proposal, gripper):
+        return self.plans
+
+
+MODEL = MeasurementModel((0.003, 0.0017), (0.001, 0.003), 0.002, True, np.zeros((6, 6)))
+
+
+def test_strategies_choose_among_the_alternatives():
+    stage = _box_stage()
+    far = _plan(0.0)
+    # A grasp beside the box touches nothing: it teaches nothing.
+    plans = [_plan(0.3), far, _plan(0.04)]
+    planner = _Planner(plans)
+    gripper = GRIPPERS["pg70"]
+    paper = choose_next_grasp("paper", planner, stage, gripper, MODEL, np.random.default_rng(0))
+    assert paper.plan is plans[0] and paper.alternatives == ()
+    informed = choose_next_grasp(
+        "information", planner, stage, gripper, MODEL, np.random.default_rng(0)
+    )
+    assert informed.scores[0] == 0.0
+    assert informed.chosen == int(np.argmax(informed.scores)) != 0
+    draws = [
+        choose_next_grasp("random", planner, stage, gripper, MODEL, np.random.default_rng(s)).chosen
+        for s in range(20)
+    ]
+    assert set(draws) == {0, 1, 2}
+    again = [
+        choose_next_grasp("random", planner, stage, gripper, MODEL, np.random.default_rng(s)).chosen
+        for s in range(20)
+    ]
+    assert draws == again
