@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from .metrics import plane_after_bias
-from .perception.grasp_candidates import (
+from .perception.pad_contact import (
     PadTaxels,
     flat_pad_taxels,
     pad_coverage,
@@ -207,7 +207,7 @@ def predicted_contacts(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarra
     """The taxels ``plan`` is predicted to touch on the completed model ``model_m``
     (``(K, 3)``, frame R): each pad closes on the layer of the model facing it
     (:func:`facing_layer`) until its first taxel meets it
-    (:func:`pipeline.perception.grasp_candidates.pad_coverage`), and every taxel whose cell
+    (:func:`pipeline.perception.pad_contact.pad_coverage`), and every taxel whose cell
     holds a touched model point reads a contact at the centroid of those points, its normal
     the pad's closing direction."""
     positions, normals, pads, indices = [], [], [], []

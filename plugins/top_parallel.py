@@ -9,14 +9,10 @@ import numpy as np
 from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.params import param
+from pipeline.perception.candidate import Candidate, CandidateParams, candidate_frame
 from pipeline.perception.grasp_candidates import (
-    Candidate,
-    CandidateParams,
     CandidatePlanner,
-    ParallelHand,
-    candidate_frame,
     closing_angles,
-    parallel_candidate,
     plan_from_candidates,
 )
 from pipeline.perception.grasp_geometry import (
@@ -26,6 +22,7 @@ from pipeline.perception.grasp_geometry import (
     parallel_top_grasp,
     rotate_z,
 )
+from pipeline.perception.parallel_candidates import ParallelHand, parallel_candidate
 from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
 
 
@@ -38,7 +35,7 @@ class TopParallel(CandidatePlanner):
     the object's top (the limits below); each candidate is kept when both jaws and the
     housing descend clear of the cloud, and ranked by its predicted pad contact on both
     sides, its alignment with the plane normal and its tipping lever
-    (:mod:`pipeline.perception.grasp_candidates`). ``GraspPlan.candidates`` holds the
+    (:mod:`pipeline.perception.candidate`). ``GraspPlan.candidates`` holds the
     ranking. The housing (``robots/pg70.urdf``: 112 x 80 mm, 78 mm deep) must pass
     ``descent_clearance_m`` above the object.
 

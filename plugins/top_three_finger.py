@@ -9,16 +9,11 @@ import numpy as np
 from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.params import param
+from pipeline.perception.candidate import Candidate, CandidateParams, candidate_frame
 from pipeline.perception.grasp_candidates import (
-    SDH_SPREADS,
-    Candidate,
-    CandidateParams,
     CandidatePlanner,
-    candidate_frame,
     closing_angles,
     plan_from_candidates,
-    sdh_candidate,
-    sdh_flat_part_edge_m,
 )
 from pipeline.perception.grasp_geometry import (
     SDH_FINGER_ANGLES_RAD,
@@ -31,6 +26,8 @@ from pipeline.perception.grasp_geometry import (
     pad_band,
     rotate_z,
 )
+from pipeline.perception.pad_contact import sdh_flat_part_edge_m
+from pipeline.perception.sdh_candidates import SDH_SPREADS, sdh_candidate
 from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
 
 
@@ -46,7 +43,7 @@ class TopThreeFinger(CandidatePlanner):
     the completed cloud; the palm height puts the pads at the chosen height there; the
     pre-shape is the most closed opening at which fingers, knuckles and palm descend
     ``descent_clearance_m`` clear of the cloud
-    (:func:`pipeline.perception.grasp_candidates.sdh_candidate`). Candidates are ranked by
+    (:func:`pipeline.perception.sdh_candidates.sdh_candidate`). Candidates are ranked by
     predicted pad contact, alignment with the plane normal and tipping lever;
     ``GraspPlan.candidates`` holds the ranking.
 

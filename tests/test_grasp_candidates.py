@@ -11,12 +11,8 @@ import yourdfpy
 from test_planners import _true_plane, _view
 
 from pipeline.perception import sdh_geometry as sdh
-from pipeline.perception.grasp_candidates import (
-    flat_pad_taxels,
-    height_grid,
-    pad_coverage,
-    sdh_distal_taxels,
-)
+from pipeline.perception.candidate import height_grid
+from pipeline.perception.pad_contact import flat_pad_taxels, pad_coverage, sdh_distal_taxels
 from pipeline.synthetic import box_object, cylinder_object
 from pipeline.types import PadLayout
 from plugins.top_parallel import TopParallel

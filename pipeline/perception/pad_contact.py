@@ -1,0 +1,160 @@
+"""Predicted pad contact: a vertical pad's taxel grid (:class:`PadTaxels`; flat, or an
+SDH-2 distal pad with its curved tip) moving horizontally toward a sampled surface, where
+it first touches, how much of it then touches and how inclined the surface is there
+(:func:`pad_coverage`). Grasp candidates score their contacts with it
+(:mod:`pipeline.perception.candidate`), and :mod:`pipeline.next_grasp` predicts the
+contacts a next grasp would add.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..pad_layout import pad_grid
+from ..types import PadLayout
+from . import sdh_geometry as sdh
+
+
+@dataclass(frozen=True)
+class PadContact:
+    """Where a pad moving toward the surface stops and how much of it touches.
+
+    Attributes:
+        touch_m: position of the pad's flat surface along its motion when it stops (m).
+        coverage: fraction of its taxels within the tolerance of the surface then.
+        points: ``(K, 3)`` surface points under those taxels.
+        inclination_rad: angle between the surface's normal there and the pad's.
+    """
+
+    touch_m: float
+    coverage: float
+    points: np.ndarray
+    inclination_rad: float = 0.0
+
+    @property
+    def quality(self) -> float:
+        """Coverage times ``cos^2`` of the inclination: an inclined surface takes the pad's
+        force partly along itself, and the pad slides off it."""
+        return self.coverage * math.cos(self.inclination_rad) ** 2
+
+
+#: Fewest taxel rows a pad must touch for its contact to be a side of the object.
+_MIN_CONTACT_ROWS = 3
+
+
+@dataclass(frozen=True)
+class PadTaxels:
+    """A vertical pad's taxel grid as it moves horizontally (metres): ``col_u`` the
+    columns' offsets across the motion (evenly ``pitch_m`` apart), ``row_z`` the rows'
+    heights, ``row_recess`` how far each row lies behind the pad's flat surface (a tip
+    curving away from the object)."""
+
+    col_u: np.ndarray
+    row_z: np.ndarray
+    row_recess: np.ndarray
+    pitch_m: float
+
+
+def flat_pad_taxels(pad: PadLayout, centre_z_m: float) -> PadTaxels:
+    """A flat vertical pad, rows along z around ``centre_z_m``."""
+    positions, _ = pad_grid(pad.rows, pad.cols, pad.pitch_m)
+    grid = positions.reshape(pad.rows, pad.cols, 3)
+    return PadTaxels(grid[0, :, 1], centre_z_m - grid[:, 0, 0], np.zeros(pad.rows), pad.pitch_m)
+
+
+def sdh_flat_part_edge_m(pad: PadLayout) -> float:
+    """How far below the SDH-2 distal pad's centre its flat rows end (negative: above
+    it): the curved tip rows below them lie back from a side the pad presses on."""
+    flat_rows = pad.rows - sdh.DISTAL_PAD_CURVED_ROWS
+    return (flat_rows - (pad.rows - 1) / 2.0 - 0.5) * pad.pitch_m
+
+
+def sdh_distal_taxels(pad: PadLayout, centre_z_m: float) -> PadTaxels:
+    """An SDH-2 distal pad on a vertical distal link: rows along the link toward the tip
+    (down), the curved tip rows recessed behind the flat surface."""
+    positions, _ = pad_grid(
+        pad.rows, pad.cols, pad.pitch_m, sdh.DISTAL_PAD_CURVED_ROWS, sdh.DISTAL_PAD_CURVE_RADIUS_M
+    )
+    grid = positions.reshape(pad.rows, pad.cols, 3)
+    return PadTaxels(grid[0, :, 1], centre_z_m - grid[:, 0, 0], -grid[:, 0, 2], pad.pitch_m)
+
+
+def pad_coverage(
+    points_robot: np.ndarray,
+    origin_m: np.ndarray,
+    direction: np.ndarray,
+    taxels: PadTaxels,
+    tolerance_m: float,
+) -> PadContact | None:
+    """Predict a pad's contact with the surface sampled by ``points_robot``.
+
+    The pad moves along ``direction`` (horizontal unit); its columns are offset across the
+    motion from the line through ``origin_m``. Each taxel sees the points within half a
+    pitch of it across and in height; their median position along ``direction`` is the
+    surface in front of it. The pad stops when its first taxel reaches the surface; the
+    taxels whose surface is then within ``tolerance_m`` count as touching.
+
+    Returns:
+        The contact, or None when no point lies in front of any taxel or the touching
+        taxels span fewer than three rows (about 10 mm: the pad meets an edge or a
+        horizontal top, not a side).
+    """
+    direction = np.asarray(direction, dtype=np.float64)
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    half = taxels.pitch_m / 2.0
+    z = points_robot[:, 2]
+    relative = points_robot - origin_m
+    u = relative @ lateral
+    near = (
+        (u >= taxels.col_u.min() - half)
+        & (u <= taxels.col_u.max() + half)
+        & (z >= taxels.row_z.min() - half)
+        & (z <= taxels.row_z.max() + half)
+    )
+    u, z, relative, kept = u[near], z[near], relative[near], points_robot[near]
+    cols = len(taxels.col_u)
+    col = np.clip(np.round((u - taxels.col_u[0]) / taxels.pitch_m).astype(int), 0, cols - 1)
+    order = np.argsort(taxels.row_z)
+    sorted_z = taxels.row_z[order]
+    row = order[np.searchsorted((sorted_z[1:] + sorted_z[:-1]) / 2.0, z)]
+    inside = np.abs(z - taxels.row_z[row]) <= half
+    if not np.any(inside):
+        return None
+    taxel = (row * cols + col)[inside]
+    depth, kept = (relative @ direction)[inside], kept[inside]
+    by_taxel = np.lexsort((depth, taxel))
+    taxel, depth, kept = taxel[by_taxel], depth[by_taxel], kept[by_taxel]
+    seen, first, counts = np.unique(taxel, return_index=True, return_counts=True)
+    surface = depth[first + counts // 2] + taxels.row_recess[seen // cols]
+    # The first touch: the nearest surface seen by at least two points (a single point may
+    # be a mixed pixel at the silhouette).
+    supported = counts >= 2
+    touch = float(surface[supported].min() if np.any(supported) else surface.min())
+    touching = seen[surface <= touch + tolerance_m]
+    if len(np.unique(touching // cols)) < _MIN_CONTACT_ROWS:
+        return None  # an edge or a horizontal top, not a side
+    return PadContact(
+        touch_m=touch + float(origin_m @ direction),
+        coverage=len(touching) / (len(taxels.row_z) * cols),
+        points=kept[np.isin(taxel, touching)],
+        inclination_rad=_inclination(
+            taxels.col_u[seen % cols], taxels.row_z[seen // cols], surface, touch, tolerance_m
+        ),
+    )
+
+
+def _inclination(
+    u: np.ndarray, z: np.ndarray, surface: np.ndarray, touch: float, tolerance_m: float
+) -> float:
+    """Angle between the pad's normal and the surface's, from a plane
+    ``surface = a + b u + c z`` fitted over the taxels whose surface lies within three
+    tolerances of the touch (too few of them, or a degenerate layout: 0)."""
+    near = surface <= touch + 3.0 * tolerance_m
+    design = np.column_stack([np.ones(np.count_nonzero(near)), u[near], z[near]])
+    if len(design) < 4 or np.linalg.matrix_rank(design) < 3:
+        return 0.0
+    _, b, c = np.linalg.lstsq(design, surface[near], rcond=None)[0]
+    return float(np.arctan(np.hypot(b, c)))

@@ -1,0 +1,124 @@
+"""Parallel-jaw grasp candidates: a jaw gripper's geometry (:class:`ParallelHand`) and one
+candidate closing along a direction at a height (:func:`parallel_candidate`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..types import GraspCandidate, PadLayout
+from .candidate import (
+    MIN_HITS,
+    Candidate,
+    CandidateSettings,
+    candidate_score,
+    footprint_half_m,
+)
+from .grasp_geometry import hand_pose
+from .pad_contact import flat_pad_taxels, pad_coverage
+
+
+@dataclass(frozen=True)
+class ParallelHand:
+    """A parallel-jaw gripper's geometry (m) for :func:`parallel_candidate`."""
+
+    pad: PadLayout
+    aperture_m: float
+    palm_to_pad_centre_m: float
+    pad_centre_to_fingertip_m: float
+    jaw_half_width_m: float
+    housing_half_length_m: float
+    housing_half_width_m: float
+    housing_depth_m: float
+
+
+def parallel_candidate(
+    visible: np.ndarray,
+    completed: np.ndarray,
+    centre_m: np.ndarray,
+    direction: np.ndarray,
+    angle_rad: float,
+    height_m: float,
+    hand: ParallelHand,
+    settings: CandidateSettings,
+    *,
+    jaw_clearance_m: float,
+    back_margin_m: float,
+) -> Candidate:
+    """A parallel-jaw grasp closing along ``direction`` (front to back) through ``centre_m``
+    with the pad centres at ``height_m``.
+
+    Both jaws descend clear of every point above the fingertips between their paths: the
+    front jaw ``jaw_clearance_m`` before the visible surface there, or less (down to
+    ``settings.descent_clearance_m``) when the object leaves less room in the aperture; the
+    back jaw at least that plus ``back_margin_m`` behind the completed back, whose position
+    is only the mirror plane's guess. The housing must pass above the object's top.
+    """
+    s = settings
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    fingertip_z = height_m - hand.pad_centre_to_fingertip_m
+    if fingertip_z < s.table_height_m + s.table_clearance_m:
+        return Candidate.rejected(angle_rad, height_m, 0.0, "fingertips below the table clearance")
+
+    def column(points: np.ndarray) -> np.ndarray:
+        across = np.abs((points - centre_m) @ lateral)
+        return points[(across <= hand.jaw_half_width_m) & (points[:, 2] >= fingertip_z)]
+
+    front_points, all_points = column(visible), column(completed)
+    if len(front_points) == 0:
+        return Candidate.rejected(angle_rad, height_m, 0.0, "no visible surface between the jaws")
+    front = float(np.percentile(front_points @ direction, 2.0))
+    back = float(np.percentile(all_points @ direction, 98.0))
+    width = back - front
+    room = hand.aperture_m - width - back_margin_m
+    if room < 2.0 * s.descent_clearance_m:
+        return Candidate.rejected(
+            angle_rad,
+            height_m,
+            0.0,
+            f"{width * 1e3:.0f} mm wide between the jaws' paths, aperture "
+            f"{hand.aperture_m * 1e3:.0f} mm",
+        )
+    front_pad = front - min(jaw_clearance_m, room / 2.0)
+    middle = front_pad + hand.aperture_m / 2.0
+    position = centre_m + (middle - centre_m @ direction) * direction
+    position[2] = height_m + hand.palm_to_pad_centre_m
+    housing_bottom = position[2] - hand.housing_depth_m
+    offset = completed - position
+    under_housing = (
+        (np.abs(offset @ direction) <= hand.housing_half_length_m + s.descent_clearance_m)
+        & (np.abs(offset @ lateral) <= hand.housing_half_width_m + s.descent_clearance_m)
+        & (completed[:, 2] >= housing_bottom - s.descent_clearance_m)
+    )
+    if np.count_nonzero(under_housing) >= MIN_HITS:
+        return Candidate.rejected(
+            angle_rad, height_m, 0.0, "the housing would hit the object's top"
+        )
+
+    contacts = []
+    taxels = flat_pad_taxels(hand.pad, height_m)
+    for points, sign in ((visible, 1.0), (completed, -1.0)):
+        contact = pad_coverage(points, position, sign * direction, taxels, s.touch_tolerance_m)
+        if contact is None:
+            side = "front" if sign > 0 else "back"
+            return Candidate.rejected(angle_rad, height_m, 0.0, f"no surface before the {side} pad")
+        contacts.append(contact)
+    coverages = tuple(c.quality for c in contacts)
+    tipping = (height_m - s.table_height_m) / footprint_half_m(completed, direction)
+    return Candidate(
+        GraspCandidate(
+            closing_angle_deg=math.degrees(angle_rad),
+            height_m=height_m,
+            spread_deg=0.0,
+            width_m=width,
+            contact_coverage=coverages,
+            tipping_ratio=tipping,
+            score=candidate_score(coverages, angle_rad, tipping, s.tipping_weight),
+            feasible=True,
+        ),
+        T_robot_hand=hand_pose(position, direction),
+        opening_m=hand.aperture_m,
+        predicted_contacts=contacts[0].points,
+    )

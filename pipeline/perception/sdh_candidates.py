@@ -1,0 +1,264 @@
+"""SDH-2 grasp candidates: one candidate at a pre-shape (base rotation, :data:`SDH_SPREADS`),
+closing direction and pad height (:func:`sdh_candidate`), with the fingers' predicted
+contacts, the pre-shape search and the closing check it needs."""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from ..types import GraspCandidate, PadLayout
+from . import sdh_geometry as sdh
+from .candidate import (
+    MIN_HITS,
+    Candidate,
+    CandidateSettings,
+    candidate_score,
+    footprint_half_m,
+)
+from .grasp_geometry import hand_pose
+from .pad_contact import PadContact, PadTaxels, pad_coverage, sdh_distal_taxels
+
+#: SDH-2 pre-shapes: base rotation -> where the object's centre sits on the palm's x axis
+#: (m): at 60 deg the fingers face the palm axis; at 0 fingers 1 and 2 face the thumb and
+#: the object sits midway between the thumb's base and theirs.
+SDH_SPREADS = {
+    math.radians(60.0): 0.0,
+    0.0: (sdh.FINGER_BASES_M[0, 0] + sdh.FINGER_BASES_M[2, 0]) / 2.0,
+}
+#: Steps of the pre-shape search: proximal angles tried below the contact angle (rad).
+_OPEN_STEP_RAD = math.radians(3.0)
+
+
+def sdh_candidate(
+    visible: np.ndarray,
+    completed: np.ndarray,
+    centre_m: np.ndarray,
+    direction: np.ndarray,
+    angle_rad: float,
+    height_m: float,
+    spread_rad: float,
+    pad: PadLayout,
+    aperture_m: float,
+    settings: CandidateSettings,
+) -> Candidate:
+    """An SDH-2 grasp at base rotation ``spread_rad`` (a key of :data:`SDH_SPREADS`), the
+    palm's x axis along ``direction`` (thumb on the front side), distal pad centres at
+    ``height_m``. Fingers 1 and 2 facing the thumb (spread 0) need the object as wide as
+    their two pads across the closing line.
+
+    Each finger's contact angle is the proximal angle at which its distal pad (distal link
+    parallel to the palm axis) touches the ``completed`` cloud (``visible`` and mirrored)
+    (:func:`pad_coverage`); the palm
+    height puts the pads' centres at ``height_m`` at those angles. The pre-shape is the
+    most closed common proximal angle, at least 3 deg before the earliest contact, at which
+    every finger, the knuckles and the palm descend clear of the cloud
+    (:func:`sdh_geometry.finger_profile`); ``opening_m`` is that pre-shape's opening. From
+    there to its contact no finger's knuckle or proximal link may meet the cloud
+    (:func:`sdh_geometry.closing_hits`).
+    """
+    s = settings
+    x_hand = np.array([direction[0], direction[1], 0.0])
+    y_hand = np.array([direction[1], -direction[0], 0.0])
+    palm_xy = centre_m - SDH_SPREADS[spread_rad] * x_hand
+    rotation = np.column_stack([x_hand[:2], y_hand[:2]])
+    facings = sdh.finger_facings(spread_rad) @ rotation.T
+    taxels = sdh_distal_taxels(pad, height_m)
+    if spread_rad == 0.0:
+        # Fingers 1 and 2 facing the thumb meet the back 33 mm either side of the closing
+        # line: the object must be wide enough there for both their pads.
+        in_band = np.abs(completed[:, 2] - height_m) <= pad.rows * pad.pitch_m / 2.0
+        across = completed[in_band] @ y_hand
+        span = sdh.FINGER_BASES_M[0, 1] + pad.cols * pad.pitch_m / 2.0
+        if len(across) == 0 or np.ptp(np.percentile(across, [2.0, 98.0])) < 2.0 * span:
+            return Candidate.rejected(
+                angle_rad, height_m, spread_rad, "too narrow for fingers facing the thumb"
+            )
+    # Fingers meet an object off the palm axis inclined, so the palm is moved once, onto
+    # the centre of the contacts predicted from the first guess.
+    for attempt in range(2):
+        bases = palm_xy[:2] + sdh.FINGER_BASES_M @ rotation.T
+        found = _finger_contacts(completed, bases, facings, taxels, s.touch_tolerance_m)
+        if isinstance(found, str):
+            return Candidate.rejected(angle_rad, height_m, spread_rad, found)
+        contacts, alphas = found
+        if attempt == 0:
+            palm_xy = _contact_centre(contacts, x_hand, y_hand, spread_rad) - (
+                SDH_SPREADS[spread_rad] * x_hand
+            )
+    palm_z = height_m + float(np.mean(sdh.distal_pad_depth_m(np.array(alphas))))
+    depth_below_palm = palm_z - completed[:, 2]
+    radial = np.hypot(*(completed[:, :2] - palm_xy[:2]).T)
+    palm_hit = (radial <= sdh.PALM_RADIUS_M + s.descent_clearance_m) & (
+        depth_below_palm <= sdh.BASE_DEPTH_M + s.descent_clearance_m
+    )
+    if np.count_nonzero(palm_hit) >= MIN_HITS:
+        return Candidate.rejected(
+            angle_rad, height_m, spread_rad, "the palm would hit the object's top"
+        )
+    open_alpha = _clear_preshape(completed, bases, facings, depth_below_palm, min(alphas), s)
+    if open_alpha is None:
+        return Candidate.rejected(
+            angle_rad, height_m, spread_rad, "the fingers cannot open around the object"
+        )
+    opening = sdh.opening_for_alpha(open_alpha)
+    if opening > aperture_m + 1e-9:
+        return Candidate.rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
+    if _closing_collides(visible, bases, facings, palm_z, open_alpha, alphas, s):
+        return Candidate.rejected(
+            angle_rad, height_m, spread_rad, "a proximal link would hit the object while closing"
+        )
+    # Closing from the pre-shape, the fingertips are lowest where the proximal links pass
+    # closest to vertical.
+    steepest = 0.0 if open_alpha <= 0.0 <= max(alphas) else min(abs(open_alpha), abs(max(alphas)))
+    lowest_tip = palm_z - (
+        sdh.KNUCKLE_DEPTH_M + sdh.PROXIMAL_LENGTH_M * math.cos(steepest) + sdh.DISTAL_LENGTH_M
+    )
+    if lowest_tip < s.table_height_m + s.table_clearance_m:
+        return Candidate.rejected(
+            angle_rad, height_m, spread_rad, "fingertips below the table clearance"
+        )
+    coverages = tuple(c.quality for c in contacts)
+    tipping = (height_m - s.table_height_m) / footprint_half_m(completed, x_hand)
+    in_band = np.abs(completed[:, 2] - height_m) <= pad.rows * pad.pitch_m / 2.0
+    width = float(np.ptp(completed[in_band] @ x_hand)) if np.any(in_band) else math.nan
+    position = np.array([palm_xy[0], palm_xy[1], palm_z])
+    order = (2, 0, 1)  # thumb, finger 1, finger 2
+    return Candidate(
+        GraspCandidate(
+            closing_angle_deg=math.degrees(angle_rad),
+            height_m=height_m,
+            spread_deg=math.degrees(spread_rad),
+            width_m=width,
+            contact_coverage=tuple(coverages[i] for i in order),
+            tipping_ratio=tipping,
+            score=candidate_score(coverages, angle_rad, tipping, s.tipping_weight),
+            feasible=True,
+        ),
+        T_robot_hand=hand_pose(position, x_hand),
+        opening_m=opening,
+        spread_rad=spread_rad,
+        predicted_contacts=np.concatenate([contacts[i].points for i in order]),
+    )
+
+
+def _finger_contacts(
+    completed: np.ndarray,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    taxels: PadTaxels,
+    tolerance_m: float,
+) -> tuple[list[PadContact], list[float]] | str:
+    """Each finger's predicted distal pad contact and its proximal angle there, or why a
+    finger finds none."""
+    contacts, alphas = [], []
+    for finger, base, facing in zip(sdh.FINGERS, bases, facings, strict=True):
+        origin = np.array([base[0], base[1], 0.0])
+        direction = np.array([facing[0], facing[1], 0.0])
+        contact = pad_coverage(completed, origin, direction, taxels, tolerance_m)
+        if contact is None:
+            return f"{finger} meets no surface"
+        alpha = float(sdh.alpha_for_reach(contact.touch_m - origin @ direction))
+        if not abs(alpha) < sdh.JOINT_LIMIT_RAD:
+            return f"{finger} cannot reach the surface"
+        contacts.append(contact)
+        alphas.append(alpha)
+    return contacts, alphas
+
+
+def _contact_centre(
+    contacts: list[PadContact], x_hand: np.ndarray, y_hand: np.ndarray, spread_rad: float
+) -> np.ndarray:
+    """Where the object's centre lies among the fingers' predicted contacts (f1, f2,
+    thumb), robot xy with z 0: midway between the thumb's contact and the fingers' along
+    the palm's x axis, between finger 1's and finger 2's across it (spread 0), or the
+    circumcentre of the three contacts (fingers facing the palm axis)."""
+    points = np.array([c.points.mean(axis=0)[:2] for c in contacts])
+    if spread_rad == 0.0:
+        x = (points[:2].mean(axis=0) @ x_hand[:2] + points[2] @ x_hand[:2]) / 2.0
+        y = points[:2].mean(axis=0) @ y_hand[:2]
+        return np.append(x * x_hand[:2] + y * y_hand[:2], 0.0)
+    a, b, c = points
+    d = 2.0 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))
+    if abs(d) < 1e-9:
+        return np.append(points.mean(axis=0), 0.0)
+    norms = (a @ a, b @ b, c @ c)
+    ux = (norms[0] * (b[1] - c[1]) + norms[1] * (c[1] - a[1]) + norms[2] * (a[1] - b[1])) / d
+    uy = (norms[0] * (c[0] - b[0]) + norms[1] * (a[0] - c[0]) + norms[2] * (b[0] - a[0])) / d
+    return np.array([ux, uy, 0.0])
+
+
+def _clear_preshape(
+    completed: np.ndarray,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    depth_below_palm: np.ndarray,
+    contact_alpha: float,
+    s: CandidateSettings,
+) -> float | None:
+    """The most closed proximal angle on a 3-deg grid, at least 3 deg before
+    ``contact_alpha``, at which every finger descends clear of the cloud; None when none
+    does."""
+    corridors = []
+    for base, facing in zip(bases, facings, strict=True):
+        relative = completed[:, :2] - base
+        across = np.abs(relative @ np.array([-facing[1], facing[0]]))
+        near = across <= sdh.FINGER_HALF_WIDTH_M + s.descent_clearance_m
+        corridors.append((relative[near] @ facing, depth_below_palm[near]))
+    step = math.floor((contact_alpha - _OPEN_STEP_RAD) / _OPEN_STEP_RAD)
+    while step * _OPEN_STEP_RAD > -sdh.JOINT_LIMIT_RAD:
+        grid, reach = _swept_profile(step, s.descent_clearance_m)
+        clear = True
+        for t, d in corridors:
+            index = np.round((t - grid[0]) / _PROFILE_STEP_M).astype(int)
+            inside = (index >= 0) & (index < len(grid))
+            if np.count_nonzero(d[inside] <= reach[index[inside]]) >= MIN_HITS:
+                clear = False
+                break
+        if clear:
+            return step * _OPEN_STEP_RAD
+        step -= 1
+    return None
+
+
+def _closing_collides(
+    visible: np.ndarray,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    palm_z: float,
+    open_alpha: float,
+    contact_alphas: list[float],
+    s: CandidateSettings,
+) -> bool:
+    """Whether a finger's knuckle or proximal link meets the visible cloud on its way from
+    the pre-shape to its contact angle (checked every 3 deg and at the contact): on a tall
+    object a low grasp swings the proximal links into its upper part. Only seen points
+    count: the mirrored ones are where the plane guesses the back, too uncertain to veto a
+    grasp on."""
+    depth_below_palm = palm_z - visible[:, 2]
+    for base, facing, contact in zip(bases, facings, contact_alphas, strict=True):
+        relative = visible[:, :2] - base
+        across = np.abs(relative @ np.array([-facing[1], facing[0]]))
+        near = across <= sdh.FINGER_HALF_WIDTH_M + s.touch_tolerance_m
+        t, d = relative[near] @ facing, depth_below_palm[near]
+        for alpha in [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]:
+            if np.count_nonzero(sdh.closing_hits(t, d, alpha, s.touch_tolerance_m)) >= MIN_HITS:
+                return True
+    return False
+
+
+#: Resolution of the finger profiles the pre-shape search compares the cloud with (m).
+_PROFILE_STEP_M = 0.001
+
+
+@functools.lru_cache(maxsize=256)
+def _swept_profile(step: int, clearance_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The finger profile at proximal angle ``step`` x 3 deg, grown by ``clearance_m`` in
+    both directions."""
+    from scipy.ndimage import maximum_filter1d  # deferred: planners load with `plugins`
+
+    grid, depth = sdh.finger_profile(step * _OPEN_STEP_RAD, _PROFILE_STEP_M)
+    width = 2 * math.ceil(clearance_m / _PROFILE_STEP_M) + 1
+    return grid, maximum_filter1d(depth, width) + clearance_m
