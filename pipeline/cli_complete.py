@@ -146,6 +146,7 @@ def write_outputs(
     """Every file ``complete`` writes, into ``out`` (created if needed)."""
     import numpy as np
 
+    from .figures import SceneObjectView, plot_scene
     from .formats import (
         bias_to_json,
         estimate_to_json,
@@ -154,7 +155,6 @@ def write_outputs(
         write_completed_clouds,
         write_json,
     )
-    from .plots import SceneObjectView, plot_scene
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -145,7 +145,12 @@ def draw_pictures(
 ) -> None:
     """``deviation.png`` (Stages 0-2 over the true mesh), ``topdown.png`` (cloud and initial
     plane) and, when the initialiser ranked hypotheses, ``vc_scores.png``."""
-    from .plots import DeviationPanel, deviation_heatmap, plot_cloud_with_plane, plot_vc_scores
+    from .trial_pictures import (
+        DeviationPanel,
+        deviation_heatmap,
+        plot_cloud_with_plane,
+        plot_vc_scores,
+    )
 
     name = config.trial.object
     panels = [
@@ -180,7 +185,7 @@ def draw_grasps(
 ) -> None:
     """``grasps.png``: the object from above with every grasp's pads numbered and the
     selected stage's median deviation after each grasp."""
-    from .plots import GraspMarks, grasps_figure
+    from .figures import GraspMarks, grasps_figure
 
     marks = []
     for contacts, entry in zip(fused.contacts, document["grasps"], strict=True):

@@ -1,4 +1,4 @@
-"""Deviation pictures and study figures (pipeline.plots)."""
+"""Deviation pictures and study figures (pipeline.trial_pictures, pipeline.figures)."""
 
 from __future__ import annotations
 
@@ -6,19 +6,21 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from pipeline.metrics import point_to_mesh_distances
-from pipeline.plots import (
+from pipeline.figures import (
     BoxPanel,
-    DeviationPanel,
     GridPanel,
     box_plot_figure,
-    deviation_heatmap,
     deviation_histogram,
-    deviation_scale_m,
     error_grid_figure,
+)
+from pipeline.metrics import point_to_mesh_distances
+from pipeline.synthetic import Cylinder, cylinder_mesh, make_case
+from pipeline.trial_pictures import (
+    DeviationPanel,
+    deviation_heatmap,
+    deviation_scale_m,
     view_projection,
 )
-from pipeline.synthetic import Cylinder, cylinder_mesh, make_case
 
 
 def test_view_projection_axes():

@@ -184,7 +184,7 @@ def _share(count: int, total: int) -> str:
 def report(rows: list[dict], out_dir: Path) -> list[Path]:
     """``results.csv``, ``explore.png`` (median deviation and plane errors after each
     grasp per strategy, all trials and the hard ones) and ``report.md``."""
-    from ..plots import LinePanel, line_figure
+    from ..figures import LinePanel, line_figure
 
     out_dir = Path(out_dir)
     csv_path = write_csv(rows, out_dir / "results.csv")

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..plots import BoxPanel, box_plot_figure
+from ..figures import BoxPanel, box_plot_figure
 from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask
 from .common import failures_section, fmt, task_seed

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..plots import BoxPanel, box_plot_figure
+from ..figures import BoxPanel, box_plot_figure
 from ..sweep import write_csv
 from .common import failures_section, fmt
 from .definitions import MeasureTable

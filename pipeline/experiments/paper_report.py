@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..plots import BoxPanel, box_plot_figure
+from ..figures import BoxPanel, box_plot_figure
 from .common import fmt
 from .rows import STAGES, count_rows, finished_rows, mean_five_numbers, mean_value
 
@@ -41,7 +41,7 @@ def deviation_box_figure(
     """Deviation box-and-whisker plots, one panel per stage, one box per category.
 
     Each box is the category's averaged five-number summary (:func:`mean_five_numbers`).
-    It is drawn by handing :func:`pipeline.plots.box_plot_figure` those five values as the
+    It is drawn by handing :func:`pipeline.figures.box_plot_figure` those five values as the
     sample: their 0/25/50/75/100th percentiles (linear interpolation) are exactly the five
     values, so the drawn box is the summary itself.
     """

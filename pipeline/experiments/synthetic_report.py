@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..plots import GridPanel, error_grid_figure
+from ..figures import GridPanel, error_grid_figure
 from ..sweep import write_csv
 from .common import failures_section, fmt
 

@@ -1,8 +1,8 @@
 """Perception kernels: from a depth image to a segmented object, its symmetry and a top grasp.
 
 Pure functions on numpy arrays (no PyBullet, no open3d, no file I/O; their pictures are in
-:mod:`pipeline.plots`), all in the robot frame ``R`` (z up) unless a name says
-otherwise:
+:mod:`pipeline.trial_pictures` and :mod:`pipeline.figures`), all in the robot frame ``R``
+(z up) unless a name says otherwise:
 
 * :mod:`.depth` - back-projecting a depth image to points, projecting points into it;
 * :mod:`.table` - table plane (RANSAC or known height) and height above it;

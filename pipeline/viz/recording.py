@@ -55,7 +55,7 @@ import numpy as np
 from ..errors import InputError, MissingExtraError
 from ..formats import read_cloud, read_contacts, read_json
 from ..metrics import nearest_distances, plane_after_bias, point_to_mesh_distances
-from ..plots import DEVIATION_CMAP, DEVIATION_MAX_M
+from ..trial_pictures import DEVIATION_CMAP, DEVIATION_MAX_M
 from ..types import Bias, Contacts, SymmetryPlane
 from .layout import blueprint, plots_path
 from .shapes import plane_quad
