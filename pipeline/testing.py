@@ -17,6 +17,10 @@ never moves. A sensor or tactile model that works in it uses nothing but the con
 config, or ``registry.create``), :func:`estimation_problem` an
 :class:`~pipeline.types.EstimationProblem` with a known answer for estimators;
 :func:`load_config` and :func:`run_trial` build and run a trial as ``symfuse trial`` does.
+
+One module because it is the one import path plugin authors are given for their tests
+(docs/plugins.md section 6), and :class:`AnalyticWorld`, one class implementing the whole
+world contract, is most of it.
 """
 
 from __future__ import annotations

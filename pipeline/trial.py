@@ -9,6 +9,10 @@ the world offers, and the chosen hand is then added to it.
 
 Every file the trial writes goes into one output folder (see :data:`TRIAL_FILES`); the
 stages are timed one by one, and the resolved config is written next to the results.
+
+One module because it is the sequence above end to end: the simulation, the grasp-and-fuse
+loop and the files and pictures they write share the trial's config, timer and record, so
+reading it top to bottom is reading one trial.
 """
 
 from __future__ import annotations

@@ -7,14 +7,16 @@ import pytest
 from scipy.spatial import ConvexHull
 from scipy.stats import multivariate_normal
 
+from pipeline.estimation.alternative_centres import (
+    _mahalanobis_nearest,
+    alternative_centres,
+    vector_median,
+)
 from pipeline.estimation.correspondences import (
     GATE_CHI2_3DOF_95,
     PointIndex,
-    _mahalanobis_nearest,
-    alternative_centres,
     find_correspondences,
     side_covariances,
-    vector_median,
 )
 from pipeline.estimation.covariances import normal_ellipsoids
 from pipeline.estimation.geometry import (

@@ -61,6 +61,11 @@ Choices this module makes where the paper is silent:
   point step). A per-component test on ``g`` would never stop on a cylinder, whose yaw about
   a pivot off its axis trades against a translation and creeps along that weakly observable
   direction by ~1e-4 rad per iteration (a few hundredths of a millimetre on the model).
+
+One module because it is one algorithm: the iteration of a grasp (:func:`update_grasp`),
+a stage over the grasps (:func:`run_stage`) and the two stages (:func:`fuse`) carry out the
+choices listed above together; the parts that stand alone (correspondences, covariance
+models, the surface filter, the geometry) are modules of their own.
 """
 
 from __future__ import annotations

@@ -24,6 +24,10 @@ proximal links inward (``alpha > 0``), for narrow objects.
 
 The hand's base floats freely in PyBullet and is held by a fixed constraint whose target
 :meth:`Hand.move_to` sets (PyBullet's world frame is the robot frame ``R``).
+
+One module because the two hands' models (:class:`HandModel`: pads, finger drives, opening
+and aperture functions of a :class:`Hand`) are the data the :class:`Hand` drives, and the
+:class:`Hand` itself, one PyBullet body opened, moved and closed, is most of it.
 """
 
 from __future__ import annotations

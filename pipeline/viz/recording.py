@@ -39,6 +39,10 @@ One timeline, ``step``, runs over the pipeline (camera, segmentation, Stage 0, g
 IEKF iteration of Stage 1, Stage 1's result, each iteration of Stage 2 and its result.
 Scrubbing it shows the plane and the bias converging; between results the model stays at the
 last finished stage (the iterations record the state, not the points).
+
+One module because the table above and the code that fills it belong together: the
+recorder reads each file of a run folder once and logs it under its entities on that one
+timeline.
 """
 
 from __future__ import annotations
