@@ -13,6 +13,7 @@ from test_planners import _true_plane, _view
 from pipeline.perception import sdh_geometry as sdh
 from pipeline.perception.candidate import height_grid
 from pipeline.perception.pad_contact import flat_pad_taxels, pad_coverage, sdh_distal_taxels
+from pipeline.perception.parallel_candidates import front_jaw_gap
 from pipeline.synthetic import box_object, cylinder_object
 from pipeline.types import PadLayout
 from plugins.top_parallel import TopParallel
@@ -186,3 +187,23 @@ def test_parallel_candidates_close_across_the_thin_side_of_a_turned_box():
     ranked = [c.score for c in plan.candidates]
     assert ranked == sorted(ranked, reverse=True)
     assert plan.score == ranked[0] > 0.0
+
+
+@pytest.mark.parametrize(
+    ("width_mm", "front_mm"),
+    [
+        (40.0, 7.5),  # room 25, less the 10 mm back margin: half of 15 each side
+        (30.0, 10.0),  # room enough: the jaw clearance
+        (51.0, 4.0),  # no room for the margin: front at its clearance, back 10 mm
+        (6.0, 30.5),  # back jaw reaches at most 32.5 - 4 mm: the front stands back
+    ],
+)
+def test_front_jaw_gap_by_hand(width_mm, front_mm):
+    gap = front_jaw_gap(0.065, width_mm / 1e3, 0.004, 0.01, 0.01)
+    assert gap == pytest.approx(front_mm / 1e3)
+    back_mm = 65.0 - width_mm - front_mm
+    assert 4.0 - 1e-9 <= back_mm <= 32.5 - 4.0 + 1e-9
+
+
+def test_front_jaw_gap_refuses_an_object_that_leaves_no_clearance():
+    assert front_jaw_gap(0.065, 0.058, 0.004, 0.01, 0.01) is None

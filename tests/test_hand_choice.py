@@ -83,6 +83,30 @@ def test_a_narrow_cylinder_is_held_by_the_sdh_pre_shaped_to_it(registry):
     assert tilt < 5.0
 
 
+def _box(name: str, extents: tuple[float, float, float], mass: float) -> SimpleNamespace:
+    mesh = trimesh.creation.box(extents)
+    mesh.apply_translation((0.0, 0.0, extents[2] / 2))
+    return SimpleNamespace(name=name, mesh=mesh, mass_kg=mass, friction=0.6)
+
+
+@pytest.mark.parametrize(
+    "extents",
+    [
+        (0.015, 0.06, 0.1),  # thinner than either jaw's reach from the visible front
+        (0.054, 0.09, 0.08),  # fits the aperture only without the back jaw's margin
+    ],
+)
+def test_the_pg70_touches_both_sides_of_thin_and_nearly_full_width_boxes(registry, extents):
+    """Both pads touch: the back jaw reaches a thin box's back, and a box nearly as wide as
+    the aperture is still grasped across its narrow side."""
+    box = _box("box", extents, 0.2)
+    choice, contacts, shift, tilt = _auto_grasp(registry, box, 0.0, hand="pg70")
+    assert choice.plan.gripper == "pg70"
+    assert set(contacts.pads) == {"left", "right"}
+    assert opposing_contacts(contacts)
+    assert tilt < 5.0 and shift < 0.01
+
+
 def test_an_object_no_hand_can_hold_is_refused_in_one_line(tmp_path, capsys):
     mesh = trimesh.creation.box((0.26, 0.26, 0.08))
     mesh.apply_translation((0.0, 0.0, 0.04))

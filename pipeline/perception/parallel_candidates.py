@@ -34,6 +34,36 @@ class ParallelHand:
     housing_depth_m: float
 
 
+def front_jaw_gap(
+    aperture_m: float,
+    width_m: float,
+    descent_m: float,
+    jaw_clearance_m: float,
+    back_margin_m: float,
+) -> float | None:
+    """Where the open jaws stand around an object ``width_m`` wide between their paths:
+    the front jaw's gap before the visible front (m), the back jaw taking the rest of the
+    aperture; None when the jaws cannot both descend ``descent_m`` clear of it.
+
+    The back jaw keeps ``back_margin_m`` beyond its clearance (the back is the mirror
+    plane's guess, the front was seen) and the front gap is ``jaw_clearance_m``, or half
+    of what is left when less is. When that leaves no room, the front jaw comes as close
+    as its clearance allows and the back jaw gives up its margin: the object still fits.
+    Both jaws close towards the hand's centre, each at most half the aperture, so on a
+    narrow object the front gap grows until the back jaw still reaches the back (placed by
+    the front alone it would close on nothing: contact on one side only).
+    """
+    room_m = aperture_m - width_m
+    if room_m < 2.0 * descent_m:
+        return None
+    if room_m - back_margin_m >= 2.0 * descent_m:
+        gap_m = min(jaw_clearance_m, (room_m - back_margin_m) / 2.0)
+    else:
+        gap_m = descent_m
+    reach_m = aperture_m / 2.0 - descent_m
+    return max(gap_m, room_m - reach_m)
+
+
 def parallel_candidate(
     visible: np.ndarray,
     completed: np.ndarray,
@@ -50,11 +80,10 @@ def parallel_candidate(
     """A parallel-jaw grasp closing along ``direction`` (front to back) through ``centre_m``
     with the pad centres at ``height_m``.
 
-    Both jaws descend clear of every point above the fingertips between their paths: the
-    front jaw ``jaw_clearance_m`` before the visible surface there, or less (down to
-    ``settings.descent_clearance_m``) when the object leaves less room in the aperture; the
-    back jaw at least that plus ``back_margin_m`` behind the completed back, whose position
-    is only the mirror plane's guess. The housing must pass above the object's top.
+    Both jaws descend clear of every point above the fingertips between their paths, the
+    front jaw before the visible surface there and the back jaw behind the completed back,
+    as far as :func:`front_jaw_gap` puts them. The housing must pass above the object's
+    top.
     """
     s = settings
     lateral = np.array([-direction[1], direction[0], 0.0])
@@ -72,8 +101,10 @@ def parallel_candidate(
     front = float(np.percentile(front_points @ direction, 2.0))
     back = float(np.percentile(all_points @ direction, 98.0))
     width = back - front
-    room = hand.aperture_m - width - back_margin_m
-    if room < 2.0 * s.descent_clearance_m:
+    front_gap = front_jaw_gap(
+        hand.aperture_m, width, s.descent_clearance_m, jaw_clearance_m, back_margin_m
+    )
+    if front_gap is None:
         return Candidate.rejected(
             angle_rad,
             height_m,
@@ -81,7 +112,7 @@ def parallel_candidate(
             f"{width * 1e3:.0f} mm wide between the jaws' paths, aperture "
             f"{hand.aperture_m * 1e3:.0f} mm",
         )
-    front_pad = front - min(jaw_clearance_m, room / 2.0)
+    front_pad = front - front_gap
     middle = front_pad + hand.aperture_m / 2.0
     position = centre_m + (middle - centre_m @ direction) * direction
     position[2] = height_m + hand.palm_to_pad_centre_m
