@@ -194,7 +194,7 @@ def test_parallel_candidates_close_across_the_thin_side_of_a_turned_box():
     [
         (40.0, 7.5),  # room 25, less the 10 mm back margin: half of 15 each side
         (30.0, 10.0),  # room enough: the jaw clearance
-        (51.0, 4.0),  # no room for the margin: front at its clearance, back 10 mm
+        (51.0, 7.0),  # no room for the margin: the 14 mm split evenly
         (6.0, 30.5),  # back jaw reaches at most 32.5 - 4 mm: the front stands back
     ],
 )
@@ -202,7 +202,7 @@ def test_front_jaw_gap_by_hand(width_mm, front_mm):
     gap = front_jaw_gap(0.065, width_mm / 1e3, 0.004, 0.01, 0.01)
     assert gap == pytest.approx(front_mm / 1e3)
     back_mm = 65.0 - width_mm - front_mm
-    assert 4.0 - 1e-9 <= back_mm <= 32.5 - 4.0 + 1e-9
+    assert min(14.0, (65.0 - width_mm) / 2) - 1e-9 <= back_mm <= 32.5 - 4.0 + 1e-9
 
 
 def test_front_jaw_gap_refuses_an_object_that_leaves_no_clearance():

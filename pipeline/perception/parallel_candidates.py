@@ -43,15 +43,17 @@ def front_jaw_gap(
 ) -> float | None:
     """Where the open jaws stand around an object ``width_m`` wide between their paths:
     the front jaw's gap before the visible front (m), the back jaw taking the rest of the
-    aperture; None when the jaws cannot both descend ``descent_m`` clear of it.
+    aperture; None when they cannot both descend ``descent_m`` clear of it.
 
-    The back jaw keeps ``back_margin_m`` beyond its clearance (the back is the mirror
-    plane's guess, the front was seen) and the front gap is ``jaw_clearance_m``, or half
-    of what is left when less is. When that leaves no room, the front jaw comes as close
-    as its clearance allows and the back jaw gives up its margin: the object still fits.
-    Both jaws close towards the hand's centre, each at most half the aperture, so on a
-    narrow object the front gap grows until the back jaw still reaches the back (placed by
-    the front alone it would close on nothing: contact on one side only).
+    The back jaw keeps ``back_margin_m`` beyond its clearance where the room allows (the
+    back is the mirror plane's guess, and a mirrored model is often a few millimetres
+    thinner than the object) and the front gap is ``jaw_clearance_m``, or half of what is
+    left when less is. An object too wide for the margin is still grasped, the room split
+    evenly between the jaws: neither lands on it when the model is off either way by less
+    than half the room. Both jaws close towards the hand's centre, each at most half the
+    aperture, so before a narrow object the front gap grows until the back jaw still
+    reaches the back (placed by the front alone it would close on nothing: contact on one
+    side only).
     """
     room_m = aperture_m - width_m
     if room_m < 2.0 * descent_m:
@@ -59,7 +61,7 @@ def front_jaw_gap(
     if room_m - back_margin_m >= 2.0 * descent_m:
         gap_m = min(jaw_clearance_m, (room_m - back_margin_m) / 2.0)
     else:
-        gap_m = descent_m
+        gap_m = room_m / 2.0
     reach_m = aperture_m / 2.0 - descent_m
     return max(gap_m, room_m - reach_m)
 
