@@ -68,7 +68,8 @@ class Candidate:
         step: the fraction of the hypothesis' step from Stage 0 that was kept (1: all).
         g: its final ``(6,)`` bias and plane; grasp_g: per grasp.
         points: ``(N, 3)`` its points ``p_n`` (unbiased, frame R).
-        consistency: the self-diagnosis, including the moved free-space test.
+        consistency: the self-diagnosis, including the motion test.
+        still: the motion test passed (the bias change is one the camera could not see).
     """
 
     name: str
@@ -77,6 +78,19 @@ class Candidate:
     grasp_g: tuple[np.ndarray, ...]
     points: np.ndarray
     consistency: Consistency
+    still: bool
+
+    def no_worse_than(self, initial: Consistency) -> bool:
+        """Passes the motion test and the taxel test, and puts no more points in seen free
+        space than the limit or ``initial`` (Stage 0's diagnosis), whichever is larger:
+        consistent when Stage 0 is, otherwise no more at odds with the image than it."""
+        verdict = self.consistency
+        allowed = max(verdict.free_space_limit, initial.free_space_violations)
+        return (
+            self.still
+            and verdict.nis <= verdict.nis_threshold
+            and verdict.free_space_violations <= allowed
+        )
 
 
 def held_problem(fusion: FusionProblem, held: tuple[int, ...]) -> FusionProblem:
@@ -167,7 +181,7 @@ def diagnose(
         verdict = replace(
             verdict, consistent=False, reason="; ".join(filter(None, (verdict.reason, reason)))
         )
-    return Candidate(name, step, g, tuple(grasp_g), points_m, verdict)
+    return Candidate(name, step, g, tuple(grasp_g), points_m, verdict, moved <= limit)
 
 
 def interpolated(
@@ -197,48 +211,53 @@ def interpolated(
 def bounded(
     fusion: FusionProblem,
     full: Candidate,
+    initial: Consistency,
     view: DepthObservation,
     settings: ConsistencySettings,
     tree: cKDTree,
 ) -> list[Candidate]:
-    """Shortened steps of ``full`` that pass every test.
+    """Shortened steps of ``full`` that are no worse than Stage 0
+    (:meth:`Candidate.no_worse_than` ``initial``).
 
-    Bisection finds the longest passing fraction ``t_max`` of the step (Stage 0, ``t = 0``,
-    passes by the caller's condition; ``full``, ``t = 1``, failed), resolution
+    Bisection finds the longest such fraction ``t_max`` of the step (Stage 0, ``t = 0``,
+    qualifies by the caller's condition; ``full``, ``t = 1``, does not), resolution
     ``1 / 2^BISECTION_STEPS``; also returned are ``t_max / 2`` and ``t_max / 4`` when they
-    pass, since the taxels may fit a shorter step better (the filter's weighted means and
-    the diagnosis' surface patches need not agree on a nearly symmetric object).
+    qualify, since the taxels may fit a shorter step better (the filter's weighted means
+    and the diagnosis' surface patches need not agree on a nearly symmetric object).
     """
     low, high, longest = 0.0, 1.0, None
     for _ in range(BISECTION_STEPS):
         middle = 0.5 * (low + high)
         candidate = interpolated(fusion, full, middle, view, settings, tree)
-        if candidate.consistency.consistent:
+        if candidate.no_worse_than(initial):
             low, longest = middle, candidate
         else:
             high = middle
     if longest is None:
         return []
     shorter = (interpolated(fusion, full, low / d, view, settings, tree) for d in (2, 4))
-    return [longest, *(c for c in shorter if c.consistency.consistent)]
+    return [longest, *(c for c in shorter if c.no_worse_than(initial))]
 
 
 def stage_candidates(
     fusion: FusionProblem,
     name: str,
     outcome: StageOutcome,
+    initial: Consistency,
     view: DepthObservation,
     settings: ConsistencySettings,
     tree: cKDTree,
 ) -> list[Candidate]:
-    """Hypothesis ``name``'s model of one stage (``outcome``) when it passes every test,
-    else its shortened steps that do."""
+    """Hypothesis ``name``'s model of one stage (``outcome``) when it is no worse than
+    Stage 0 (diagnosis ``initial``), else its shortened steps that are."""
     if estimate_failed(outcome.status):
         return []
     full = diagnose(
         fusion, name, 1.0, outcome.g, outcome.grasp_g, outcome.points, view, settings, tree
     )
-    return [full] if full.consistency.consistent else bounded(fusion, full, view, settings, tree)
+    if full.no_worse_than(initial):
+        return [full]
+    return bounded(fusion, full, initial, view, settings, tree)
 
 
 def revise(
@@ -250,18 +269,15 @@ def revise(
     tree: cKDTree,
 ) -> list[StageEstimate]:
     """``stages`` (diagnosed, Stage 0 first) with inconsistent fused stages replaced by
-    their best consistent hypothesis, when there is one.
+    their best hypothesis no worse than Stage 0, when there is one.
 
     Runs only when the last stage is inconsistent (status ``inconsistent``) while Stage 0
-    is consistent, and only with the camera's image (the moved free-space test needs it).
+    is worth holding (:func:`_holdable`), and only with the camera's image (the motion
+    test needs it). A replacement is ``inconsistent`` when Stage 0 was (then it is at
+    most as much at odds with the image and fits the taxels better).
     """
     initial, last = stages[0], stages[-1]
-    if (
-        view is None
-        or initial.consistency is None
-        or not initial.consistency.consistent
-        or last.status != "inconsistent"
-    ):
+    if view is None or last.status != "inconsistent" or not _holdable(initial, last):
         return list(stages)
     refused = {name: refuse(held_problem(fusion, held)) for name, held in HYPOTHESES.items()}
     revised = list(stages)
@@ -275,7 +291,7 @@ def revise(
             (candidate, outcomes[index - 1])
             for name, outcomes in refused.items()
             for candidate in stage_candidates(
-                fusion, name, outcomes[index - 1], view, settings, tree
+                fusion, name, outcomes[index - 1], initial.consistency, view, settings, tree
             )
         ]
         seconds = stage.seconds + spent + time.perf_counter() - started
@@ -287,6 +303,20 @@ def revise(
         else:
             revised[index] = replace(stage, seconds=seconds)
     return revised
+
+
+def _holdable(initial: StageEstimate, last: StageEstimate) -> bool:
+    """Stage 0 is worth holding on to: the taxels do not contradict it, and the evidence
+    contradicts it no more than the last stage (always so when Stage 0 is consistent). When
+    only the image contradicts it (an initialiser's plane whose mirror image grazes seen
+    free space), a hypothesis must be no more at odds with the image than it."""
+    verdict = initial.consistency
+    return (
+        verdict is not None
+        and last.consistency is not None
+        and verdict.nis <= verdict.nis_threshold
+        and verdict.excess <= last.consistency.excess
+    )
 
 
 def _as_stage(
@@ -310,7 +340,7 @@ def _as_stage(
         chosen.points,
         fusion.pivot_m,
         fused.iterations + outcome.iterations,
-        outcome.status,
+        outcome.status if chosen.consistency.consistent else "inconsistent",
         seconds,
         outcome.active_points,
         outcome.trace,
