@@ -15,7 +15,9 @@ from test_estimation_consistency import flat_view
 from pipeline.estimation.consistency import ConsistencySettings
 from pipeline.estimation.hypotheses import (
     HYPOTHESES,
+    Candidate,
     held_problem,
+    holdable,
     motion_limit,
     moved_free_space,
 )
@@ -26,6 +28,7 @@ from pipeline.estimation.problem import estimate_result
 from pipeline.formats import stage_to_json
 from pipeline.metrics import diameter_error
 from pipeline.synthetic import make_case
+from pipeline.types import Bias, Consistency, StageEstimate, SymmetryPlane
 from plugins.iekf import IekfEstimator
 
 
@@ -166,3 +169,52 @@ def test_no_hypothesis_when_stage_zero_is_inconsistent_too():
     result = IekfEstimator().estimate(case.problem)
     assert not result.stage(0).consistency.consistent
     assert all(stage.hypothesis is None for stage in result.stages)
+
+
+def verdict(nis: float, violations: int, limit: int = 100) -> Consistency:
+    return Consistency(
+        checks=("taxels", "free_space"),
+        taxel_rms_m=0.001,
+        nis=nis,
+        nis_threshold=5.0,
+        free_space_violations=violations,
+        free_space_limit=limit,
+        consistent=nis <= 5.0 and violations <= limit,
+    )
+
+
+def candidate(nis: float, violations: int, still: bool = True) -> Candidate:
+    g = np.zeros(6)
+    return Candidate("held-angle", 1.0, g, (g,), np.zeros((1, 3)), verdict(nis, violations), still)
+
+
+def test_a_hypothesis_is_no_worse_than_stage_zero_only_on_every_test():
+    consistent, grazing = verdict(1.0, 10), verdict(1.0, 150)
+    assert candidate(2.0, 90).no_worse_than(consistent)
+    assert not candidate(2.0, 120).no_worse_than(consistent)  # over the limit
+    assert candidate(2.0, 140).no_worse_than(grazing)  # over it, but less than Stage 0
+    assert not candidate(2.0, 160).no_worse_than(grazing)
+    assert not candidate(6.0, 10).no_worse_than(consistent)  # the taxels contradict it
+    assert not candidate(2.0, 10, still=False).no_worse_than(consistent)  # the bias moved it
+
+
+def test_stage_zero_is_held_only_when_the_taxels_accept_it_and_it_is_less_contradicted():
+    def stage_with(consistency: Consistency) -> StageEstimate:
+        return StageEstimate(
+            stage=0,
+            plane=SymmetryPlane(0.0, 0.0),
+            bias=Bias(),
+            covariance=np.eye(6),
+            points=np.zeros((1, 3)),
+            completed=np.zeros((2, 3)),
+            iterations=0,
+            status="initial",
+            seconds=0.0,
+            consistency=consistency,
+        )
+
+    fused = stage_with(verdict(0.1, 900))
+    assert holdable(stage_with(verdict(1.0, 10)), fused)
+    assert holdable(stage_with(verdict(1.0, 150)), fused)  # only the image, and less
+    assert not holdable(stage_with(verdict(6.0, 10)), fused)  # the taxels reject it
+    assert not holdable(stage_with(verdict(1.0, 1000)), fused)  # more contradicted

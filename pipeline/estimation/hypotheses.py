@@ -272,12 +272,12 @@ def revise(
     their best hypothesis no worse than Stage 0, when there is one.
 
     Runs only when the last stage is inconsistent (status ``inconsistent``) while Stage 0
-    is worth holding (:func:`_holdable`), and only with the camera's image (the motion
+    is worth holding (:func:`holdable`), and only with the camera's image (the motion
     test needs it). A replacement is ``inconsistent`` when Stage 0 was (then it is at
     most as much at odds with the image and fits the taxels better).
     """
     initial, last = stages[0], stages[-1]
-    if view is None or last.status != "inconsistent" or not _holdable(initial, last):
+    if view is None or last.status != "inconsistent" or not holdable(initial, last):
         return list(stages)
     refused = {name: refuse(held_problem(fusion, held)) for name, held in HYPOTHESES.items()}
     revised = list(stages)
@@ -305,7 +305,7 @@ def revise(
     return revised
 
 
-def _holdable(initial: StageEstimate, last: StageEstimate) -> bool:
+def holdable(initial: StageEstimate, last: StageEstimate) -> bool:
     """Stage 0 is worth holding on to: the taxels do not contradict it, and the evidence
     contradicts it no more than the last stage (always so when Stage 0 is consistent). When
     only the image contradicts it (an initialiser's plane whose mirror image grazes seen
