@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 from estimation_scenes import cylinder_scene, fusion_problem
-from test_estimation_consistency import flat_view
+from test_estimation_consistency import flat_view, stage
 
 from pipeline.estimation.consistency import ConsistencySettings
 from pipeline.estimation.hypotheses import (
@@ -28,7 +28,7 @@ from pipeline.estimation.problem import estimate_result
 from pipeline.formats import stage_to_json
 from pipeline.metrics import diameter_error
 from pipeline.synthetic import make_case
-from pipeline.types import Bias, Consistency, StageEstimate, SymmetryPlane
+from pipeline.types import Consistency, StageEstimate
 from plugins.iekf import IekfEstimator
 
 
@@ -200,18 +200,7 @@ def test_a_hypothesis_is_no_worse_than_stage_zero_only_on_every_test():
 
 def test_stage_zero_is_held_only_when_the_taxels_accept_it_and_it_is_less_contradicted():
     def stage_with(consistency: Consistency) -> StageEstimate:
-        return StageEstimate(
-            stage=0,
-            plane=SymmetryPlane(0.0, 0.0),
-            bias=Bias(),
-            covariance=np.eye(6),
-            points=np.zeros((1, 3)),
-            completed=np.zeros((2, 3)),
-            iterations=0,
-            status="initial",
-            seconds=0.0,
-            consistency=consistency,
-        )
+        return dataclasses.replace(stage(0, 0.1), status="initial", consistency=consistency)
 
     fused = stage_with(verdict(0.1, 900))
     assert holdable(stage_with(verdict(1.0, 10)), fused)
