@@ -39,6 +39,7 @@ from .types import (
     Contacts,
     EstimateResult,
     GraspPlan,
+    Hypothesis,
     PointCloud,
     StageEstimate,
     SymmetryPlane,
@@ -404,6 +405,19 @@ def stage_to_json(stage: StageEstimate) -> dict[str, Any]:
             for state in stage.trace
         ],
         "consistency": consistency_to_json(stage.consistency),
+        "hypothesis": hypothesis_to_json(stage.hypothesis),
+    }
+
+
+def hypothesis_to_json(hypothesis: Hypothesis | None) -> dict[str, Any] | None:
+    """The alternative hypothesis a stage's model comes from (None: the fused estimate):
+    its name, the fraction of its step kept and why the fused model was set aside."""
+    if hypothesis is None:
+        return None
+    return {
+        "name": hypothesis.name,
+        "step": float(hypothesis.step),
+        "replaced": hypothesis.replaced,
     }
 
 
@@ -435,6 +449,12 @@ def consistency_fields(prefix: str, consistency_json: dict[str, Any] | None) -> 
         return {}
     names = ("consistent", "taxel_rms_mm", "nis", "free_space_violations")
     return {f"{prefix}_{name}": consistency_json[name] for name in names}
+
+
+def hypothesis_field(prefix: str, hypothesis_json: dict[str, Any] | None) -> dict[str, str]:
+    """The alternative hypothesis a stage's model comes from as the sweep-row field
+    ``{prefix}_hypothesis`` (empty for the fused or initial model)."""
+    return {f"{prefix}_hypothesis": (hypothesis_json or {}).get("name", "")}
 
 
 def estimate_to_json(result: EstimateResult) -> list[dict[str, Any]]:

@@ -407,6 +407,23 @@ class Consistency:
 
 
 @dataclass(frozen=True)
+class Hypothesis:
+    """The alternative hypothesis a stage's model comes from when the fused model
+    contradicted the evidence (:mod:`pipeline.estimation.hypotheses`).
+
+    Attributes:
+        name: ``"held-plane"`` (fused again with the initialiser's plane held) or
+            ``"held-plane, bounded"`` (that step from Stage 0, shortened until it passes).
+        step: the fraction of the hypothesis' step from Stage 0 kept (1 when not bounded).
+        replaced: why the fused model was set aside (its failed tests).
+    """
+
+    name: str
+    step: float = 1.0
+    replaced: str = ""
+
+
+@dataclass(frozen=True)
 class StageEstimate:
     """The estimate after one stage: 0 (initial), 1 (bias + plane), 2 (+ points).
 
@@ -423,6 +440,8 @@ class StageEstimate:
         trace: the state after every iteration, in order (empty for Stage 0 and estimators
             that do not iterate).
         consistency: the self-diagnosis of this stage's model, None when not assessed.
+        hypothesis: the alternative hypothesis the model comes from, None when it is the
+            fused (or initial) estimate itself.
     """
 
     stage: int
@@ -437,6 +456,7 @@ class StageEstimate:
     active_points: int = 0
     trace: tuple[IterationState, ...] = ()
     consistency: Consistency | None = None
+    hypothesis: Hypothesis | None = None
 
 
 @dataclass(frozen=True)

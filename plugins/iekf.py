@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Literal
 
 from pipeline import hookimpl
@@ -87,8 +88,12 @@ class IekfEstimator(Estimator):
         started = time.perf_counter()
         window = (p.window_along_normal_m, p.window_across_normal_m)
         fusion = fusion_problem(problem, p, self.name, window, p.facing_filter)
-        outcomes = fuse(fusion, self.settings(), last_stage=p.last_stage)
-        return estimate_result(fusion, outcomes, started, problem.view, consistency_settings(p))
+        settings = self.settings()
+        outcomes = fuse(fusion, settings, last_stage=p.last_stage)
+        # The alternative hypotheses (docs/method.md §9) re-fuse under the same settings.
+        refuse = partial(fuse, settings=settings, last_stage=p.last_stage)
+        checks = consistency_settings(p)
+        return estimate_result(fusion, outcomes, started, problem.view, checks, refuse)
 
 
 @hookimpl

@@ -26,6 +26,7 @@ from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
 
 if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
     from .consistency import ConsistencySettings
+    from .hypotheses import Refuse
     from .iekf import FusionProblem, GraspContacts, IterationRecord, StageOutcome
 
 
@@ -112,6 +113,7 @@ def estimate_result(
     started_s: float,
     view: DepthObservation | None = None,
     consistency: ConsistencySettings | None = None,
+    refuse: Refuse | None = None,
 ) -> EstimateResult:
     """Stage 0 (the initial state) followed by the fused stages ``outcomes`` (1, then 2).
 
@@ -122,6 +124,9 @@ def estimate_result(
     With ``consistency`` every stage is diagnosed against the taxels (and ``view``, when
     given), a fused stage whose model contradicts the evidence gets the status
     ``inconsistent`` (unless it already failed), and the best-supported stage is selected.
+    With ``refuse`` (the estimator's fusion, run on another problem) an inconsistent fused
+    stage may first be replaced by an alternative hypothesis that passes every test
+    (:func:`.hypotheses.revise`).
     """
     setup_seconds = time.perf_counter() - started_s - sum(o.seconds for o in outcomes)
     initial = stage_estimate(
@@ -173,6 +178,10 @@ def estimate_result(
             status = "inconsistent"
         seconds = stage.seconds + time.perf_counter() - started
         diagnosed.append(replace(stage, consistency=verdict, status=status, seconds=seconds))
+    if refuse is not None:
+        from .hypotheses import revise
+
+        diagnosed = revise(fusion, diagnosed, refuse, view, consistency, tree)
     selected, reason = select_stage(diagnosed)
     return EstimateResult(stages=tuple(diagnosed), selected_stage=selected, selection_reason=reason)
 

@@ -4,10 +4,12 @@ Result rows (``k`` = stage 0, 1, 2): ``failed`` (None, or the reason a stage ref
 empty segmentation, refused or unexecuted grasp, rejected initialisation), ``status`` (the
 final stage's, or ``"failed"``), ``diverged``, ``points``, ``taxels_in_contact``,
 ``seconds``, ``timings``, and per stage ``stage{k}_status``, ``stage{k}_iterations``,
-``stage{k}_deviation_{min,q1,median,q3,max,mean}_mm`` and every scalar metric of
-:func:`pipeline.evaluation.evaluate_stage` as ``stage{k}_<metric>`` (thickness, side angle,
-diameter, plane errors, and the shape scores: ``chamfer_mm``, ``precision_2mm``,
-``recall_2mm``, ``fscore_2mm``, the same at 5 mm, ``iou``).
+``stage{k}_hypothesis`` (the alternative hypothesis its model comes from, empty for the
+fused model; docs/method.md §9), ``stage{k}_deviation_{min,q1,median,q3,max,mean}_mm``
+and every scalar metric of :func:`pipeline.evaluation.evaluate_stage` as
+``stage{k}_<metric>`` (thickness, side angle, diameter, plane errors, and the shape scores:
+``chamfer_mm``, ``precision_2mm``, ``recall_2mm``, ``fscore_2mm``, the same at 5 mm,
+``iou``).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import StageFailure
-from ..formats import consistency_fields
+from ..formats import consistency_fields, hypothesis_field
 from .common import plugin_registry
 from .paper_tasks import trial_config
 from .rows import STAGES
@@ -78,6 +80,7 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
         row[f"{prefix}_status"] = stage_json.get("status")
         row[f"{prefix}_iterations"] = stage_json.get("iterations")
         row.update(consistency_fields(prefix, stage_json.get("consistency")))
+        row.update(hypothesis_field(prefix, stage_json.get("hypothesis")))
         for name, value in stage_metrics.items():
             if name == "deviation_m":
                 for field, metres in value.items():

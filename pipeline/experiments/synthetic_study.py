@@ -16,8 +16,10 @@ the file boundary; everything is converted to SI before it reaches the generator
     estimator          estimator name; estimator_params: its parameter overrides
 
 Result rows add ``stage{k}_diameter_error_mm`` (None when the completed cloud admits no circle
-fit), ``stage{k}_status``, ``stage{k}_iterations``, ``stage{k}_seconds`` for k = 0, 1, 2 (as far
-as the estimator returns stages), and the cloud and contact sizes.
+fit), ``stage{k}_status``, ``stage{k}_iterations``, ``stage{k}_seconds``,
+``stage{k}_hypothesis`` (empty unless an alternative hypothesis replaced the fused model,
+docs/method.md §9) for k = 0, 1, 2 (as far as the estimator returns stages), and the cloud
+and contact sizes.
 """
 
 from __future__ import annotations
@@ -28,7 +30,12 @@ from typing import Any
 
 import numpy as np
 
-from ..formats import consistency_fields, consistency_to_json
+from ..formats import (
+    consistency_fields,
+    consistency_to_json,
+    hypothesis_field,
+    hypothesis_to_json,
+)
 from ..metrics import diameter_error
 from ..runner import run_estimator
 from ..stages import Estimator
@@ -153,4 +160,5 @@ def run_trial(params: Mapping[str, Any]) -> dict[str, Any]:
         row[f"{prefix}_iterations"] = int(stage.iterations)
         row[f"{prefix}_seconds"] = float(stage.seconds)
         row.update(consistency_fields(prefix, consistency_to_json(stage.consistency)))
+        row.update(hypothesis_field(prefix, hypothesis_to_json(stage.hypothesis)))
     return row
