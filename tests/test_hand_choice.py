@@ -106,6 +106,7 @@ def test_the_pg70_grasps_a_box_too_wide_for_the_back_jaws_margin(registry):
     back margin ask for: the jaws split it and touch both sides."""
     box = _box("box", (0.054, 0.09, 0.08), 0.2)
     choice, contacts, shift, tilt = _auto_grasp(registry, box, 0.0, hand="pg70")
+    assert choice.plan.gripper == "pg70"
     assert set(contacts.pads) == {"left", "right"}
     assert tilt < 5.0 and shift < 0.01
 
