@@ -40,6 +40,7 @@ from summary import record  # noqa: E402
 from pipeline.estimation.dense import DenseCovariance  # noqa: E402
 from pipeline.estimation.geometry import apply_bias  # noqa: E402
 from pipeline.estimation.iekf import fuse  # noqa: E402
+from pipeline.estimation.map_params import fusion_problem  # noqa: E402
 from pipeline.types import (  # noqa: E402
     Bias,
     Contacts,
@@ -122,7 +123,9 @@ def filter_seconds(dense: bool, repeats: int) -> tuple[float, list[int]]:
     """Median wall time of Stages 1-2 (:func:`fuse`) at ``DENSE_N`` points and the
     iterations, with the dense or the structured covariance."""
     estimator = IekfEstimator()
-    fusion = estimator.fusion_problem(cylinder_problem(DENSE_N))
+    p = estimator.params
+    window = (p.window_along_normal_m, p.window_across_normal_m)
+    fusion = fusion_problem(cylinder_problem(DENSE_N), p, estimator.name, window, p.facing_filter)
     model = {"covariance_model": DenseCovariance} if dense else {}
     times = []
     for _ in range(repeats):

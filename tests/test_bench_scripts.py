@@ -1,0 +1,92 @@
+"""The benchmarks in ``bench/`` stay runnable as the code under them changes.
+
+Each benchmark is a script run by ``bench/run_all.py``; nothing else calls them, so an API
+change would only show when somebody runs ``tox -e bench``. These tests import every script
+and run the parts that call into the pipeline at a small size, each in a fresh interpreter
+(the scripts set thread variables and import paths of their own).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+SCRIPTS = sorted(p.stem for p in BENCH.glob("*.py"))
+
+
+def run_in_bench(code: str) -> str:
+    """Run ``code`` in a new interpreter with ``bench/`` importable; its stdout."""
+    prelude = f"import sys; sys.path.insert(0, {str(BENCH)!r})\n"
+    done = subprocess.run(
+        [sys.executable, "-c", prelude + textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        cwd=BENCH,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done.stdout
+
+
+def test_every_benchmark_script_imports():
+    imports = "".join(f"import {name}\n" for name in SCRIPTS)
+    run_in_bench(imports)
+
+
+def test_the_estimator_benchmark_times_both_covariance_models():
+    out = run_in_bench(
+        """
+        import estimator
+        row = estimator.estimate_row(2000, 1)
+        seconds, iterations = estimator.filter_seconds(False, 1)
+        print(row["status"], seconds > 0, len(iterations))
+        """
+    )
+    assert out.split() == ["converged/converged", "True", "2"]
+
+
+def test_the_sweep_overhead_benchmark_runs_a_real_sweep(tmp_path):
+    out = run_in_bench(
+        f"""
+        from pathlib import Path
+        import sweep_overhead
+        result = sweep_overhead.experiment_sweep("fig10", 4, Path({str(tmp_path)!r}), True)
+        print(result["tasks"], result["trial_s"] > 0, result["start_up_s"] >= 0)
+        """
+    )
+    assert out.split() == ["4", "True", "True"]
+
+
+def test_overhead_shares_of_two_workers_by_hand():
+    sys.path.insert(0, str(BENCH))
+    try:
+        from sweep_overhead import overhead_shares
+    finally:
+        sys.path.remove(str(BENCH))
+
+    def row(pid, start, end, trial):
+        return {"bench_pid": pid, "bench_start": start, "bench_end": end, "timings": {"t": trial}}
+
+    # Worker 1: first task waits 1 s and runs 3 s (its others take 1 s): start-up 1 + 2 s.
+    # Each later task: 0.1 s gap before it and 0.1 s of run_one outside the trial's 0.9 s.
+    rows = [
+        row(1, 1.0, 4.0, 2.9),
+        row(1, 4.1, 5.1, 0.9),
+        row(1, 5.2, 6.2, 0.9),
+        row(2, 2.0, 3.0, 0.9),
+        row(2, 3.1, 4.1, 0.9),
+        row(2, 4.2, 5.2, 0.9),
+    ]
+    shares = overhead_shares(rows, started=0.0, ended=7.0)
+    assert shares["trial_s"] == pytest.approx(0.9)
+    assert shares["steady"] == pytest.approx(0.2 / 0.9)
+    # Worker 1: 1 s wait + (3 - 1) s first-task excess; worker 2: 2 s wait, no excess.
+    assert shares["start_up_s"] == pytest.approx((3.0 + 2.0) / 2)
+    assert shares["tail_s"] == pytest.approx(0.8)
+    assert shares["whole"] == pytest.approx((2 * 7.0 / 6 - 0.9) / 0.9)
+    assert shares["per_minute"] == pytest.approx(60.0 * 6 / 7.0)
