@@ -27,7 +27,12 @@ from pipeline.perception.grasp_geometry import (
     rotate_z,
 )
 from pipeline.perception.pad_contact import sdh_flat_part_edge_m
-from pipeline.perception.sdh_candidates import SDH_SPREADS, sdh_candidate
+from pipeline.perception.sdh_candidates import (
+    PINCH_SPREAD_RAD,
+    SDH_SPREADS,
+    TOO_NARROW,
+    sdh_candidate,
+)
 from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
 
 
@@ -195,8 +200,9 @@ class TopThreeFinger(CandidatePlanner):
             (angle, front_to_back(points, rotate_z(proposal.plane.normal, angle)))
             for angle in closing_angles(p.angle_step_deg)
         ]
-        candidates = [
-            sdh_candidate(
+
+        def candidate(spread: float, angle: float, direction: np.ndarray, height: float):
+            return sdh_candidate(
                 points,
                 frame.completed,
                 centre,
@@ -208,10 +214,21 @@ class TopThreeFinger(CandidatePlanner):
                 gripper.max_aperture_m,
                 frame.settings,
             )
-            for spread in SDH_SPREADS
+
+        poses = [
+            (angle, direction, height)
             for angle, direction in directions
             for height in frame.heights_m
         ]
+        by_spread = {spread: [candidate(spread, *pose) for pose in poses] for spread in SDH_SPREADS}
+        # Where the object is too narrow across for fingers 1 and 2 facing the thumb, they
+        # can pinch it from two sides instead.
+        pinches = [
+            candidate(PINCH_SPREAD_RAD, *pose)
+            for pose, parallel in zip(poses, by_spread[0.0], strict=True)
+            if parallel.summary.reason == TOO_NARROW
+        ]
+        candidates = [c for group in by_spread.values() for c in group] + pinches
         return candidates
 
 

@@ -130,3 +130,16 @@ def test_an_object_no_hand_can_hold_is_refused_in_one_line(tmp_path, capsys):
     document = json.loads((out / "result.json").read_text())
     assert document["status"] == "failed"
     assert {a["gripper"] for a in document["hand"]["answers"]} == {"pg70", "sdh"}
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 80.0])
+def test_the_sdh_holds_a_jar_too_narrow_for_fingers_facing_the_thumb(registry, yaw_deg):
+    """68 mm across, 97 mm tall: narrower than fingers 1 and 2 facing the thumb need for
+    both their pads (86 mm). The planner may turn them to face each other and pinch it, with
+    the thumb, which nothing opposes then, resting at the surface without pushing; all three
+    pads touch and the jar stays put."""
+    jar = _cylinder("jar", 0.068, 0.097, 0.4)
+    _, contacts, shift, tilt = _auto_grasp(registry, jar, yaw_deg, hand="sdh")
+    assert {"f1_distal", "f2_distal", "thumb_distal"} <= set(contacts.pads)
+    assert opposing_contacts(contacts)
+    assert tilt < 5.0 and shift < 0.005

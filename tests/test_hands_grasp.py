@@ -12,7 +12,8 @@ import yourdfpy
 
 from pipeline.errors import ConfigError
 from pipeline.pad_layout import pad_grid
-from pipeline.sim.grasping import execute_grasp, object_pose
+from pipeline.perception import sdh_geometry
+from pipeline.sim.grasping import execute_grasp, object_pose, opposed_fingers
 from pipeline.sim.hands import GRIPPERS, Hand
 from pipeline.types import GraspPlan
 from robots import ROOT
@@ -298,3 +299,17 @@ def test_object_pose_is_the_link_frame_not_the_centre_of_mass_and_timestep_is_re
     execute_grasp(client, hand, _top_grasp("pg70", 0.5, 0.1, 0.225, 0.065), box)
     parameters = pb.getPhysicsEngineParameters(physicsClientId=client)
     assert parameters["fixedTimeStep"] == pytest.approx(1.0 / 500.0)
+
+
+@pytest.mark.parametrize(
+    ("facings", "expected"),
+    [
+        ([[-1.0, 0.0], [1.0, 0.0]], [True, True]),  # parallel jaws
+        (sdh_geometry.finger_facings(np.radians(60.0)), [True, True, True]),  # tripod
+        (sdh_geometry.finger_facings(0.0), [True, True, True]),  # f1, f2 facing the thumb
+        (sdh_geometry.finger_facings(np.pi / 2), [True, True, False]),  # pinch: thumb alone
+        ([[1.0, 0.0], [0.0, 1.0]], [False, False]),  # at right angles
+    ],
+)
+def test_a_finger_presses_only_when_another_closes_against_it(facings, expected):
+    assert opposed_fingers(np.array(facings)).tolist() == expected

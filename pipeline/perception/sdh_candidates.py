@@ -21,13 +21,22 @@ from .candidate import (
 from .grasp_geometry import hand_pose
 from .pad_contact import PadContact, PadTaxels, pad_coverage, sdh_distal_taxels
 
-#: SDH-2 pre-shapes: base rotation -> where the object's centre sits on the palm's x axis
-#: (m): at 60 deg the fingers face the palm axis; at 0 fingers 1 and 2 face the thumb and
-#: the object sits midway between the thumb's base and theirs.
+#: SDH-2 pre-shapes every grasp is tried with: base rotation -> where the object's centre
+#: sits on the palm's x axis (m): at 60 deg the fingers face the palm axis (a tripod); at 0
+#: fingers 1 and 2 face the thumb and the object sits midway between the thumb's base and
+#: theirs.
 SDH_SPREADS = {
     math.radians(60.0): 0.0,
     0.0: (sdh.FINGER_BASES_M[0, 0] + sdh.FINGER_BASES_M[2, 0]) / 2.0,
 }
+#: The pinch: at 90 deg fingers 1 and 2 face each other across the palm and close on the
+#: object from two sides, its centre on the line between their bases, while the thumb
+#: closes on a third side. Tried where the object is too narrow across for fingers 1 and 2
+#: facing the thumb.
+PINCH_SPREAD_RAD = math.pi / 2.0
+_CENTRES = {**SDH_SPREADS, PINCH_SPREAD_RAD: float(sdh.FINGER_BASES_M[0, 0])}
+#: Why :func:`sdh_candidate` rejects a grasp at spread 0 that the pinch may take instead.
+TOO_NARROW = "too narrow for fingers facing the thumb"
 #: Steps of the pre-shape search: proximal angles tried below the contact angle (rad).
 _OPEN_STEP_RAD = math.radians(3.0)
 
@@ -44,7 +53,8 @@ def sdh_candidate(
     aperture_m: float,
     settings: CandidateSettings,
 ) -> Candidate:
-    """An SDH-2 grasp at base rotation ``spread_rad`` (a key of :data:`SDH_SPREADS`), the
+    """An SDH-2 grasp at base rotation ``spread_rad`` (a key of :data:`SDH_SPREADS`, or
+    :data:`PINCH_SPREAD_RAD`), the
     palm's x axis along ``direction`` (thumb on the front side), distal pad centres at
     ``height_m``. Fingers 1 and 2 facing the thumb (spread 0) need the object as wide as
     their two pads across the closing line.
@@ -62,7 +72,7 @@ def sdh_candidate(
     s = settings
     x_hand = np.array([direction[0], direction[1], 0.0])
     y_hand = np.array([direction[1], -direction[0], 0.0])
-    palm_xy = centre_m - SDH_SPREADS[spread_rad] * x_hand
+    palm_xy = centre_m - _CENTRES[spread_rad] * x_hand
     rotation = np.column_stack([x_hand[:2], y_hand[:2]])
     facings = sdh.finger_facings(spread_rad) @ rotation.T
     taxels = sdh_distal_taxels(pad, height_m)
@@ -73,9 +83,7 @@ def sdh_candidate(
         across = completed[in_band] @ y_hand
         span = sdh.FINGER_BASES_M[0, 1] + pad.cols * pad.pitch_m / 2.0
         if len(across) == 0 or np.ptp(np.percentile(across, [2.0, 98.0])) < 2.0 * span:
-            return Candidate.rejected(
-                angle_rad, height_m, spread_rad, "too narrow for fingers facing the thumb"
-            )
+            return Candidate.rejected(angle_rad, height_m, spread_rad, TOO_NARROW)
     # Fingers meet an object off the palm axis inclined, so the palm is moved once, onto
     # the centre of the contacts predicted from the first guess.
     for attempt in range(2):
@@ -86,7 +94,7 @@ def sdh_candidate(
         contacts, alphas = found
         if attempt == 0:
             palm_xy = _contact_centre(contacts, x_hand, y_hand, spread_rad) - (
-                SDH_SPREADS[spread_rad] * x_hand
+                _CENTRES[spread_rad] * x_hand
             )
     palm_z = height_m + float(np.mean(sdh.distal_pad_depth_m(np.array(alphas))))
     depth_below_palm = palm_z - completed[:, 2]
@@ -173,13 +181,16 @@ def _contact_centre(
 ) -> np.ndarray:
     """Where the object's centre lies among the fingers' predicted contacts (f1, f2,
     thumb), robot xy with z 0: midway between the thumb's contact and the fingers' along
-    the palm's x axis, between finger 1's and finger 2's across it (spread 0), or the
-    circumcentre of the three contacts (fingers facing the palm axis)."""
+    the palm's x axis, between finger 1's and finger 2's across it (spread 0); midway
+    between finger 1's and finger 2's (the pinch); or the circumcentre of the three
+    contacts (fingers facing the palm axis)."""
     points = np.array([c.points.mean(axis=0)[:2] for c in contacts])
     if spread_rad == 0.0:
         x = (points[:2].mean(axis=0) @ x_hand[:2] + points[2] @ x_hand[:2]) / 2.0
         y = points[:2].mean(axis=0) @ y_hand[:2]
         return np.append(x * x_hand[:2] + y * y_hand[:2], 0.0)
+    if spread_rad == PINCH_SPREAD_RAD:
+        return np.append(points[:2].mean(axis=0), 0.0)
     a, b, c = points
     d = 2.0 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))
     if abs(d) < 1e-9:

@@ -18,7 +18,9 @@ Sequence (:func:`execute_grasp`):
    it presses with its force caps - at once, or, with ``press_together``, only once every
    finger has stopped, and only when every finger is in contact (a guarded close: a
    finger that arrives first waits at the surface instead of pushing the object away from
-   the others, and none presses when one closed on nothing);
+   the others, and none presses when one closed on nothing); a finger no other closes
+   against (the SDH-2's thumb when fingers 1 and 2 pinch across it) stays at the surface
+   and does not press (:func:`opposed_fingers`);
 6. let everything settle for ``settle_s`` and report.
 
 The hand closes along the x axis of ``plan.T_robot_hand`` (``plan.closing_direction`` is
@@ -181,11 +183,27 @@ def _finger_targets(
     return targets
 
 
+def opposed_fingers(facings: np.ndarray) -> np.ndarray:
+    """``(F,)`` whether each finger, closing along its row of ``facings`` (unit, palm xy),
+    has another closing against it: one at least 120 deg away (the tripod's fingers
+    oppose each other). A finger nothing opposes only pushes the object when it presses."""
+    facings = np.asarray(facings, dtype=np.float64)
+    dots = facings @ facings.T
+    np.fill_diagonal(dots, 1.0)
+    return dots.min(axis=1) <= -0.5 + 1e-9
+
+
 def _close(
-    client: int, hand: Hand, object_id: int, open_targets: dict[str, float], s: GraspSettings
+    client: int,
+    hand: Hand,
+    object_id: int,
+    open_targets: dict[str, float],
+    spread_rad: float,
+    s: GraspSettings,
 ) -> None:
     """Close every finger until it touches (or reaches its limit); see the module doc."""
     fingers = hand.model.fingers
+    presses = opposed_fingers(hand.model.facings(spread_rad)).astype(np.float64)
     closure = np.zeros(len(fingers))
     limit = np.array([hand.closure_limit(f, open_targets) for f in fingers])
     stopped = limit <= 0.0
@@ -216,7 +234,7 @@ def _close(
                 stopped[i] = True
                 contact[i] = 1.0
                 if not s.press_together:
-                    touching[i] = 1.0
+                    touching[i] = presses[i]
             elif closure[i] >= limit[i]:
                 stopped[i] = True
         if stopped.all():
@@ -224,7 +242,7 @@ def _close(
     if s.press_together and not contact.all():
         # A finger closed on nothing: pressing with the others would only shove the object.
         contact[:] = 0.0
-    hand.command(_finger_targets(hand, open_targets, closure, contact), s.force_fraction)
+    hand.command(_finger_targets(hand, open_targets, closure, contact * presses), s.force_fraction)
 
 
 def execute_grasp(
@@ -310,6 +328,6 @@ def _execute(
             f"hand blocked {miss_m * 1e3:.1f} mm short of the grasp pose during the descent",
         )
 
-    _close(client, hand, object_id, open_targets, s)
+    _close(client, hand, object_id, open_targets, plan.spread_rad, s)
     _step(client, max(1, round(s.settle_s / s.timestep_s)))
     return _outcome(client, hand, object_id, before, True)

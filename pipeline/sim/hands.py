@@ -129,6 +129,9 @@ class HandModel:
     fingers: tuple[FingerDrive, ...]
     open_configuration: Callable[[float, float], dict[str, float]]
     aperture: Callable[[Hand], float]
+    #: ``(F, 2)`` unit directions each finger closes along in the palm's xy plane, for a
+    #: spread (:attr:`fingers` order).
+    facings: Callable[[float], np.ndarray]
 
 
 def _pg70_open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
@@ -172,7 +175,15 @@ def _pg70_model() -> HandModel:
         for side in ("left", "right")
     )
     spec = GripperSpec("pg70", 2, 0.065, tuple(p.layout for p in pads), 0.154)
-    return HandModel(spec, "pg70.urdf", pads, fingers, _pg70_open_configuration, _pg70_aperture)
+    return HandModel(
+        spec,
+        "pg70.urdf",
+        pads,
+        fingers,
+        _pg70_open_configuration,
+        _pg70_aperture,
+        lambda spread_rad: np.array([[-1.0, 0.0], [1.0, 0.0]]),
+    )
 
 
 def _sdh_model() -> HandModel:
@@ -198,7 +209,13 @@ def _sdh_model() -> HandModel:
     max_aperture_m = sdh_geometry.opening_for_alpha(-sdh_geometry.JOINT_LIMIT_RAD)
     spec = GripperSpec("sdh", 3, max_aperture_m, tuple(p.layout for p in pads), 0.246)
     return HandModel(
-        spec, "sdh2.urdf", tuple(pads), tuple(fingers), _sdh_open_configuration, _sdh_aperture
+        spec,
+        "sdh2.urdf",
+        tuple(pads),
+        tuple(fingers),
+        _sdh_open_configuration,
+        _sdh_aperture,
+        sdh_geometry.finger_facings,
     )
 
 
