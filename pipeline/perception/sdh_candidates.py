@@ -54,10 +54,9 @@ def sdh_candidate(
     settings: CandidateSettings,
 ) -> Candidate:
     """An SDH-2 grasp at base rotation ``spread_rad`` (a key of :data:`SDH_SPREADS`, or
-    :data:`PINCH_SPREAD_RAD`), the
-    palm's x axis along ``direction`` (thumb on the front side), distal pad centres at
-    ``height_m``. Fingers 1 and 2 facing the thumb (spread 0) need the object as wide as
-    their two pads across the closing line.
+    :data:`PINCH_SPREAD_RAD`), the palm's x axis along ``direction`` (thumb on the front
+    side), distal pad centres at ``height_m``. Fingers 1 and 2 facing the thumb (spread 0)
+    need the object as wide as their two pads across the closing line.
 
     Each finger's contact angle is the proximal angle at which its distal pad (distal link
     parallel to the palm axis) touches the ``completed`` cloud (``visible`` and mirrored)
