@@ -35,6 +35,15 @@ def ring_mesh() -> trimesh.Trimesh:
     return standing(trimesh.creation.annulus(r_min=0.03, r_max=0.05, height=0.08))
 
 
+def rays_through_ring(scene: Scene) -> tuple:
+    """Ray hits straight down the hole and through the wall of a ring placed at x = 0.2 m."""
+    return pybullet.rayTestBatch(
+        [(0.2, 0.0, 0.3), (0.24, 0.0, 0.3)],
+        [(0.2, 0.0, -0.01), (0.24, 0.0, -0.01)],
+        physicsClientId=scene.client,
+    )
+
+
 def yaw_of(quaternion_xyzw) -> float:
     return float(Rotation.from_quat(quaternion_xyzw).as_euler("xyz")[2])
 
@@ -87,11 +96,7 @@ def test_non_convex_mesh_keeps_its_hole_and_is_cached(tmp_path, monkeypatch):
         body = scene.add_object(ring, 0.2, 0.5, x_m=0.2)
         scene.step(120)
         # A ray straight down the hole reaches the table; one through the wall hits the ring.
-        hole, wall = pybullet.rayTestBatch(
-            [(0.2, 0.0, 0.3), (0.24, 0.0, 0.3)],
-            [(0.2, 0.0, -0.01), (0.24, 0.0, -0.01)],
-            physicsClientId=scene.client,
-        )
+        hole, wall = rays_through_ring(scene)
         assert hole[0] == scene.table_id
         assert wall[0] == body
         assert wall[3][2] == pytest.approx(0.08, abs=3e-3)
@@ -108,6 +113,28 @@ def test_non_convex_mesh_keeps_its_hole_and_is_cached(tmp_path, monkeypatch):
     monkeypatch.setattr(scene_module.pybullet, "vhacd", no_vhacd)
     with Scene(vhacd_resolution=20_000) as scene:
         scene.add_object(ring_mesh(), 0.2, 0.5)
+
+
+def test_an_open_scan_gets_parts_on_its_surface(tmp_path, monkeypatch):
+    # A scan with holes has no inside; its parts are hulls of surface samples, so the hand
+    # stops on the surface the camera sees, not a voxel outside it.
+    monkeypatch.setenv("SYMFUSE_CACHE", str(tmp_path))
+    ring = ring_mesh()
+    top = np.flatnonzero(ring.triangles_center[:, 2] > 0.079)[:6]
+    scan = trimesh.Trimesh(ring.vertices, np.delete(ring.faces, top, axis=0), process=False)
+    assert not scan.is_watertight and not scan.is_convex
+    raw = trimesh.Trimesh(ring.vertices, ring.faces)  # the same shape, as V-HACD saw it
+    path = collision.convex_decomposition(scan, 20_000)
+    assert path.name.endswith("_surface.obj")
+    vertices = np.vstack(collision.read_convex_parts(path))
+    _, distance, _ = trimesh.proximity.closest_point(raw, vertices)
+    assert distance.max() < 1e-6
+    with Scene(vhacd_resolution=20_000) as scene:
+        body = scene.add_object(scan, 0.2, 0.5, x_m=0.2)
+        scene.step(120)
+        hole, wall = rays_through_ring(scene)
+        assert hole[0] == scene.table_id and wall[0] == body
+        assert wall[3][2] == pytest.approx(0.08, abs=1e-3)
 
 
 def test_convex_mesh_is_not_decomposed(tmp_path, monkeypatch):

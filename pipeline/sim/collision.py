@@ -63,10 +63,14 @@ def convex_decomposition(mesh: trimesh.Trimesh, resolution: int) -> Path:
     its can), so the fingers would stop that far outside the true surface and every taxel
     in contact would lie there. Each part is therefore also refined
     (:func:`_faithful_hulls`) until no hull sticks out of the mesh by more than
-    ``HULL_TOLERANCE_M``.
+    ``HULL_TOLERANCE_M``. A mesh that is not watertight (a scan with holes) has no inside
+    to test against, so each part becomes the hull of the surface samples it holds
+    (:func:`_surface_hulls`): its vertices lie on the surface, which removes the voxel's
+    offset (2-4 mm on a scanned box), though not a bridge across a concavity.
     """
     directory = cache_dir() / "vhacd"
-    key = f"{mesh_hash(mesh)[:32]}_r{resolution}_refined{HULL_TOLERANCE_M * 1e6:.0f}um"
+    fit = f"refined{HULL_TOLERANCE_M * 1e6:.0f}um" if mesh.is_watertight else "surface"
+    key = f"{mesh_hash(mesh)[:32]}_r{resolution}_{fit}"
     path = directory / f"{key}.obj"
     if path.is_file():
         return path
@@ -88,6 +92,8 @@ def convex_decomposition(mesh: trimesh.Trimesh, resolution: int) -> Path:
             raise InputError(f"convex decomposition of mesh {key} produced no parts")
         if mesh.is_watertight:
             parts = _faithful_hulls([_shrink_wrap(part, mesh) for part in parts], mesh)
+        else:
+            parts = _surface_hulls([trimesh.convex.convex_hull(part) for part in parts], mesh)
         staged = Path(scratch) / "wrapped.obj"
         write_convex_parts(staged, parts)
         os.replace(staged, path)
@@ -130,10 +136,47 @@ def _faithful_hulls(hulls: list[trimesh.Trimesh], mesh: trimesh.Trimesh) -> list
     """Convex parts covering the watertight ``mesh`` that stick out of it by at most
     ``HULL_TOLERANCE_M`` (as far as ``HULL_MAX_SPLITS`` halvings get).
 
-    Dense surface samples are shared out among the parts (each goes to the hull it lies
-    in, or the nearest), each part becomes the hull of its samples, and a hull that sticks
-    out too far is cut in two (:func:`_split_where_hull_bulges`) and both halves refined.
+    Dense surface samples are shared out among the parts (:func:`_shared_samples`), each
+    part becomes the hull of its samples, and a hull that sticks out too far is cut in two
+    (:func:`_split_where_hull_bulges`) and both halves refined.
     """
+    points, owner = _shared_samples(hulls, mesh)
+    refined: list[trimesh.Trimesh] = []
+    for index in range(len(hulls)):
+        refined.extend(_split_where_hull_bulges(points[owner == index], mesh, HULL_MAX_SPLITS))
+    return refined
+
+
+def _surface_hulls(hulls: list[trimesh.Trimesh], mesh: trimesh.Trimesh) -> list[trimesh.Trimesh]:
+    """Each part of a mesh without an inside replaced by the hull of the surface samples it
+    holds (:func:`_shared_samples`). A small part whose samples span no volume (a patch of
+    one flat face) becomes the hull of its vertices moved to their closest surface points;
+    when even those are flat it is a sliver along a face that holds nothing up, and is left
+    out, as :func:`_split_where_hull_bulges` leaves out such slivers of a watertight mesh."""
+    points, owner = _shared_samples(hulls, mesh)
+    wrapped = []
+    for index, hull in enumerate(hulls):
+        on_surface = _solid_hull(points[owner == index])
+        if on_surface is None:
+            on_surface = _solid_hull(trimesh.proximity.closest_point(mesh, hull.vertices)[0])
+        if on_surface is not None:
+            wrapped.append(on_surface)
+    return wrapped or hulls
+
+
+def _solid_hull(points: np.ndarray) -> trimesh.Trimesh | None:
+    """The convex hull of ``points``, None when they span no volume."""
+    if len(points) < 4 or np.linalg.matrix_rank(points - points[0], tol=1e-9) < 3:
+        return None
+    hull = trimesh.convex.convex_hull(points)
+    return hull if hull.volume > 1e-12 else None
+
+
+def _shared_samples(
+    hulls: list[trimesh.Trimesh], mesh: trimesh.Trimesh
+) -> tuple[np.ndarray, np.ndarray]:
+    """Dense samples of ``mesh``'s surface (and its vertices), ``(P, 3)``, and the index of
+    the part each goes to: the hull it lies in, or the nearest."""
     rng = np.random.default_rng(0)
     samples, _ = trimesh.sample.sample_surface(mesh, HULL_SAMPLES, seed=rng)
     points = np.concatenate([samples, mesh.vertices])
@@ -147,11 +190,7 @@ def _faithful_hulls(hulls: list[trimesh.Trimesh], mesh: trimesh.Trimesh) -> list
             for hull in hulls
         ]
     )
-    owner = np.argmin(outside, axis=0)
-    refined: list[trimesh.Trimesh] = []
-    for index in range(len(hulls)):
-        refined.extend(_split_where_hull_bulges(points[owner == index], mesh, HULL_MAX_SPLITS))
-    return refined
+    return points, np.argmin(outside, axis=0)
 
 
 def _hull_bulge(
