@@ -397,6 +397,13 @@ class Consistency:
     reason: str = ""
 
     @property
+    def passes_free_space(self) -> bool:
+        """The camera's test passed (true when it did not run)."""
+        if self.free_space_violations is None or self.free_space_limit is None:
+            return True
+        return self.free_space_violations <= self.free_space_limit
+
+    @property
     def excess(self) -> float:
         """The largest ratio of a statistic to its bound (<= 1 when consistent): how far the
         evidence contradicts the model, comparable between stages."""

@@ -150,16 +150,22 @@ def test_assess_passes_the_true_state_and_fails_a_plane_thirty_millimetres_off()
     assert wrong.taxel_rms_m > 0.01 and wrong.excess > 1.0
 
 
-def stage(index: int, excess_nis: float) -> StageEstimate:
+def stage(
+    index: int, excess_nis: float, violations: int | None = None, limit: int = 100
+) -> StageEstimate:
+    """A diagnosed stage whose taxel statistic is ``excess_nis`` of its bound (1) and, when
+    ``violations`` is given, with that many points in seen free space against ``limit``."""
+    camera = violations is not None
+    passes = excess_nis <= 1.0 and (not camera or violations <= limit)
     verdict = Consistency(
-        checks=("taxels",),
+        checks=("taxels", "free_space") if camera else ("taxels",),
         taxel_rms_m=0.001,
         nis=excess_nis,
         nis_threshold=1.0,
-        free_space_violations=None,
-        free_space_limit=None,
-        consistent=excess_nis <= 1.0,
-        reason="" if excess_nis <= 1.0 else "taxels",
+        free_space_violations=violations,
+        free_space_limit=limit if camera else None,
+        consistent=passes,
+        reason="" if passes else "failed",
     )
     return StageEstimate(
         stage=index,
@@ -169,7 +175,7 @@ def stage(index: int, excess_nis: float) -> StageEstimate:
         points=np.zeros((1, 3)),
         completed=np.zeros((2, 3)),
         iterations=1,
-        status="converged" if excess_nis <= 1.0 else "inconsistent",
+        status="converged" if passes else "inconsistent",
         seconds=0.0,
         consistency=verdict,
     )
@@ -181,6 +187,20 @@ def test_selection_keeps_a_consistent_last_stage_and_otherwise_the_least_contrad
     index, reason = select_stage([stage(0, 9.0), stage(1, 1.5), stage(2, 2.0)])
     assert index == 1 and "Stage 1" in reason
     assert select_stage([stage(0, 9.0), stage(1, 3.0), stage(2, 2.0)])[0] == 2
+
+
+def test_with_no_consistent_stage_the_camera_ranks_first():
+    # Stage 0's taxels are far off (the object moved, or touched a part symmetry cannot
+    # complete); the fused stages fit them by putting matter where the camera saw none.
+    stages = [stage(0, 16.7, violations=15), stage(1, 0.1, 648), stage(2, 0.1, 645)]
+    index, reason = select_stage(stages)
+    assert index == 0 and "contradicts the camera" in reason
+    # Among stages the camera accepts, the least contradicted by the taxels.
+    stages = [stage(0, 16.7, violations=15), stage(1, 3.0, 20), stage(2, 0.1, 645)]
+    assert select_stage(stages)[0] == 1
+    # When the camera accepts none, the smallest excess over both tests.
+    stages = [stage(0, 16.7, violations=150), stage(1, 3.0, 400), stage(2, 2.0, 120)]
+    assert select_stage(stages)[0] == 2
 
 
 def test_a_last_stage_that_kept_its_prior_gives_way_to_the_last_that_did_not_fail():

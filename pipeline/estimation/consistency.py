@@ -278,15 +278,22 @@ def assess(
 
 
 def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
-    """The stage the evidence supports best, and why.
+    """The stage the evidence supports best, and why (docs/method.md §9).
 
     The last stage stands while its model is consistent with the evidence: between two
     models that both pass, the tests cannot say which is closer to the truth. When it is
-    inconsistent, the stage with the smallest :attr:`~pipeline.types.Consistency.excess` is
-    selected (the later one on a tie), so fusion never makes the model worse than vision
-    alone without saying so. Stages without a diagnosis are never selected over the last.
-    A last stage that fell back to its prior (``no_correspondence``, ``diverged``) gives way
-    to the last stage whose status is not failed.
+    inconsistent, the camera ranks first: a model that puts matter where the camera saw
+    none is wrong in its shape whatever the taxels say, while taxels off a model the camera
+    accepts may be the object's motion between seeing and touching, or the camera's pose
+    error (the bias, which Stage 0 does not estimate), or a part that symmetry cannot
+    complete (a handle). Among the stages the image accepts, or among all when it accepts
+    none, the one with the smallest :attr:`~pipeline.types.Consistency.excess` is selected
+    (the later one on a tie), so fusion never makes the model worse than vision alone
+    without saying so.
+
+    Stages without a diagnosis are never selected over the last. A last stage that fell
+    back to its prior (``no_correspondence``, ``diverged``) gives way to the last stage
+    whose status is not failed.
     """
     last = len(stages) - 1
     if stages[last].status in FELL_BACK_STATUSES:
@@ -304,9 +311,22 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
     if final.consistent:
         return last, f"Stage {last} is consistent with the evidence"
     assessed = [s for s in stages if s.consistency is not None]
-    best = min(reversed(assessed), key=lambda s: s.consistency.excess)
+    seen_right = [s for s in assessed if s.consistency.passes_free_space]
+    pool = seen_right or assessed
+    best = min(reversed(pool), key=lambda s: s.consistency.excess)
     if best.stage == last:
         return last, f"no stage is consistent; Stage {last} contradicts the evidence least"
+    if best.consistency.consistent:
+        return best.stage, (
+            f"Stage {last} contradicts the evidence ({final.reason}); Stage {best.stage} is "
+            "consistent with it"
+        )
+    if seen_right and not final.passes_free_space:
+        return best.stage, (
+            f"Stage {last} contradicts the camera ({final.reason}); Stage {best.stage} is the "
+            f"stage the camera accepts that contradicts the taxels least "
+            f"({best.consistency.excess:.2f} of the bound)"
+        )
     return best.stage, (
         f"Stage {last} contradicts the evidence ({final.reason}); Stage {best.stage} "
         f"contradicts it least ({best.consistency.excess:.2f} of the bound vs "
