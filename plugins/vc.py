@@ -36,7 +36,9 @@ class VcInitialiser(SymmetryInitialiser):
     and counts the points lying more than ``tolerance_m`` in front of the measured depth at
     their pixel (table and background pixels are free space too; NaN pixels and points
     outside the image are unknown). Ranking:
-    fewest violations, then smallest summed violation depth. ``SymmetryInit.hypotheses``
+    fewest violations, then smallest summed violation depth, then, among hypotheses still
+    tied (typically several with no violation at all), the most compact completion
+    (:func:`tie_spread`). ``SymmetryInit.hypotheses``
     holds every hypothesis, best first, with ``score`` = fraction of violating points. When
     even the best one exceeds ``max_violation_fraction`` the result is ``"rejected"``.
     ``refine`` keeps the proposal (zero bias, pivot at the cloud's centroid).
@@ -103,8 +105,9 @@ class VcInitialiser(SymmetryInitialiser):
             observation.T_robot_camera,
             tolerance_m=p.tolerance_m,
         )
-        order = np.lexsort((depth_sum, violations))
         theta, offset = grid.theta_rad.ravel(), grid.offset_m.ravel()
+        spread = tie_spread(cloud.points, theta, offset, violations, depth_sum)
+        order = np.lexsort((spread, depth_sum, violations))
         hypotheses = tuple(
             SymmetryHypothesis(
                 plane=SymmetryPlane(float(theta[i]), float(offset[i])),
@@ -129,6 +132,39 @@ class VcInitialiser(SymmetryInitialiser):
                 ),
             )
         return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+
+
+def tie_spread(
+    points_m: np.ndarray,
+    theta_rad: np.ndarray,
+    offset_m: np.ndarray,
+    violations: np.ndarray,
+    depth_sum_m: np.ndarray,
+) -> np.ndarray:
+    """Mean distance of the cloud from each plane hypothesis tied with the best one (m); 0
+    for the others.
+
+    The camera rejects a mirror image only where it lies in seen free space, so a plane far
+    behind a round object, whose mirror image hides in the object's shadow, passes as well
+    as the right one: on the catalogue's cylinders 3-13 hypotheses of the default grid have
+    no violation at all, and the grid's order used to decide. Between hypotheses the camera
+    cannot tell apart, the one whose mirror image lies closest to the seen points completes
+    the smallest object that explains the view, the least that must be assumed about the
+    hidden side.
+
+    Args:
+        points_m: ``(N, 3)`` the cloud, frame R.
+        theta_rad, offset_m: ``(H,)`` the hypotheses' planes ``{p : n(theta) . p = offset}``.
+        violations, depth_sum_m: ``(H,)`` their violation counts and summed depths.
+    """
+    best = np.lexsort((depth_sum_m, violations))[0]
+    tied = np.flatnonzero((violations == violations[best]) & (depth_sum_m == depth_sum_m[best]))
+    spread = np.zeros(len(theta_rad))
+    if len(tied) > 1:
+        normals = np.stack([np.cos(theta_rad[tied]), np.sin(theta_rad[tied])])
+        distances = np.abs(np.asarray(points_m)[:, :2] @ normals - offset_m[tied])
+        spread[tied] = distances.mean(axis=0)
+    return spread
 
 
 @hookimpl

@@ -223,3 +223,21 @@ def test_ps_refine_recovers_offset_and_bias_from_contacts():
     no_plan = initialiser.refine(proposal, cloud, None, contacts)
     assert no_plan.bias.translation_m @ no_plan.bias.translation_m == 0.0
     assert no_plan.plane.offset_m == pytest.approx(normal[:2] @ [0.604, 0.0], abs=0.0015)
+
+
+def test_ties_between_hypotheses_go_to_the_most_compact_completion():
+    from plugins.vc import tie_spread
+
+    # Two seen points at x = 0 and x = 0.02 m; planes x = 0.03 and x = 0.05 both without
+    # violations (tied), a third at x = 0.01 with three.
+    points = np.array([[0.0, 0.0, 0.1], [0.02, 0.01, 0.1]])
+    theta = np.zeros(3)
+    offset = np.array([0.05, 0.01, 0.03])
+    violations = np.array([0, 3, 0])
+    spread = tie_spread(points, theta, offset, violations, np.zeros(3))
+    # mean |x - offset| by hand: (0.05 + 0.03) / 2 and (0.03 + 0.01) / 2; untied: 0
+    assert spread == pytest.approx([0.04, 0.0, 0.02])
+    assert np.lexsort((spread, np.zeros(3), violations))[0] == 2
+    # A summed violation depth already separates hypotheses: no tie, no spread.
+    depth = np.array([0.0, 0.0, 0.001])
+    assert tie_spread(points, theta, offset, violations, depth) == pytest.approx(np.zeros(3))
