@@ -1,11 +1,12 @@
 """Grasps on every catalogue object and YCB scan: the hand chosen, opposing contacts, tilt.
 
 Run ``python bench/grasps.py`` (nice it on a shared machine). For each object - the
-catalogue, and every ``*/textured.obj`` under ``--ycb`` (default ``../shared/ycb``, skipped
-when absent) - and each of ``--yaws`` random yaws (seeded), one simulated grasp as a trial
-makes it: render, segment, propose a plane, plan and choose the hand (``--gripper``, default
-``auto``), grasp, read the taxels. No estimator, no pictures. ``--only`` runs objects whose
-name contains a string; ``--out`` keeps ``results.jsonl`` (a re-run resumes).
+catalogue, and every ``*/textured.obj`` under ``--ycb DIR`` (default: the folder named by
+``$SYMFUSE_SCANS``; none when unset) - and each of ``--yaws`` random yaws (seeded), one
+simulated grasp as a trial makes it: render, segment, propose a plane, plan and choose the
+hand (``--gripper``, default ``auto``), grasp, read the taxels. No estimator, no pictures.
+``--only`` runs objects whose name contains a string; ``--out`` keeps ``results.jsonl`` (a
+re-run resumes).
 
 Prints per object: the hand(s) chosen, the grasps with contacts on two opposing sides
 (:func:`pipeline.evaluation.opposing_contacts`), the median object tilt and shift during the
@@ -28,13 +29,13 @@ from pipeline.config import load_config
 from pipeline.errors import StageFailure
 from pipeline.evaluation import object_motion, opposing_contacts
 from pipeline.experiments import SweepTask
+from pipeline.experiments.scanned import SCANS_ENV, default_scans_dir
 from pipeline.hand_choice import candidate_to_json, choose_grasp
 from pipeline.registry import load_registry
 from pipeline.sweep import run_sweep
 from pipeline.tables import format_table
 from pipeline.types import SceneSetup
 
-YCB_ROOT = Path(__file__).resolve().parents[2] / "shared" / "ycb"
 #: Tilt below which a grasp counts as not tipping the object (deg).
 TILT_LIMIT_DEG = 5.0
 
@@ -88,9 +89,10 @@ def grasp_once(params: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def object_names(ycb: Path, only: str | None) -> list[str]:
+def object_names(ycb: Path | None, only: str | None) -> list[str]:
     names = [info.name for info in list_objects()]
-    names += [str(path) for path in sorted(ycb.glob("*/textured.obj"))] if ycb.is_dir() else []
+    if ycb is not None and ycb.is_dir():
+        names += [str(path) for path in sorted(ycb.glob("*/textured.obj"))]
     return [n for n in names if only is None or only in n]
 
 
@@ -134,7 +136,12 @@ def summary(rows: list[dict[str, Any]]) -> tuple[list[list[str]], int, int]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--ycb", type=Path, default=YCB_ROOT, help="folder of YCB scans")
+    parser.add_argument(
+        "--ycb",
+        type=Path,
+        default=default_scans_dir(),
+        help=f"folder of YCB scans DIR/*/textured.obj (default: ${SCANS_ENV})",
+    )
     parser.add_argument("--only", help="only objects whose name contains this")
     parser.add_argument("--yaws", type=int, default=20, help="random yaws per object")
     parser.add_argument("--gripper", default="auto", help="auto, pg70 or sdh")

@@ -2,7 +2,7 @@
 one summary table of every headline number beside its target.
 
 Run: ``python bench/run_all.py [NAME ...] [--markdown FILE]`` (names without ``.py``;
-default: all but the YCB one, which needs ``../shared/ycb``). Each benchmark runs in its own
+default: all but the YCB one, which needs a folder of scans). Each benchmark runs in its own
 process so one's imports and threads do not disturb the next; the rows it reports through
 :func:`summary.record` are gathered in a temporary file. ``--markdown`` also writes the
 summary with the machine it ran on (e.g. ``docs/performance.md``).

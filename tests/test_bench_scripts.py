@@ -90,3 +90,34 @@ def test_overhead_shares_of_two_workers_by_hand():
     assert shares["tail_s"] == pytest.approx(0.8)
     assert shares["whole"] == pytest.approx((2 * 7.0 / 6 - 0.9) / 0.9)
     assert shares["per_minute"] == pytest.approx(60.0 * 6 / 7.0)
+
+
+def test_the_scan_benchmark_runs_a_trial_on_a_folder_of_scans(tmp_path):
+    # A catalogue mesh stands in for a scan: the script needs only DIR/<name>/textured.obj.
+    from pipeline.catalogue import load_object
+
+    (tmp_path / "jar").mkdir()
+    load_object("jam").mesh.export(tmp_path / "jar" / "textured.obj")
+    done = subprocess.run(
+        [sys.executable, str(BENCH / "ycb_trials.py"), "--root", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        cwd=BENCH,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "jar/yaw00" in done.stdout
+    assert "1/1 trials touched the object" in done.stdout
+
+
+def test_the_scan_target_by_hand():
+    sys.path.insert(0, str(BENCH))
+    try:
+        from ycb_trials import meets
+    finally:
+        sys.path.remove(str(BENCH))
+    assert meets(1.0, 1.2)  # 0.2 mm worse: within the tolerance
+    assert not meets(1.0, 1.3)
+    assert meets(6.0, 4.0)  # better, under 5 mm
+    assert not meets(6.0, 5.5)  # better than Stage 0 but above 5 mm
+    assert not meets(None, 1.0) and not meets(1.0, float("nan"))

@@ -1,26 +1,28 @@
 """Real scans through whole trials: non-watertight YCB meshes with an arbitrary origin.
 
-Needs ``../shared/ycb`` (skipped cleanly when absent); slow (one full trial per case).
+Needs a folder of YCB scans named by ``$SYMFUSE_SCANS`` (skipped cleanly when unset); slow
+(one full trial per case).
 """
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
 from pipeline.experiments.paper_trial import run_paper_trial
-from pipeline.experiments.scanned import scan_trial_params
+from pipeline.experiments.scanned import SCANS_ENV, default_scans_dir, scan_trial_params
 
-YCB_ROOT = Path(__file__).resolve().parents[2] / "shared" / "ycb"
+YCB_ROOT = default_scans_dir()
 
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.ycb,
-    pytest.mark.skipif(not YCB_ROOT.is_dir(), reason=f"YCB scans not found at {YCB_ROOT}"),
+    pytest.mark.skipif(
+        YCB_ROOT is None or not YCB_ROOT.is_dir(), reason=f"no YCB scans: set {SCANS_ENV}"
+    ),
 ]
 
 
@@ -36,10 +38,11 @@ def test_a_scan_goes_through_a_whole_trial(scan, gripper, tmp_path):
     assert np.linalg.norm(source.bounds.mean(axis=0)[:2]) > 0.005  # origin off the centre
 
     params = scan_trial_params(path, seed=1, trial_dir=tmp_path)
-    assert params["gripper"] == gripper
+    assert params["gripper"] == "auto"
     row = run_paper_trial(params)
 
     assert row["failed"] is None
+    assert row["gripper"] == gripper  # the hand with the best feasible grasp
     assert row["points"] > 500
     assert row["taxels_in_contact"] > 0
     document = json.loads((tmp_path / "result.json").read_text())

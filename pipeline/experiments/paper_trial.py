@@ -3,6 +3,7 @@
 Result rows (``k`` = stage 0, 1, 2): ``failed`` (None, or the reason a stage refused:
 empty segmentation, refused or unexecuted grasp, rejected initialisation), ``status`` (the
 final stage's, or ``"failed"``), ``diverged``, ``points``, ``taxels_in_contact``,
+``gripper`` (the hand that grasped), ``selected_stage``,
 ``seconds``, ``timings``, and per stage ``stage{k}_status``, ``stage{k}_iterations``,
 ``stage{k}_hypothesis`` (the alternative hypothesis its model comes from, empty for the
 fused model; docs/method.md §9), ``stage{k}_deviation_{min,q1,median,q3,max,mean}_mm``
@@ -74,6 +75,7 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
         "taxels_in_contact": document.get("taxels_in_contact"),
         "timings": dict(document.get("timings", {})),
         "selected_stage": document.get("selected_stage"),
+        "gripper": document.get("gripper"),
     }
     for stage_json, stage_metrics in zip(document["stages"], metrics, strict=True):
         prefix = f"stage{stage_json['stage']}"
