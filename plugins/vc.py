@@ -146,8 +146,8 @@ def tie_spread(
 
     The camera rejects a mirror image only where it lies in seen free space, so a plane far
     behind a round object, whose mirror image hides in the object's shadow, passes as well
-    as the right one: on the catalogue's cylinders 3-13 hypotheses of the default grid have
-    no violation at all, and the grid's order used to decide. Between hypotheses the camera
+    as the right one: on a cylinder several hypotheses of the default grid have no
+    violation at all, and the grid's order alone would decide. Between hypotheses the camera
     cannot tell apart, the one whose mirror image lies closest to the seen points completes
     the smallest object that explains the view, the least that must be assumed about the
     hidden side.
