@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -50,7 +51,5 @@ SCANS_ENV = "SYMFUSE_SCANS"
 
 def default_scans_dir() -> Path | None:
     """The folder named by :data:`SCANS_ENV`, None when it is unset."""
-    import os
-
     value = os.environ.get(SCANS_ENV, "").strip()
     return Path(value) if value else None
