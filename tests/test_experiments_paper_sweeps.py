@@ -27,6 +27,9 @@ def test_quick_sweep_runs_and_reports(name, tmp_path):
     paths = module.report(rows, tmp_path)
     assert all(path.is_file() and path.stat().st_size > 0 for path in paths)
     report = (tmp_path / "report.md").read_text()
-    # "finished/total" per group; spray and kth also give the whole sweep's
-    counts = [(int(a), int(b)) for a, b in re.findall(r"(\d+)/(\d+) finished", report)]
-    assert (len(finished), len(rows)) in counts or sum(a for a, _ in counts) == len(finished)
+    # Every table gives "finished/total" per group (spray and kth also the whole sweep's).
+    tables = [re.findall(r"(\d+)/(\d+) finished", block) for block in report.split("\n\n")]
+    tables = [[(int(a), int(b)) for a, b in counts] for counts in tables if counts]
+    assert tables
+    for counts in tables:
+        assert (len(finished), len(rows)) in counts or sum(a for a, _ in counts) == len(finished)
