@@ -193,16 +193,13 @@ def _shared_samples(
     return points, np.argmin(outside, axis=0)
 
 
-def _hull_bulge(
-    points: np.ndarray, mesh: trimesh.Trimesh
-) -> tuple[trimesh.Trimesh, float, np.ndarray]:
-    """The hull of ``points``, how far (m) it sticks out of ``mesh`` at most, and where."""
-    hull = trimesh.convex.convex_hull(points)
+def _hull_bulge(hull: trimesh.Trimesh, mesh: trimesh.Trimesh) -> tuple[float, np.ndarray]:
+    """How far (m) ``hull`` sticks out of ``mesh`` at most, and where."""
     probes, _ = trimesh.sample.sample_surface(hull, 4000, seed=np.random.default_rng(0))
     probes = np.concatenate([probes, hull.vertices])
     outside = _outside_distances(probes, mesh)
     worst = int(np.argmax(outside))
-    return hull, float(outside[worst]), probes[worst]
+    return float(outside[worst]), probes[worst]
 
 
 def _split_where_hull_bulges(
@@ -216,11 +213,10 @@ def _split_where_hull_bulges(
     bulge least is taken: a hull that bridges a step, such as a lid wider than its can, is
     cut at the step.
     """
-    if len(points) < 4 or np.linalg.matrix_rank(points - points[0], tol=1e-9) < 3:
+    hull = _solid_hull(points)
+    if hull is None:  # a sliver of coplanar samples holds nothing up
         return []
-    hull, bulge, worst = _hull_bulge(points, mesh)
-    if hull.volume < 1e-12:  # a sliver of coplanar samples holds nothing up
-        return []
+    bulge, worst = _hull_bulge(hull, mesh)
     if splits_left == 0 or bulge <= HULL_TOLERANCE_M:
         return [hull]
     nearest = trimesh.proximity.closest_point(mesh, worst[None])[0][0]
@@ -231,7 +227,7 @@ def _split_where_hull_bulges(
         halves = [points[height > 0.0], points[height <= 0.0]]
         if min(len(h) for h in halves) < 4:
             continue
-        worst_half = max(_hull_bulge(h, mesh)[1] for h in halves)
+        worst_half = max(_hull_bulge(trimesh.convex.convex_hull(h), mesh)[0] for h in halves)
         if best is None or worst_half < best[0]:
             best = (worst_half, halves)
     if best is None:
