@@ -123,11 +123,16 @@ def stop_reason(
     return ""
 
 
-def model_for_planning(stage: StageEstimate) -> tuple[PointCloud, SymmetryInit]:
+def model_for_planning(
+    stage: StageEstimate, viewpoint_m: np.ndarray | None
+) -> tuple[PointCloud, SymmetryInit]:
     """The current model as a planner takes it: the visible points where the object was at
-    the last grasp (moved by the bias) and the symmetry plane moved with them; the
-    planner's completion mirrors the one through the other, which is the stage's model."""
-    cloud = PointCloud(stage.completed[: len(stage.points)])
+    the last grasp (moved by the bias), the camera's ``viewpoint_m`` (m, frame R) and the
+    symmetry plane moved with them; the planner's completion mirrors the one through the
+    other, which is the stage's model."""
+    if viewpoint_m is not None:
+        viewpoint_m = stage.bias.apply(np.asarray(viewpoint_m)[None, :])[0]
+    cloud = PointCloud(stage.completed[: len(stage.points)], viewpoint_m=viewpoint_m)
     plane = plane_after_bias(stage.plane, stage.bias)
     return cloud, SymmetryInit(plane=plane, bias=Bias(pivot_m=cloud.points.mean(axis=0)))
 
@@ -307,10 +312,12 @@ def choose_next_grasp(
     gripper: GripperSpec,
     model: MeasurementModel,
     rng: np.random.Generator,
+    viewpoint_m: np.ndarray | None = None,
 ) -> NextGraspChoice:
     """Plan the next grasp on ``stage``'s model with ``planner`` (a
-    :class:`pipeline.stages.GraspPlanner`) and pick it by ``strategy``."""
-    cloud, proposal = model_for_planning(stage)
+    :class:`pipeline.stages.GraspPlanner`) and pick it by ``strategy``; ``viewpoint_m`` is
+    the camera's position when the object was seen (m, frame R)."""
+    cloud, proposal = model_for_planning(stage, viewpoint_m)
     if strategy == "paper":
         return NextGraspChoice(planner.plan(cloud, proposal, gripper), strategy)
     alternatives = tuple(planner.alternatives(cloud, proposal, gripper))

@@ -415,7 +415,13 @@ def _grasp_and_fuse(
             report(f"planning grasp {k + 1} ({settings.next_grasp})")
             with timer.phase("planner"):
                 following = choose_next_grasp(
-                    settings.next_grasp, planner, fused.result.selected, gripper, model, rng
+                    settings.next_grasp,
+                    planner,
+                    fused.result.selected,
+                    gripper,
+                    model,
+                    rng,
+                    cloud.viewpoint_m,
                 )
             plan, chosen_by = following.plan, following.to_json()
             if plan.status != "ok":

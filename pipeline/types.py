@@ -115,16 +115,24 @@ class PointCloud:
             that crosses a stage boundary).
         pixels: optional ``(N, 2) int`` (row, column) of the depth pixel each point came
             from; lets visibility reasoning go back to the image.
+        viewpoint_m: optional ``(3,)`` position of the sensor's optical centre in
+            ``frame`` (m); tells which side of the object the camera saw.
     """
 
     points: np.ndarray
     frame: str = "robot"
     pixels: np.ndarray | None = None
+    viewpoint_m: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "points", _as_points(self.points, "PointCloud.points"))
         if self.pixels is not None and len(self.pixels) != len(self.points):
             raise ValueError("PointCloud.pixels must have one row per point")
+        if self.viewpoint_m is not None:
+            viewpoint = np.asarray(self.viewpoint_m, dtype=np.float64)
+            if viewpoint.shape != (3,) or not np.all(np.isfinite(viewpoint)):
+                raise ValueError("PointCloud.viewpoint_m must be a finite (3,) position")
+            object.__setattr__(self, "viewpoint_m", viewpoint)
 
     def __len__(self) -> int:
         return len(self.points)

@@ -69,7 +69,7 @@ class GroundTruthMask(Segmenter):
                 f"{p.min_height_m * 1000:.0f} mm above the table (< min_object_points = "
                 f"{p.min_object_points}; {int(on_object.sum())} masked pixels with depth)"
             )
-        return PointCloud(points[keep], "robot", pixels[keep])
+        return PointCloud(points[keep], "robot", pixels[keep], observation.T_robot_camera[:3, 3])
 
 
 @hookimpl

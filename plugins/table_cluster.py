@@ -24,7 +24,7 @@ class TableCluster(Segmenter):
     the table is removed, the rest is clustered (DBSCAN, or Euclidean clustering) and the
     largest cluster is the object (``segment_objects`` also keeps every other cluster of at
     least ``min_object_points`` points and ``min_object_area_m2`` of visible surface).
-    Output points are in the robot frame with their pixels.
+    Output points are in the robot frame with their pixels and the camera's position.
     """
 
     name = "table-cluster"
@@ -97,8 +97,9 @@ class TableCluster(Segmenter):
         depth = observation.depth_m[pixels[:, 0], pixels[:, 1]].astype(np.float64)
         k = observation.intrinsics
         pixel_area_m2 = depth**2 / (k.fx * k.fy)
+        viewpoint = observation.T_robot_camera[:3, 3]
         return tuple(
-            PointCloud(points[indices], "robot", pixels[indices])
+            PointCloud(points[indices], "robot", pixels[indices], viewpoint)
             for rank, indices in enumerate(result.objects)
             if len(indices) >= p.min_object_points
             and (rank == 0 or pixel_area_m2[indices].sum() >= p.min_object_area_m2)

@@ -110,7 +110,9 @@ class TopParallel(CandidatePlanner):
         normal = plane.normal
         centroid = points.mean(axis=0)
         centre = centroid - (centroid @ normal - plane.offset_m) * normal
-        direction = front_to_back(points, rotate_z(normal, np.deg2rad(p.tactile_angle_deg)))
+        direction = front_to_back(
+            points, rotate_z(normal, np.deg2rad(p.tactile_angle_deg)), cloud.viewpoint_m
+        )
         band = pad_band(
             points,
             gripper.pads[0],
@@ -183,6 +185,7 @@ class TopParallel(CandidatePlanner):
             pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
             keep_above_cloud=p.pad_above_cloud,
             contact_edge_below_centre_m=pad.rows * pad.pitch_m / 2,
+            viewpoint_m=cloud.viewpoint_m,
         )
         hand = ParallelHand(
             pad=pad,
@@ -197,7 +200,10 @@ class TopParallel(CandidatePlanner):
         centre = frame.completed.mean(axis=0)
         # Which way is front to back depends on the closing angle alone, not on the height.
         directions = [
-            (angle, front_to_back(points, rotate_z(proposal.plane.normal, angle)))
+            (
+                angle,
+                front_to_back(points, rotate_z(proposal.plane.normal, angle), cloud.viewpoint_m),
+            )
             for angle in closing_angles(p.angle_step_deg)
         ]
         candidates = [

@@ -124,7 +124,9 @@ class TopThreeFinger(CandidatePlanner):
         points = cloud.points
         completed = np.concatenate([points, proposal.plane.mirror(points)])
         direction = front_to_back(
-            points, rotate_z(proposal.plane.normal, np.deg2rad(p.tactile_angle_deg))
+            points,
+            rotate_z(proposal.plane.normal, np.deg2rad(p.tactile_angle_deg)),
+            cloud.viewpoint_m,
         )
         distal = [pad for pad in gripper.pads if pad.name.endswith("distal")]
         band = pad_band(
@@ -193,11 +195,15 @@ class TopThreeFinger(CandidatePlanner):
             pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
             keep_above_cloud=p.keep_above_cloud,
             contact_edge_below_centre_m=sdh_flat_part_edge_m(pad),
+            viewpoint_m=cloud.viewpoint_m,
         )
         centre = frame.completed.mean(axis=0)
         # Which way is front to back depends on the closing angle alone, not on the height.
         directions = [
-            (angle, front_to_back(points, rotate_z(proposal.plane.normal, angle)))
+            (
+                angle,
+                front_to_back(points, rotate_z(proposal.plane.normal, angle), cloud.viewpoint_m),
+            )
             for angle in closing_angles(p.angle_step_deg)
         ]
 

@@ -11,9 +11,10 @@ import yourdfpy
 from test_planners import _true_plane, _view
 
 from pipeline.perception import sdh_geometry as sdh
-from pipeline.perception.candidate import height_grid
+from pipeline.perception.candidate import CandidateSettings, height_grid
+from pipeline.perception.grasp_geometry import front_to_back
 from pipeline.perception.pad_contact import flat_pad_taxels, pad_coverage, sdh_distal_taxels
-from pipeline.perception.parallel_candidates import front_jaw_gap
+from pipeline.perception.parallel_candidates import ParallelHand, front_jaw_gap, parallel_candidate
 from pipeline.synthetic import box_object, cylinder_object
 from pipeline.types import PadLayout
 from plugins.top_parallel import TopParallel
@@ -207,3 +208,82 @@ def test_front_jaw_gap_by_hand(width_mm, front_mm):
 
 def test_front_jaw_gap_refuses_an_object_that_leaves_no_clearance():
     assert front_jaw_gap(0.065, 0.058, 0.004, 0.01, 0.01) is None
+
+
+def test_front_to_back_points_away_from_the_camera_at_a_wall_seen_level():
+    # The near half of a 41 mm cup wall, every height seen alike: the lower quarter of the
+    # cloud says nothing about which side is in front, the camera's position does.
+    angles = np.radians(np.arange(95.0, 266.0, 5.0))
+    heights = np.arange(0.02, 0.095, 0.005)
+    a, z = np.meshgrid(angles, heights)
+    wall = np.column_stack([0.041 * np.cos(a.ravel()), 0.041 * np.sin(a.ravel()), z.ravel()])
+    camera = np.array([-0.7, -0.02, 0.1])
+    for heading_deg in (0.0, 50.0, 130.0, 180.0, -100.0):
+        d = np.array([math.cos(math.radians(heading_deg)), math.sin(math.radians(heading_deg)), 0])
+        result = front_to_back(wall, d, camera)
+        away = (wall.mean(axis=0) - camera) * [1.0, 1.0, 0.0]
+        assert result @ away > 0.0
+        assert abs(result @ d) == pytest.approx(1.0)
+
+
+def _jaw_hand():
+    from pipeline.sim.hands import GRIPPERS
+
+    return ParallelHand(
+        pad=GRIPPERS["pg70"].pads[0],
+        aperture_m=0.065,
+        palm_to_pad_centre_m=0.125,
+        pad_centre_to_fingertip_m=0.029,
+        jaw_half_width_m=0.02,
+        housing_half_length_m=0.056,
+        housing_half_width_m=0.04,
+        housing_depth_m=0.078,
+    )
+
+
+def _wall(along_m: float, thickness_m: float = 0.006) -> np.ndarray:
+    """A 40 mm wide vertical wall across +y, from ``along_m`` to ``along_m + thickness_m``
+    along y, 20-90 mm high."""
+    x, y, z = np.meshgrid(
+        np.arange(-0.02, 0.0201, 0.002),
+        np.arange(along_m, along_m + thickness_m + 1e-9, 0.002),
+        np.arange(0.02, 0.0901, 0.002),
+    )
+    return np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+
+
+@pytest.mark.parametrize(
+    ("visible_at", "hidden_at", "reason"),
+    [
+        # The column holds one wall beyond the centre: the jaws would pinch it.
+        (0.035, None, "the jaws would close on one wall, not around the object"),
+        # ... or one wall before it.
+        (-0.04, None, "the jaws would close on one wall, not around the object"),
+        # Two walls 30 mm apart around the centre: a grasp.
+        (-0.021, 0.009, ""),
+    ],
+)
+def test_parallel_candidate_closes_around_the_centre(visible_at, hidden_at, reason):
+    visible = _wall(visible_at)
+    completed = visible if hidden_at is None else np.vstack([visible, _wall(hidden_at)])
+    settings = CandidateSettings(
+        table_height_m=0.0,
+        table_clearance_m=0.005,
+        descent_clearance_m=0.004,
+        touch_tolerance_m=0.002,
+        tipping_weight=0.5,
+    )
+    candidate = parallel_candidate(
+        visible,
+        completed,
+        np.zeros(3),
+        np.array([0.0, 1.0, 0.0]),
+        0.0,
+        0.06,
+        _jaw_hand(),
+        settings,
+        jaw_clearance_m=0.01,
+        back_margin_m=0.01,
+    )
+    assert candidate.summary.reason == reason
+    assert candidate.summary.feasible == (reason == "")

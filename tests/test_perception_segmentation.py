@@ -17,7 +17,7 @@ from pipeline.perception.depth import backproject_depth, project_points
 from pipeline.perception.table import fit_table_ransac
 from pipeline.poses import look_at
 from pipeline.synthetic import box_object, render_depth, synthetic_observation
-from pipeline.types import CameraIntrinsics, DepthObservation
+from pipeline.types import CameraIntrinsics, DepthObservation, PointCloud
 from plugins.ground_truth_mask import GroundTruthMask
 from plugins.table_cluster import TableCluster
 
@@ -145,6 +145,7 @@ def test_table_cluster_recovers_object_points(box_scene, table):
     assert precision > 0.99
     assert on_object.sum() >= 0.97 * reachable
     assert cloud.frame == "robot" and cloud.points[:, 2].min() >= 0.7 + 0.015
+    np.testing.assert_array_equal(cloud.viewpoint_m, box_scene.T_robot_camera[:3, 3])
 
 
 def test_table_cluster_fails_clearly_on_an_empty_table():
@@ -161,9 +162,16 @@ def test_ground_truth_mask_drops_near_table_points_and_needs_a_mask(box_scene):
     cloud = GroundTruthMask().segment(box_scene)
     assert box_scene.object_mask[cloud.pixels[:, 0], cloud.pixels[:, 1]].all()
     assert cloud.points[:, 2].min() >= 0.72
+    np.testing.assert_array_equal(cloud.viewpoint_m, box_scene.T_robot_camera[:3, 3])
     without = DepthObservation(
         box_scene.depth_m, box_scene.rgb, box_scene.intrinsics, box_scene.T_robot_camera, 0.7
     )
     with pytest.raises(PluginError, match="no object mask") as error:  # not a failed run
         GroundTruthMask().segment(without)
     assert error.value.exit_code == EXIT_BAD_INPUT
+
+
+@pytest.mark.parametrize("viewpoint", [[0.0, 1.0], [0.0, np.nan, 1.0]])
+def test_a_cloud_refuses_a_viewpoint_that_is_not_a_position(viewpoint):
+    with pytest.raises(ValueError, match="viewpoint_m"):
+        PointCloud(np.zeros((3, 3)), viewpoint_m=np.array(viewpoint))

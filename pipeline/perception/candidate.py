@@ -41,17 +41,20 @@ from .grasp_geometry import front_to_back
 MIN_HITS = 8
 
 
-def covering_plane(points_robot: np.ndarray, plane: SymmetryPlane) -> SymmetryPlane:
+def covering_plane(
+    points_robot: np.ndarray, plane: SymmetryPlane, viewpoint_m: np.ndarray | None = None
+) -> SymmetryPlane:
     """``plane`` moved back along its normal, if needed, so that the cloud mirrored through
     it reaches the farthest visible point: at least midway between the nearest and the
     farthest visible points along the normal (1st and 99th percentiles), seen from the
-    visible side. A plane through the cloud's centroid (PCA) lies too close to the camera
-    when the view also sees the object's top reaching far back; the completed object then
-    ends before a top it must hold up."""
+    visible side (the camera at ``viewpoint_m``, frame R, when known). A plane through the
+    cloud's centroid (PCA) lies too close to the camera when the view also sees the
+    object's top reaching far back; the completed object then ends before a top it must
+    hold up."""
     normal = plane.normal
     along = points_robot @ normal
     middle = float(np.mean(np.percentile(along, [1.0, 99.0])))
-    backward = front_to_back(points_robot, normal) @ normal > 0.0
+    backward = front_to_back(points_robot, normal, viewpoint_m) @ normal > 0.0
     offset = max(plane.offset_m, middle) if backward else min(plane.offset_m, middle)
     return SymmetryPlane(plane.theta_rad, offset)
 
@@ -180,6 +183,7 @@ def candidate_frame(
     pad_centre_to_fingertip_m: float,
     keep_above_cloud: bool,
     contact_edge_below_centre_m: float,
+    viewpoint_m: np.ndarray | None = None,
 ) -> CandidateFrame:
     """The completed cloud, and pad-centre heights every ``params.height_step_m`` from the
     lowest allowed - fingertips ``table_clearance_m`` above the table (taken
@@ -187,9 +191,9 @@ def candidate_frame(
     edge of the pad's touching part (``contact_edge_below_centre_m`` below its centre;
     negative above it) above the cloud's bottom - to ``top_margin_m`` below the cloud's top (the
     pads may reach above a short object; their predicted contact says how much of them
-    touches)."""
+    touches). ``viewpoint_m`` is the camera's position (frame R) when known."""
     completed = np.concatenate(
-        [points_robot, covering_plane(points_robot, plane).mirror(points_robot)]
+        [points_robot, covering_plane(points_robot, plane, viewpoint_m).mirror(points_robot)]
     )
     table = float(points_robot[:, 2].min()) - params.cloud_base_above_table_m
     z_bottom, z_top = np.percentile(completed[:, 2], [2.0, 98.0])

@@ -43,10 +43,18 @@ def rotate_z(vector: np.ndarray, angle_rad: float) -> np.ndarray:
     return np.array([c * vector[0] - s * vector[1], s * vector[0] + c * vector[1], vector[2]])
 
 
-def front_to_back(points_robot: np.ndarray, direction: np.ndarray) -> np.ndarray:
+def front_to_back(
+    points_robot: np.ndarray, direction: np.ndarray, viewpoint_m: np.ndarray | None = None
+) -> np.ndarray:
     """``direction`` (horizontal unit) or its negative, whichever points from the visible
-    (camera) side of the cloud to its hidden back, judged by the lower quarter of the
-    cloud's height lying on the front side of the centroid."""
+    (camera) side of the cloud to its hidden back: away from the camera at ``viewpoint_m``
+    (frame R) when it is known, else judged by the lower quarter of the cloud's height
+    lying on the front side of the centroid (a camera looking down sees an object's
+    bottom in front of its top; a wall seen level, such as a cup's, leaves that guess to
+    chance)."""
+    if viewpoint_m is not None:
+        away = points_robot.mean(axis=0) - viewpoint_m
+        return direction if away[:2] @ direction[:2] >= 0.0 else -direction
     z = points_robot[:, 2]
     low = z <= z.min() + 0.25 * (z.max() - z.min())
     shift = (points_robot[low].mean(axis=0) - points_robot.mean(axis=0)) @ direction

@@ -84,8 +84,8 @@ def parallel_candidate(
 
     Both jaws descend clear of every point above the fingertips between their paths, the
     front jaw before the visible surface there and the back jaw behind the completed back,
-    as far as :func:`front_jaw_gap` puts them. The housing must pass above the object's
-    top.
+    as far as :func:`front_jaw_gap` puts them; the surface between them must enclose
+    ``centre_m``. The housing must pass above the object's top.
     """
     s = settings
     lateral = np.array([-direction[1], direction[0], 0.0])
@@ -102,6 +102,12 @@ def parallel_candidate(
         return Candidate.rejected(angle_rad, height_m, 0.0, "no visible surface between the jaws")
     front = float(np.percentile(front_points @ direction, 2.0))
     back = float(np.percentile(all_points @ direction, 98.0))
+    if not front < centre_m @ direction < back:
+        # Where the completed model has a gap (a thin-walled object's unseen side), the
+        # column may hold one wall only: the jaws would pinch it, not close around the object.
+        return Candidate.rejected(
+            angle_rad, height_m, 0.0, "the jaws would close on one wall, not around the object"
+        )
     width = back - front
     front_gap = front_jaw_gap(
         hand.aperture_m, width, s.descent_clearance_m, jaw_clearance_m, back_margin_m
