@@ -46,9 +46,6 @@ from .types import (
 #: A predicted taxel touches the model when the surface in front of it lies within this of
 #: the pad at its first touch (m): the planners' default touch tolerance.
 TOUCH_TOLERANCE_M = 0.003
-#: Depth of the surface layer a pad meets in each taxel cell (m): over twice the cloud's
-#: depth noise, thinner than any graspable object's wall-to-wall depth.
-LAYER_M = 0.006
 
 
 @dataclass(frozen=True)
@@ -196,29 +193,16 @@ def _taxel_cells(points_m: np.ndarray, approach: PadApproach) -> np.ndarray:
     return np.where(inside, row * cols + col, -1)
 
 
-def facing_layer(points_m: np.ndarray, approach: PadApproach) -> np.ndarray:
-    """The points of ``points_m`` a pad can meet: in each of its taxel cells those within
-    :data:`LAYER_M` of the nearest one along its motion (a z-buffer seen from the pad), so
-    the far side of the model never counts as the surface in front of it."""
-    cells = _taxel_cells(points_m, approach)
-    inside = np.flatnonzero(cells >= 0)
-    depth = (points_m[inside] - approach.origin_m) @ approach.direction
-    nearest = np.full(cells.max(initial=-1) + 1, np.inf)
-    np.minimum.at(nearest, cells[inside], depth)
-    return points_m[inside[depth <= nearest[cells[inside]] + LAYER_M]]
-
-
 def predicted_contacts(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarray) -> Contacts:
     """The taxels ``plan`` is predicted to touch on the completed model ``model_m``
-    (``(K, 3)``, frame R): each pad closes on the layer of the model facing it
-    (:func:`facing_layer`) until its first taxel meets it
-    (:func:`pipeline.perception.pad_contact.pad_coverage`), and every taxel whose cell
-    holds a touched model point reads a contact at the centroid of those points, its normal
-    the pad's closing direction."""
+    (``(K, 3)``, frame R): each pad closes on the layer of the model facing it until its
+    first taxel meets it (:func:`pipeline.perception.pad_contact.pad_coverage`), and every
+    taxel whose cell holds a touched model point reads a contact at the centroid of those
+    points, its normal the pad's closing direction."""
     positions, normals, pads, indices = [], [], [], []
     for approach in pad_approaches(plan, gripper):
         contact = pad_coverage(
-            facing_layer(model_m, approach),
+            model_m,
             approach.origin_m,
             approach.direction,
             approach.taxels,

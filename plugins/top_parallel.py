@@ -52,8 +52,8 @@ class TopParallel(CandidatePlanner):
     ``cloud_base_above_table_m`` below the cloud's lowest point (the segmentation's height
     cut), and the pads' lower edge stays above the cloud's bottom (``pad_above_cloud``; on
     short objects the pads reach above the top instead of touching unseen surface).
-    Palm-to-pad-centre and pad-centre-to-fingertip distances default to ``robots/pg70.urdf``
-    (125 mm and 29 mm). ``predicted_contacts`` are the visible points the front pad meets
+    Palm-to-pad-centre and pad-centre-to-fingertip distances and the finger's recess behind
+    the pad default to ``robots/pg70.urdf`` (125 mm, 29 mm and 3 mm). ``predicted_contacts`` are the visible points the front pad meets
     first, moved onto the pad's plane at that touch. The plan is refused when the object's
     width along the closing direction (visible cloud and its mirror image, between the pads'
     paths) plus the jaw clearance exceeds the gripper's aperture.
@@ -72,6 +72,9 @@ class TopParallel(CandidatePlanner):
         )
         palm_to_pad_centre_m: float = param(0.125, "palm origin to pad centre along z (m)")
         pad_centre_to_fingertip_m: float = param(0.029, "pad centre to fingertip along z (m)")
+        finger_recess_m: float = param(
+            0.003, "candidates: the finger's face behind the pad's surface (m)"
+        )
         contact_band_m: float = param(
             0.008, "depth of the first-touched surface layer, about 4 sigma of depth noise (m)"
         )
@@ -192,6 +195,7 @@ class TopParallel(CandidatePlanner):
             aperture_m=gripper.max_aperture_m,
             palm_to_pad_centre_m=p.palm_to_pad_centre_m,
             pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            finger_recess_m=p.finger_recess_m,
             jaw_half_width_m=p.jaw_width_m / 2,
             housing_half_length_m=p.housing_length_m / 2,
             housing_half_width_m=p.housing_width_m / 2,

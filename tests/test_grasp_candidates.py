@@ -117,6 +117,19 @@ def test_pad_coverage_on_a_flat_face_and_on_a_cylinder():
     assert pad_coverage(face, np.zeros(3), np.array([0, 1.0, 0]), taxels, tol) is None
 
 
+def test_pad_coverage_meets_the_near_side_of_a_cloud_with_two_sides():
+    # A completed box, front face 30 mm ahead and its mirrored back 70 mm ahead, as many
+    # points on each: the pad meets the front, and only its points are in the contact.
+    y, z = np.meshgrid(np.arange(-0.03, 0.03, 0.001), np.arange(0.0, 0.1, 0.001))
+    face = np.column_stack([np.full(y.size, 0.03), y.ravel(), z.ravel()])
+    both = np.vstack([face, face + np.array([0.04, 0.0, 0.0])])
+    taxels = flat_pad_taxels(PAD, 0.05)
+    contact = pad_coverage(both, np.zeros(3), np.array([1.0, 0, 0]), taxels, 0.003)
+    assert contact.touch_m == pytest.approx(0.03)
+    assert contact.coverage == 1.0
+    assert np.all(contact.points[:, 0] == 0.03)
+
+
 def test_the_distal_pad_tip_curves_away_from_a_flat_face():
     """The 9 tip rows lie on a 59 mm cylinder: a row s along the curve is recessed
     r (1 - cos(s / r)); only rows within the tolerance touch a flat face."""
@@ -234,6 +247,7 @@ def _jaw_hand():
         aperture_m=0.065,
         palm_to_pad_centre_m=0.125,
         pad_centre_to_fingertip_m=0.029,
+        finger_recess_m=0.003,
         jaw_half_width_m=0.02,
         housing_half_length_m=0.056,
         housing_half_width_m=0.04,

@@ -43,6 +43,9 @@ class PadContact:
 
 #: Fewest taxel rows a pad must touch for its contact to be a side of the object.
 _MIN_CONTACT_ROWS = 3
+#: Depth of the surface layer a pad meets in each taxel cell (m): over twice the cloud's
+#: depth noise, thinner than any graspable object's wall-to-wall depth.
+LAYER_M = 0.006
 
 
 @dataclass(frozen=True)
@@ -93,9 +96,12 @@ def pad_coverage(
 
     The pad moves along ``direction`` (horizontal unit); its columns are offset across the
     motion from the line through ``origin_m``. Each taxel sees the points within half a
-    pitch of it across and in height; their median position along ``direction`` is the
-    surface in front of it. The pad stops when its first taxel reaches the surface; the
-    taxels whose surface is then within ``tolerance_m`` count as touching.
+    pitch of it across and in height, and of those the layer :data:`LAYER_M` deep behind
+    the nearest (a z-buffer seen from the pad: a completed cloud also holds the far side,
+    which is not the surface in front of it); their median position along
+    ``direction`` is the surface in front of it. The pad stops when its first taxel
+    reaches the surface; the taxels whose surface is then within ``tolerance_m`` count as
+    touching.
 
     Returns:
         The contact, or None when no point lies in front of any taxel or the touching
@@ -127,6 +133,9 @@ def pad_coverage(
     depth, kept = (relative @ direction)[inside], kept[inside]
     by_taxel = np.lexsort((depth, taxel))
     taxel, depth, kept = taxel[by_taxel], depth[by_taxel], kept[by_taxel]
+    _, first, which = np.unique(taxel, return_index=True, return_inverse=True)
+    layer = depth <= depth[first][which] + LAYER_M
+    taxel, depth, kept = taxel[layer], depth[layer], kept[layer]
     seen, first, counts = np.unique(taxel, return_index=True, return_counts=True)
     surface = depth[first + counts // 2] + taxels.row_recess[seen // cols]
     # The first touch: the nearest surface seen by at least two points (a single point may

@@ -17,17 +17,20 @@ from .candidate import (
     footprint_half_m,
 )
 from .grasp_geometry import hand_pose
-from .pad_contact import flat_pad_taxels, pad_coverage
+from .pad_contact import PadContact, PadTaxels, flat_pad_taxels, pad_coverage
 
 
 @dataclass(frozen=True)
 class ParallelHand:
-    """A parallel-jaw gripper's geometry (m) for :func:`parallel_candidate`."""
+    """A parallel-jaw gripper's geometry (m) for :func:`parallel_candidate`; the finger
+    carrying each pad reaches ``pad_centre_to_fingertip_m`` below the pad's centre, its
+    face ``finger_recess_m`` behind the pad's surface."""
 
     pad: PadLayout
     aperture_m: float
     palm_to_pad_centre_m: float
     pad_centre_to_fingertip_m: float
+    finger_recess_m: float
     jaw_half_width_m: float
     housing_half_length_m: float
     housing_half_width_m: float
@@ -139,10 +142,14 @@ def parallel_candidate(
     contacts = []
     taxels = flat_pad_taxels(hand.pad, height_m)
     for points, sign in ((visible, 1.0), (completed, -1.0)):
+        side = "front" if sign > 0 else "back"
         contact = pad_coverage(points, position, sign * direction, taxels, s.touch_tolerance_m)
         if contact is None:
-            side = "front" if sign > 0 else "back"
             return Candidate.rejected(angle_rad, height_m, 0.0, f"no surface before the {side} pad")
+        if _finger_meets_first(points, position, sign * direction, taxels, contact, hand, s):
+            return Candidate.rejected(
+                angle_rad, height_m, 0.0, f"the {side} finger meets the object before its pad"
+            )
         contacts.append(contact)
     coverages = tuple(c.quality for c in contacts)
     tipping = (height_m - s.table_height_m) / footprint_half_m(completed, direction)
@@ -161,3 +168,33 @@ def parallel_candidate(
         opening_m=hand.aperture_m,
         predicted_contacts=contacts[0].points,
     )
+
+
+def _finger_meets_first(
+    points: np.ndarray,
+    origin_m: np.ndarray,
+    direction: np.ndarray,
+    taxels: PadTaxels,
+    contact: PadContact,
+    hand: ParallelHand,
+    settings: CandidateSettings,
+) -> bool:
+    """Whether the finger carrying a pad, closing along ``direction``, meets the surface
+    between the pad's lowest taxels and the fingertip before the pad reaches ``contact``:
+    a shoulder below a bottle's cap, say, stops the finger (its face ``finger_recess_m``
+    behind the pad) with the pad short of the cap. (Above the pad the finger also passes
+    an object's top face, which may reach beyond a wrong mirrored back; the pad meets
+    that true back as soon as the finger does.)"""
+    half = taxels.pitch_m / 2.0
+    centre_z = float(np.mean(taxels.row_z))
+    z = points[:, 2]
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    in_band = (
+        (np.abs((points - origin_m) @ lateral) <= taxels.col_u.max() + half)
+        & (z >= centre_z - hand.pad_centre_to_fingertip_m)
+        & (z < taxels.row_z.min() - half)
+    )
+    if np.count_nonzero(in_band) < MIN_HITS:
+        return False
+    nearest = float(np.percentile(points[in_band] @ direction, 2.0))
+    return nearest + hand.finger_recess_m < contact.touch_m - settings.touch_tolerance_m
