@@ -53,8 +53,9 @@ class TopParallel(CandidatePlanner):
     cut), and the pads' lower edge stays above the cloud's bottom (``pad_above_cloud``; on
     short objects the pads reach above the top instead of touching unseen surface).
     Palm-to-pad-centre and pad-centre-to-fingertip distances and the finger's recess behind
-    the pad default to ``robots/pg70.urdf`` (125 mm, 29 mm and 3 mm). ``predicted_contacts`` are the visible points the front pad meets
-    first, moved onto the pad's plane at that touch. The plan is refused when the object's
+    the pad default to ``robots/pg70.urdf`` (125 mm, 29 mm and 3 mm).
+    ``predicted_contacts`` are the visible points the front pad meets first, moved onto the
+    pad's plane at that touch. The plan is refused when the object's
     width along the closing direction (visible cloud and its mirror image, between the pads'
     paths) plus the jaw clearance exceeds the gripper's aperture.
     """

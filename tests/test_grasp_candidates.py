@@ -10,6 +10,7 @@ import pytest
 import yourdfpy
 from test_planners import _true_plane, _view
 
+from pipeline.perception import sdh_candidates
 from pipeline.perception import sdh_geometry as sdh
 from pipeline.perception.candidate import CandidateSettings, height_grid
 from pipeline.perception.grasp_geometry import front_to_back
@@ -301,3 +302,21 @@ def test_parallel_candidate_closes_around_the_centre(visible_at, hidden_at, reas
     )
     assert candidate.summary.reason == reason
     assert candidate.summary.feasible == (reason == "")
+
+
+@pytest.mark.parametrize(
+    ("top_m", "edge"),
+    [
+        (0.080, True),  # between the pad's top row (72 mm) and the distal joint (92 mm)
+        (0.120, False),  # the side goes on above the joint: the link runs along it
+        (0.066, False),  # the side ends below the pad's top row: the pad reaches over it
+    ],
+)
+def test_a_top_edge_behind_the_distal_link_is_found(top_m, edge):
+    y, z = np.meshgrid(np.arange(-0.02, 0.0201, 0.002), np.arange(0.0, top_m + 1e-9, 0.002))
+    wall = np.column_stack([np.full(y.size, 0.05), y.ravel(), z.ravel()])
+    taxels = sdh_distal_taxels(DISTAL, 0.05)
+    direction = np.array([1.0, 0.0, 0.0])
+    contact = pad_coverage(wall, np.zeros(3), direction, taxels, 0.003)
+    assert contact.touch_m == pytest.approx(0.05)
+    assert sdh_candidates._top_edge_above_pad(wall, np.zeros(3), direction, taxels, contact) is edge

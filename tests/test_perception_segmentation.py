@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -14,7 +16,8 @@ from pipeline.perception.clustering import (
     voxel_subsample_indices,
 )
 from pipeline.perception.depth import backproject_depth, project_points
-from pipeline.perception.table import fit_table_ransac
+from pipeline.perception.segmentation import merge_overlapping_footprints, segment_points
+from pipeline.perception.table import fit_table_ransac, table_from_height
 from pipeline.poses import look_at
 from pipeline.synthetic import box_object, render_depth, synthetic_observation
 from pipeline.types import CameraIntrinsics, DepthObservation, PointCloud
@@ -175,3 +178,55 @@ def test_ground_truth_mask_drops_near_table_points_and_needs_a_mask(box_scene):
 def test_a_cloud_refuses_a_viewpoint_that_is_not_a_position(viewpoint):
     with pytest.raises(ValueError, match="viewpoint_m"):
         PointCloud(np.zeros((3, 3)), viewpoint_m=np.array(viewpoint))
+
+
+def _arc(radius_m, start_deg, stop_deg, z_low, z_high):
+    """Points on a vertical cylinder wall about the origin, every 5 deg and 2 mm."""
+    a, z = np.meshgrid(
+        np.radians(np.arange(start_deg, stop_deg + 1e-9, 5.0)), np.arange(z_low, z_high, 0.002)
+    )
+    return np.column_stack([radius_m * np.cos(a.ravel()), radius_m * np.sin(a.ravel()), z.ravel()])
+
+
+def test_a_mugs_near_wall_and_its_inside_seen_over_the_rim_are_one_object():
+    # What a camera above the -x side sees of an open mug (radius 40 mm, 80 mm tall, its
+    # inside floor 35 mm up): the outside of the near wall and, over the rim, the inside of
+    # the far wall and the floor beyond the near wall's shadow. The floor reaches 15 mm
+    # from the near wall: two clusters in space, one footprint. A second object stands
+    # 16 cm away.
+    near = _arc(0.040, 120.0, 240.0, 0.72, 0.80)
+    x, y = np.meshgrid(np.arange(-0.025, 0.0301, 0.002), np.arange(-0.015, 0.0151, 0.002))
+    floor = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 0.735)])
+    inside = np.vstack([_arc(0.036, -60.0, 60.0, 0.735, 0.80), floor])
+    other = _arc(0.03, 120.0, 240.0, 0.72, 0.80) + np.array([0.0, 0.16, 0.0])
+    points = np.vstack([near, inside, other])
+    table = table_from_height(0.7)
+    labels = dbscan_labels(points, 0.01, 10)
+    assert len(np.unique(labels)) == 3  # apart in space
+    merged = merge_overlapping_footprints(points, labels, table)
+    parts = np.cumsum([0, len(near), len(inside), len(other)])
+    ids = [np.unique(merged[a:b]) for a, b in itertools.pairwise(parts)]
+    assert all(len(i) == 1 for i in ids)
+    assert ids[0] == ids[1] != ids[2]
+    assert sorted(np.unique(merged)) == [0, 1]
+    result = segment_points(points, table, min_height_m=0.0)
+    assert len(result.objects) == 2
+    assert len(result.objects[0]) == len(near) + len(inside)
+
+
+def test_merging_footprints_keeps_noise_and_apart_clusters():
+    labels = np.array([0, 0, 0, -1, 1, 1, 1])
+    points = np.array(
+        [
+            [0, 0, 1],
+            [0.01, 0, 1],
+            [0, 0.01, 1],
+            [0.5, 0.5, 1],
+            [1, 0, 1],
+            [1.01, 0, 1],
+            [1, 0.01, 1],
+        ],
+        dtype=float,
+    )
+    merged = merge_overlapping_footprints(points, labels, table_from_height(0.0))
+    np.testing.assert_array_equal(merged, labels)

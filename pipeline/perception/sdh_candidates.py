@@ -129,6 +129,12 @@ def sdh_candidate(
         )
     coverages = tuple(c.quality for c in contacts)
     tipping = (height_m - s.table_height_m) / footprint_half_m(completed, x_hand)
+    score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
+    if any(
+        _top_edge_above_pad(completed, np.append(base, 0.0), np.append(facing, 0.0), taxels, c)
+        for base, facing, c in zip(bases, facings, contacts, strict=True)
+    ):
+        score *= _EDGE_PENALTY
     in_band = np.abs(completed[:, 2] - height_m) <= pad.rows * pad.pitch_m / 2.0
     width = float(np.ptp(completed[in_band] @ x_hand)) if np.any(in_band) else math.nan
     position = np.array([palm_xy[0], palm_xy[1], palm_z])
@@ -141,7 +147,7 @@ def sdh_candidate(
             width_m=width,
             contact_coverage=tuple(coverages[i] for i in order),
             tipping_ratio=tipping,
-            score=candidate_score(coverages, angle_rad, tipping, s.tipping_weight),
+            score=score,
             feasible=True,
         ),
         T_robot_hand=hand_pose(position, x_hand),
@@ -272,3 +278,41 @@ def _swept_profile(step: int, clearance_m: float) -> tuple[np.ndarray, np.ndarra
     grid, depth = sdh.finger_profile(step * _OPEN_STEP_RAD, _PROFILE_STEP_M)
     width = 2 * math.ceil(clearance_m / _PROFILE_STEP_M) + 1
     return grid, maximum_filter1d(depth, width) + clearance_m
+
+
+#: How deep behind a pad's touch the surface counts as the side it closes on, looking for
+#: that side's top edge (m).
+_EDGE_DEPTH_M = 0.015
+#: Score factor of a grasp with a top edge behind a distal link (:func:`_top_edge_above_pad`):
+#: such a grasp is taken only where no other comes close, as on a box too tall for the pads
+#: to reach clear of its top edge.
+_EDGE_PENALTY = 0.25
+
+
+def _top_edge_above_pad(
+    points: np.ndarray,
+    origin_m: np.ndarray,
+    direction: np.ndarray,
+    taxels: PadTaxels,
+    contact: PadContact,
+) -> bool:
+    """Whether the top edge of the side a distal pad closes on lies between the pad's top
+    row and the distal joint, where the link stands 1 mm behind the pad's surface. A rim,
+    lip or lid there is often a millimetre or two proud of the side below it, more than
+    the link's recess and less than the cloud can show, and stops the finger on its
+    link with the pad short of the side (a mug's rim, a coffee tin's lid)."""
+    half = taxels.pitch_m / 2.0
+    pad_top = float(taxels.row_z.max()) + half
+    joint = float(np.median(taxels.row_z)) + sdh.DISTAL_PAD_CENTRE_M  # the middle row
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    relative = points - origin_m
+    depth = relative @ direction - (contact.touch_m - origin_m @ direction)
+    side = (
+        (np.abs(relative @ lateral) <= sdh.FINGER_HALF_WIDTH_M)
+        & (depth <= _EDGE_DEPTH_M)
+        & (points[:, 2] > pad_top)
+    )
+    if np.count_nonzero(side) < MIN_HITS:
+        return False  # the side ends below the pad's top row: the pad reaches over it
+    top = float(np.percentile(points[side, 2], 98.0))
+    return top < joint

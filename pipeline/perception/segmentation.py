@@ -2,7 +2,10 @@
 
 Drop everything lower than ``min_height_m`` above the table (the table itself and what lies
 on it flat), optionally thin the rest on a voxel grid and cluster it: every cluster is an
-object, the largest one is *the* object of the paper.
+object, the largest one is *the* object of the paper. Clusters whose footprints on the
+table overlap are one object: objects standing on a table do not overlap, but the parts of
+one object can be apart in space, such as a mug's near wall and the inside of its far wall
+seen over the rim.
 """
 
 from __future__ import annotations
@@ -64,6 +67,7 @@ def segment_points(
     above = np.flatnonzero((height >= min_height_m) & (height <= max_height_m))
     kept = above[voxel_subsample_indices(points_robot[above], voxel_m)]
     labels = dbscan_labels(points_robot[kept], eps_m, min_points)
+    labels = merge_overlapping_footprints(points_robot[kept], labels, table)
     clusters = int(labels.max()) + 1 if len(labels) else 0
     sizes = np.bincount(labels[labels >= 0], minlength=clusters)
     order = np.argsort(-sizes, kind="stable")
@@ -72,6 +76,41 @@ def segment_points(
         above_table=len(above),
         clusters=clusters,
     )
+
+
+def merge_overlapping_footprints(
+    points_robot: np.ndarray, labels: np.ndarray, table: TablePlane
+) -> np.ndarray:
+    """``labels`` (``-1``: noise) with every two clusters merged when a point of one lies
+    inside the convex hull of the other's footprint (its points projected onto the table
+    plane), renumbered ``0..K-1``."""
+    from scipy.spatial import ConvexHull, Delaunay, QhullError
+
+    normal = np.asarray(table.normal, dtype=np.float64)
+    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    flat = points_robot @ np.column_stack([u, np.cross(normal, u)])
+    count = int(labels.max()) + 1 if len(labels) else 0
+    parent = np.arange(count)
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for i in range(count):
+        footprint = flat[labels == i]
+        try:
+            hull = Delaunay(footprint[ConvexHull(footprint).vertices])
+        except QhullError:  # on one line: no area for another cluster to lie in
+            continue
+        inside = hull.find_simplex(flat) >= 0
+        for j in np.unique(labels[inside & (labels >= 0)]):
+            parent[root(int(j))] = root(i)
+    roots = np.array([root(i) for i in range(count)], dtype=np.int64)
+    merged = np.where(labels >= 0, roots[np.maximum(labels, 0)], -1)
+    _, renumbered = np.unique(merged, return_inverse=True)
+    return np.where(merged >= 0, renumbered - int(np.any(merged < 0)), -1)
 
 
 def outside_view(valid: np.ndarray) -> np.ndarray:
