@@ -240,6 +240,15 @@ def test_front_to_back_points_away_from_the_camera_at_a_wall_seen_level():
         assert abs(result @ d) == pytest.approx(1.0)
 
 
+JAW_SETTINGS = CandidateSettings(
+    table_height_m=0.0,
+    table_clearance_m=0.005,
+    descent_clearance_m=0.004,
+    touch_tolerance_m=0.002,
+    tipping_weight=0.5,
+)
+
+
 def _jaw_hand():
     from pipeline.sim.hands import GRIPPERS
 
@@ -281,13 +290,6 @@ def _wall(along_m: float, thickness_m: float = 0.006) -> np.ndarray:
 def test_parallel_candidate_closes_around_the_centre(visible_at, hidden_at, reason):
     visible = _wall(visible_at)
     completed = visible if hidden_at is None else np.vstack([visible, _wall(hidden_at)])
-    settings = CandidateSettings(
-        table_height_m=0.0,
-        table_clearance_m=0.005,
-        descent_clearance_m=0.004,
-        touch_tolerance_m=0.002,
-        tipping_weight=0.5,
-    )
     candidate = parallel_candidate(
         visible,
         completed,
@@ -296,7 +298,7 @@ def test_parallel_candidate_closes_around_the_centre(visible_at, hidden_at, reas
         0.0,
         0.06,
         _jaw_hand(),
-        settings,
+        JAW_SETTINGS,
         jaw_clearance_m=0.01,
         back_margin_m=0.01,
     )
@@ -320,3 +322,29 @@ def test_a_top_edge_behind_the_distal_link_is_found(top_m, edge):
     contact = pad_coverage(wall, np.zeros(3), direction, taxels, 0.003)
     assert contact.touch_m == pytest.approx(0.05)
     assert sdh_candidates._top_edge_above_pad(wall, np.zeros(3), direction, taxels, contact) is edge
+
+
+def test_a_jaw_finger_that_meets_a_shoulder_below_its_pad_is_rejected():
+    # Two walls around the centre, pads centred 60 mm up (rows 36-84 mm, fingertip 31 mm).
+    # Below the front pad a shoulder stands 10 mm proud of the wall: the finger, 3 mm
+    # behind the pad's surface, meets it first.
+    front, back = _wall(-0.021), _wall(0.009)
+    shoulder = _wall(-0.031)
+    shoulder = shoulder[shoulder[:, 2] < 0.035]
+    for visible, reason in (
+        (front, ""),
+        (np.vstack([front, shoulder]), "the front finger meets the object before its pad"),
+    ):
+        candidate = parallel_candidate(
+            visible,
+            np.vstack([visible, back]),
+            np.zeros(3),
+            np.array([0.0, 1.0, 0.0]),
+            0.0,
+            0.06,
+            _jaw_hand(),
+            JAW_SETTINGS,
+            jaw_clearance_m=0.01,
+            back_margin_m=0.01,
+        )
+        assert candidate.summary.reason == reason
