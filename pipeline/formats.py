@@ -7,8 +7,9 @@ share the validators and JSON helpers here).
   [x, y, z], "normal": [nx, ny, nz], "pad": "left", "index": 17}, ...], "plan": {...}},
   ...]}``, one entry per grasp in the order the grasps happened; ``index`` (the taxel's
   row-major index within its pad) is optional. Normals point out of the pad into the object
-  and are normalised on reading. The optional ``plan`` records the grasp plan (see
-  :func:`plan_to_json`); PS initialisation uses its predicted contacts for the initial bias.
+  and are normalised on reading (unless unit already, to rounding). The optional ``plan``
+  records the grasp plan (see :func:`plan_to_json`); PS initialisation uses its predicted
+  contacts for the initial bias.
   ``units`` is ``"m"`` or ``"mm"`` (positions and the plan's lengths); a reader's ``units``
   argument overrides it (``--units``).
 * Results: ``result.json`` (see :func:`estimate_to_json`) and ``completed_stage{0,1,2}.ply``.
@@ -166,6 +167,8 @@ class RecordedGrasps:
 
 #: The keys of one taxel in a contacts file.
 TAXEL_KEYS = ("position", "normal", "pad", "index")
+#: A normal this close to unit length is unit up to rounding and is read unchanged.
+_UNIT_TOLERANCE = 1e-12
 
 
 def contacts_from_json(document: Any, path: Path, units: str | None = None) -> RecordedGrasps:
@@ -204,7 +207,9 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
             length = float(np.linalg.norm(normal))
             if length < 1e-9:
                 raise InputError(f"{path}: {where}.normal has zero length")
-            normals.append(normal / length)
+            # A unit normal is kept bit for bit: a replay of a recording then fuses exactly
+            # as the trial that wrote it.
+            normals.append(normal if abs(length - 1.0) <= _UNIT_TOLERANCE else normal / length)
             pad = taxel.get("pad")
             if not isinstance(pad, str) or not pad:
                 raise InputError(f"{path}: {where}.pad must be a non-empty string")

@@ -106,6 +106,17 @@ def test_contacts_round_trip_with_plan(tmp_path):
     assert plan_to_json(recorded.plans[0]) == plan_to_json(plan())
 
 
+def test_unit_normals_are_read_bit_for_bit(tmp_path):
+    # Normals a simulated pad gives: unit up to rounding, so that dividing by their length
+    # again moves some in the last bits (and a replay would fuse differently).
+    normals = np.random.default_rng(0).normal(size=(50, 3))
+    unit = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    assert np.any(unit / np.linalg.norm(unit, axis=1, keepdims=True) != unit)
+    recorded = Contacts(np.zeros((50, 3)), unit, ["left"] * 50, np.arange(50))
+    path = write_json(tmp_path / "contacts.json", contacts_to_json([recorded], [None]))
+    np.testing.assert_array_equal(read_contacts(path).contacts[0].normals, unit)
+
+
 def test_minimal_contacts_document(tmp_path):
     path = tmp_path / "c.json"
     taxel = {"position": [0, 0, 0.1], "normal": [1, 0, 0], "pad": "left"}
