@@ -104,8 +104,12 @@ def merge_overlapping_footprints(
             hull = Delaunay(footprint[ConvexHull(footprint).vertices])
         except QhullError:  # on one line: no area for another cluster to lie in
             continue
-        inside = hull.find_simplex(flat) >= 0
-        for j in np.unique(labels[inside & (labels >= 0)]):
+        # Only points within the footprint's bounding box can lie inside it.
+        near = np.flatnonzero(
+            np.all((flat >= footprint.min(axis=0)) & (flat <= footprint.max(axis=0)), axis=1)
+        )
+        inside = near[hull.find_simplex(flat[near]) >= 0]
+        for j in np.unique(labels[inside][labels[inside] >= 0]):
             parent[root(int(j))] = root(i)
     roots = np.array([root(i) for i in range(count)], dtype=np.int64)
     merged = np.where(labels >= 0, roots[np.maximum(labels, 0)], -1)
