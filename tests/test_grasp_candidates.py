@@ -265,6 +265,22 @@ def _jaw_hand():
     )
 
 
+def _jaws_closing_along_y(visible: np.ndarray, completed: np.ndarray):
+    """The PG-70 candidate closing along +y through the origin, pads centred 60 mm up."""
+    return parallel_candidate(
+        visible,
+        completed,
+        np.zeros(3),
+        np.array([0.0, 1.0, 0.0]),
+        0.0,
+        0.06,
+        _jaw_hand(),
+        JAW_SETTINGS,
+        jaw_clearance_m=0.01,
+        back_margin_m=0.01,
+    )
+
+
 def _wall(along_m: float, thickness_m: float = 0.006) -> np.ndarray:
     """A 40 mm wide vertical wall across +y, from ``along_m`` to ``along_m + thickness_m``
     along y, 20-90 mm high."""
@@ -290,18 +306,7 @@ def _wall(along_m: float, thickness_m: float = 0.006) -> np.ndarray:
 def test_parallel_candidate_closes_around_the_centre(visible_at, hidden_at, reason):
     visible = _wall(visible_at)
     completed = visible if hidden_at is None else np.vstack([visible, _wall(hidden_at)])
-    candidate = parallel_candidate(
-        visible,
-        completed,
-        np.zeros(3),
-        np.array([0.0, 1.0, 0.0]),
-        0.0,
-        0.06,
-        _jaw_hand(),
-        JAW_SETTINGS,
-        jaw_clearance_m=0.01,
-        back_margin_m=0.01,
-    )
+    candidate = _jaws_closing_along_y(visible, completed)
     assert candidate.summary.reason == reason
     assert candidate.summary.feasible == (reason == "")
 
@@ -335,16 +340,5 @@ def test_a_jaw_finger_that_meets_a_shoulder_below_its_pad_is_rejected():
         (front, ""),
         (np.vstack([front, shoulder]), "the front finger meets the object before its pad"),
     ):
-        candidate = parallel_candidate(
-            visible,
-            np.vstack([visible, back]),
-            np.zeros(3),
-            np.array([0.0, 1.0, 0.0]),
-            0.0,
-            0.06,
-            _jaw_hand(),
-            JAW_SETTINGS,
-            jaw_clearance_m=0.01,
-            back_margin_m=0.01,
-        )
+        candidate = _jaws_closing_along_y(visible, np.vstack([visible, back]))
         assert candidate.summary.reason == reason
