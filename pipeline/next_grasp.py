@@ -9,9 +9,13 @@ strategy picks among them:
 * ``paper``: the first grasp's rule again, the planner's own best plan on the current model;
 * ``random``: a feasible alternative drawn uniformly (seeded by the trial);
 * ``information``: the alternative with the largest expected reduction of the hidden side's
-  uncertainty (:func:`pipeline.estimation.uncertainty.hidden_side_gain_m2`), from the
+  uncertainty relative to the visible side, the object's shape
+  (:func:`pipeline.estimation.uncertainty.hidden_side_gain_m2` with
+  :func:`~pipeline.estimation.uncertainty.shape_gram`), from the
   taxels it is predicted to touch on the current model (:func:`predicted_contacts`) and the
-  estimator's own measurement model.
+  estimator's own measurement model, weighted by the planner's score of the grasp (in
+  [0, 1]: how squarely its pads meet the sides and how far it is from tipping the object),
+  so that the expected gain counts only as much as the grasp is likely to deliver it.
 
 The stop rule (:func:`stop_reason`) ends the trial once the plane offset and the hidden side
 are known well enough, or when the grasps run out.
@@ -228,22 +232,23 @@ def information_scores(
     model: MeasurementModel,
 ) -> list[float]:
     """Each plan's expected reduction of the hidden side's mean squared positional std
-    (m^2) if its predicted taxels were fused into ``stage`` (module docstring), from the
-    covariance the estimator will fuse them with: ``stage``'s plus the re-grasp noise. All
+    relative to the visible side (m^2, the shape; the bias, which the next release forgets,
+    is a nuisance) if its predicted taxels were fused into ``stage`` (module docstring), from
+    the covariance the estimator will fuse them with: ``stage``'s plus the re-grasp noise. All
     zero when ``stage`` has no finite covariance (the planner's best is then taken)."""
     from .estimation.correspondences import PointIndex
     from .estimation.problem import grasp_contacts
     from .estimation.uncertainty import (
         hidden_side_gain_m2,
-        hidden_side_gram,
         predicted_measurement,
+        shape_gram,
     )
 
     covariance = np.asarray(stage.covariance, dtype=float) + model.regrasp_noise
     if not np.all(np.isfinite(covariance)):
         return [0.0] * len(plans)  # an estimator without a covariance: nothing to rank by
     g, pivot, points = state_vector(stage), stage.bias.pivot_m, stage.points
-    gram = hidden_side_gram(points, g, pivot)
+    gram = shape_gram(points, g, pivot)
     index = PointIndex(points)
     variance = np.full(len(points), model.point_std_m**2)
     scores = []
@@ -270,7 +275,8 @@ class NextGraspChoice:
         plan: the plan to execute (refused when the planner found none).
         strategy: the strategy that chose it.
         alternatives: the feasible plans it chose among.
-        scores: the information score of each alternative (m^2), ``information`` only.
+        scores: the information score of each alternative (m^2), ``information`` only;
+            the choice maximises it times the alternative's planner score.
         chosen: index of ``plan`` among ``alternatives`` (None when refused).
     """
 
@@ -286,7 +292,13 @@ class NextGraspChoice:
             "alternatives": len(self.alternatives),
             "chosen": self.chosen,
             "scores_mm2": [1e6 * s for s in self.scores],
+            "planner_scores": [_planner_score(plan) for plan in self.alternatives],
         }
+
+
+def _planner_score(plan: GraspPlan) -> float:
+    """The planner's score of ``plan`` in [0, 1]; 1 when the planner gives none."""
+    return 1.0 if math.isnan(plan.score) else float(plan.score)
 
 
 def choose_next_grasp(
@@ -311,5 +323,6 @@ def choose_next_grasp(
         chosen = int(rng.integers(len(alternatives)))
         return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
     scores = tuple(information_scores(stage, alternatives, gripper, model))
-    chosen = int(np.argmax(scores))
+    expected = [s * _planner_score(plan) for s, plan in zip(scores, alternatives, strict=True)]
+    chosen = int(np.argmax(expected))
     return NextGraspChoice(alternatives[chosen], strategy, alternatives, scores, chosen)

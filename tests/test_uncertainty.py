@@ -16,6 +16,7 @@ from pipeline.estimation.uncertainty import (
     hidden_side_std_m,
     plane_offset_std_m,
     predicted_measurement,
+    shape_gram,
 )
 from pipeline.types import Contacts
 
@@ -70,6 +71,22 @@ def _numeric_jacobian(function, x, step=1e-7):
         shifted[k] += step
         columns.append((function(shifted) - base) / step)
     return np.column_stack(columns)
+
+
+def _subset_gain(points, g, pivot, taxels, subset, covariance, gram, point_std_m=0.002):
+    """:func:`hidden_side_gain_m2` of the taxels ``subset`` alone."""
+    contacts = type(taxels)(
+        taxels.positions_m[subset],
+        taxels.pads[subset],
+        taxels.window[subset],
+        taxels.noise[subset],
+        taxels.normals[subset],
+    )
+    variance = np.full(len(points), point_std_m**2)
+    H, N = predicted_measurement(
+        PointIndex(points), points, g, pivot, contacts, covariance, variance
+    )
+    return hidden_side_gain_m2(covariance, H, N, gram)
 
 
 def test_gain_matches_bayes_on_the_dense_state():
@@ -181,18 +198,41 @@ def test_no_contact_no_gain_and_more_taxels_more_gain():
     assert jacobian.shape == (0, 6)
 
     def score(subset):
-        contacts = type(taxels)(
-            taxels.positions_m[subset],
-            taxels.pads[subset],
-            taxels.window[subset],
-            taxels.noise[subset],
-            taxels.normals[subset],
-        )
-        H, N = predicted_measurement(index, points, g, pivot, contacts, covariance, variance)
-        return hidden_side_gain_m2(covariance, H, N, gram)
+        return _subset_gain(points, g, pivot, taxels, subset, covariance, gram)
 
     front_only, both_sides = score([0, 1]), score([0, 1, 2, 3])
     assert 0.0 < front_only < both_sides
+
+
+def test_shape_gram_is_the_mirror_images_spread_under_the_plane_alone():
+    rng = np.random.default_rng(5)
+    points, g, pivot, taxels = _problem(rng)
+    gram = shape_gram(points, g, pivot)
+    plane_only = np.diag([0.0, 0.0, 0.0, 0.0, 0.003, 0.05]) ** 2
+    # Finite differences of the mirror image in the plane's two components, unbiased.
+    jacobians = [
+        _numeric_jacobian(
+            lambda x, p=p: apply_mirror_bias(p[None, :], np.r_[0.0, 0.0, 0.0, 0.0, x], pivot)[0],
+            g[4:].copy(),
+        )
+        for p in points
+    ]
+    expected = np.mean([np.trace(J @ plane_only[4:, 4:] @ J.T) for J in jacobians])
+    assert np.trace(plane_only @ gram) == pytest.approx(expected, rel=1e-4)
+    # The bias moves both sides alike: it does not change the shape.
+    bias_only = np.diag([0.03, 0.004, 0.004, 0.002, 0.0, 0.0]) ** 2
+    assert np.trace(bias_only @ gram) == 0.0
+
+    # Taxels on the front face alone pin the bias; with a prior that does not couple the
+    # bias to the plane they teach the shape nothing, and both faces teach it something.
+    covariance = np.diag([0.03, 0.004, 0.004, 0.002, 0.01, 0.2]) ** 2
+
+    def gain(subset, weights):
+        return _subset_gain(points, g, pivot, taxels, subset, covariance, weights)
+
+    assert gain([0, 1], hidden_side_gram(points, g, pivot)) > 0.0
+    assert gain([0, 1], gram) == pytest.approx(0.0, abs=1e-15)
+    assert gain([0, 1, 2, 3], gram) > 0.0
 
 
 def test_plane_offset_std_is_the_distance_from_the_pivot():

@@ -31,6 +31,17 @@ expected reduction of the hidden side's mean squared uncertainty is
 the drop of the squared hidden-side std above. It weighs the plane and bias by how far
 they move the hidden surface: a plane angle error matters in proportion to the object's
 length along the plane, a bias error everywhere.
+
+**What a grasp teaches about the shape.** The bias only moves the object: it carries the
+visible and the hidden side alike, and the object is released and moved again before the
+next grasp, which adds the re-grasp noise ``Q`` back. Ranking grasps by ``M`` therefore
+ranks them mostly by how well each pins the bias it will forget, the same for every grasp
+that touches: ``tr(Q M)`` is tens of mm^2 against the plane's few. The shape, the hidden
+side relative to the visible side, depends on the plane alone, so :func:`shape_gram`
+keeps only the plane's columns of ``J_n`` (``M_s``), and ``tr((P - P+) M_s)`` is what a
+grasp teaches about the object's hidden side wherever the object stands. The bias stays in
+``P`` and ``P+`` as a nuisance: a grasp that cannot tell the plane from the bias teaches
+the shape little.
 """
 
 from __future__ import annotations
@@ -39,7 +50,7 @@ import numpy as np
 import scipy.linalg
 
 from .correspondences import PointIndex, exclusive_sides, find_correspondences
-from .geometry import BIAS_PLANE_DIM, side_jacobian
+from .geometry import BIAS_PLANE_DIM, PLANE, side_jacobian
 from .iekf import GraspContacts
 from .measurement import freeze, linearise
 from .structured import block_diagonal
@@ -51,6 +62,15 @@ def hidden_side_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -
     std under a covariance ``P`` of ``g``. Shape (6, 6)."""
     jacobians = side_jacobian(np.asarray(points_m, dtype=float), g, pivot_m, back=True)
     return np.einsum("nki,nkj->ij", jacobians, jacobians) / len(jacobians)
+
+
+def shape_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
+    """:func:`hidden_side_gram` restricted to the plane: ``tr(P M_s)`` is the hidden side's
+    mean squared positional std relative to the visible side (its shape), which the bias
+    does not change. Shape (6, 6), zero outside the plane's block."""
+    gram = np.zeros((BIAS_PLANE_DIM, BIAS_PLANE_DIM))
+    gram[PLANE, PLANE] = hidden_side_gram(points_m, g, pivot_m)[PLANE, PLANE]
+    return gram
 
 
 def hidden_side_std_m(covariance: np.ndarray, gram: np.ndarray) -> float:
