@@ -427,8 +427,10 @@ class Hypothesis:
     contradicted the evidence (:mod:`pipeline.estimation.hypotheses`).
 
     Attributes:
-        name: ``"held-plane"`` (fused again with the initialiser's plane held) or
-            ``"held-plane, bounded"`` (that step from Stage 0, shortened until it passes).
+        name: ``"held-plane"`` (fused again with the initialiser's plane held),
+            ``"held-plane, bounded"`` (that step from Stage 0, shortened until it passes) or
+            ``"earlier shape"`` (the grasps before the last, located by the last:
+            :mod:`pipeline.estimation.later_grasps`).
         step: the fraction of the hypothesis' step from Stage 0 kept (1 when not bounded).
         replaced: why the fused model was set aside (its failed tests).
     """
@@ -457,6 +459,9 @@ class StageEstimate:
         consistency: the self-diagnosis of this stage's model, None when not assessed.
         hypothesis: the alternative hypothesis the model comes from, None when it is the
             fused (or initial) estimate itself.
+        grasp_g: the ``(6,)`` state ``(b_theta, b_x, b_y, b_z, m_r, m_theta)`` each grasp's
+            taxels are compared under, in grasp order (the bias differs between grasps when
+            the object was re-grasped); empty when the estimator does not say.
     """
 
     stage: int
@@ -472,6 +477,7 @@ class StageEstimate:
     trace: tuple[IterationState, ...] = ()
     consistency: Consistency | None = None
     hypothesis: Hypothesis | None = None
+    grasp_g: tuple[np.ndarray, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from pipeline.estimation.hypotheses import (
     holdable,
     motion_limit,
     moved_free_space,
+    unheld_covariance,
 )
 from pipeline.estimation.iekf import IekfSettings, fuse
 from pipeline.estimation.map_params import consistency_settings
@@ -56,6 +57,25 @@ def test_holding_the_angle_leaves_the_plane_distance_from_the_pivot_uncertain():
     # is left, the Schur complement (the pivot's lever arm makes the prior's much larger).
     assert held[4, 4] == pytest.approx(prior[4, 4] - prior[4, 5] ** 2 / prior[5, 5])
     assert 0.0 < held[4, 4] < prior[4, 4]
+
+
+@pytest.mark.parametrize("name", sorted(HYPOTHESES))
+def test_putting_the_held_uncertainty_back_on_an_unmeasured_prior_gives_the_prior(name):
+    # Without a measurement the re-fusion's posterior is the prior conditioned on the held
+    # components; the law of total covariance must then give back the prior itself.
+    rng = np.random.default_rng(3)
+    root = rng.normal(size=(6, 6))
+    prior = root @ root.T + 0.1 * np.eye(6)
+    problem = dataclasses.replace(
+        fusion_problem(cylinder_scene(200), np.zeros(6)), covariance_init=prior
+    )
+    conditioned = held_problem(problem, HYPOTHESES[name]).covariance_init
+    restored = unheld_covariance(conditioned, prior, HYPOTHESES[name])
+    np.testing.assert_allclose(restored, prior, rtol=1e-10, atol=1e-12)
+    # A measured free component keeps its smaller variance on top of what the held add.
+    measured = conditioned.copy()
+    measured[1, 1] *= 0.5
+    assert unheld_covariance(measured, prior, HYPOTHESES[name])[1, 1] < prior[1, 1]
 
 
 def test_moved_free_space_counts_only_what_the_bias_change_moves():

@@ -113,6 +113,25 @@ def held_problem(fusion: FusionProblem, held: tuple[int, ...]) -> FusionProblem:
     return replace(fusion, covariance_init=covariance)
 
 
+def unheld_covariance(
+    posterior: np.ndarray, prior: np.ndarray, held: tuple[int, ...]
+) -> np.ndarray:
+    """The covariance of ``g`` under a hypothesis, with the held components' uncertainty
+    put back: ``posterior`` (the re-fusion's, zero in ``held``) is the uncertainty *given*
+    the held values, which were not measured but taken from Stage 0, so their marginal is
+    the ``prior``'s ``P_hh`` and the other components follow them by the prior's regression
+    ``A = P_fh P_hh^-1``: ``posterior + [A; I] P_hh [A; I]^T``, positive semi-definite. A
+    zero there would claim the plane known exactly (the stop rule would stop on it, and
+    every next grasp would look as uninformative as the others)."""
+    h = list(held)
+    free = [i for i in range(len(prior)) if i not in held]
+    lift = np.zeros((len(prior), len(h)))
+    lift[free] = prior[np.ix_(free, h)] @ np.linalg.inv(prior[np.ix_(h, h)])
+    lift[h] = np.eye(len(h))
+    covariance = posterior + lift @ prior[np.ix_(h, h)] @ lift.T
+    return (covariance + covariance.T) / 2.0
+
+
 def moved_free_space(
     points_m: np.ndarray,
     g: np.ndarray,
@@ -288,14 +307,14 @@ def revise(
         # Each re-fusion's stage counts in the stage it stands in for.
         spent = sum(outcomes[index - 1].seconds for outcomes in refused.values())
         candidates = [
-            (candidate, outcomes[index - 1])
+            (candidate, outcomes[index - 1], HYPOTHESES[name])
             for name, outcomes in refused.items()
             for candidate in stage_candidates(
                 fusion, name, outcomes[index - 1], initial.consistency, view, settings, tree
             )
         ]
         seconds = stage.seconds + spent + time.perf_counter() - started
-        best = min(candidates, key=lambda pair: pair[0].consistency.nis, default=None)
+        best = min(candidates, key=lambda entry: entry[0].consistency.nis, default=None)
         # The touch must support the hypothesis better than vision alone does; otherwise
         # the step it takes is not the contacts' evidence but the filter's.
         if best is not None and best[0].consistency.nis < initial.consistency.nis:
@@ -323,20 +342,26 @@ def _as_stage(
     fused: StageEstimate,
     chosen: Candidate,
     outcome: StageOutcome,
+    held: tuple[int, ...],
     fusion: FusionProblem,
     seconds: float,
 ) -> StageEstimate:
-    """The stage estimate of ``chosen`` (from the re-fusion ``outcome``) in place of
-    ``fused``, recording the hypothesis and why the fused model was set aside.
+    """The stage estimate of ``chosen`` (from the re-fusion ``outcome``, components
+    ``held`` at Stage 0's values) in place of ``fused``, recording the hypothesis and why
+    the fused model was set aside.
 
-    Its covariance is the re-fusion's posterior, which has no variance in the held plane
-    components: it is the uncertainty *given* the hypothesis. ``seconds`` is the fused
-    stage's time plus what the hypotheses cost.
+    Its covariance is the re-fusion's posterior with the held components' prior
+    uncertainty put back (:func:`unheld_covariance`). ``seconds`` is the fused stage's time
+    plus what the hypotheses cost.
     """
     estimate = stage_estimate(
         fused.stage,
         chosen.g,
-        outcome.covariance,
+        unheld_covariance(
+            np.asarray(outcome.covariance, dtype=float),
+            np.asarray(fusion.covariance_init, dtype=float),
+            held,
+        ),
         chosen.points,
         fusion.pivot_m,
         fused.iterations + outcome.iterations,
@@ -344,6 +369,7 @@ def _as_stage(
         seconds,
         outcome.active_points,
         outcome.trace,
+        chosen.grasp_g,
     )
     hypothesis = Hypothesis(
         name=chosen.name,

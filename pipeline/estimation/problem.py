@@ -76,8 +76,10 @@ def stage_estimate(
     seconds: float,
     active_points: int,
     trace: Sequence[IterationRecord] = (),
+    grasp_g: Sequence[np.ndarray] = (),
 ) -> StageEstimate:
-    """A :class:`StageEstimate` with the completed model ``{f_b(p)} u {f_mb(p)}``."""
+    """A :class:`StageEstimate` with the completed model ``{f_b(p)} u {f_mb(p)}``;
+    ``grasp_g`` is the state each grasp's taxels are compared under."""
     completed = np.vstack([apply_bias(points, g, pivot_m), apply_mirror_bias(points, g, pivot_m)])
     return StageEstimate(
         stage=stage,
@@ -96,6 +98,7 @@ def stage_estimate(
             )
             for r in trace
         ),
+        grasp_g=tuple(np.array(g_k, dtype=float) for g_k in grasp_g),
     )
 
 
@@ -125,8 +128,9 @@ def estimate_result(
     given), a fused stage whose model contradicts the evidence gets the status
     ``inconsistent`` (unless it already failed), and the best-supported stage is selected.
     With ``refuse`` (the estimator's fusion, run on another problem) an inconsistent fused
-    stage may first be replaced by an alternative hypothesis that passes every test
-    (:func:`.hypotheses.revise`).
+    stage may first be replaced by an alternative that passes every test: with several
+    grasps the earlier grasps' shape located by the last (:mod:`.later_grasps`), then a
+    hypothesis with part of the plane held (:func:`.hypotheses.revise`).
     """
     setup_seconds = time.perf_counter() - started_s - sum(o.seconds for o in outcomes)
     initial = stage_estimate(
@@ -139,6 +143,7 @@ def estimate_result(
         "initial",
         max(setup_seconds, 0.0),
         0,
+        grasp_g=[fusion.g_init] * len(fusion.grasps),
     )
     fused = [
         stage_estimate(
@@ -152,13 +157,12 @@ def estimate_result(
             o.seconds,
             o.active_points,
             o.trace,
+            o.grasp_g,
         )
         for stage, o in enumerate(outcomes, start=1)
     ]
     if consistency is None:
         return EstimateResult(stages=(initial, *fused))
-    states = [fusion.g_init, *(o.g for o in outcomes)]
-    grasp_states = [[fusion.g_init] * len(fusion.grasps)] + [list(o.grasp_g) for o in outcomes]
     # One tree over the unfused points serves every stage: Stage 1 holds them fixed and
     # Stage 2 moves them by millimetres, so their nearest neighbours by index barely change
     # (the patches take the stage's own coordinates).
@@ -168,10 +172,11 @@ def estimate_result(
 
     tree = cKDTree(fusion.points_m, balanced_tree=False)
     diagnosed = []
-    for stage, g, per_grasp in zip((initial, *fused), states, grasp_states, strict=True):
+    states = [fusion.g_init, *(o.g for o in outcomes)]
+    for stage, g in zip((initial, *fused), states, strict=True):
         started = time.perf_counter()
         verdict = assess(
-            stage.points, g, per_grasp, fusion.pivot_m, fusion.grasps, view, consistency, tree
+            stage.points, g, stage.grasp_g, fusion.pivot_m, fusion.grasps, view, consistency, tree
         )
         status = stage.status
         if not verdict.consistent and status in ("converged", "max_iterations"):
@@ -180,7 +185,9 @@ def estimate_result(
         diagnosed.append(replace(stage, consistency=verdict, status=status, seconds=seconds))
     if refuse is not None:
         from .hypotheses import revise
+        from .later_grasps import earlier_shape_stages
 
+        diagnosed = earlier_shape_stages(fusion, diagnosed, refuse, view, consistency, tree)
         diagnosed = revise(fusion, diagnosed, refuse, view, consistency, tree)
     selected, reason = select_stage(diagnosed)
     return EstimateResult(stages=tuple(diagnosed), selected_stage=selected, selection_reason=reason)

@@ -1,0 +1,115 @@
+"""A later grasp whose contacts contradict the model the earlier grasps built only locates
+the object (docs/method.md §11).
+
+With several grasps the estimator fuses them all, in order, each with its own bias. A later
+grasp can pull the plane and the points where the evidence does not follow: its contacts
+may meet a part the mirror image cannot complete (a handle, a nozzle), or the object may
+have turned or tipped during the grasp beyond what the re-grasp noise ``Q`` allows, so that
+wrong correspondences reshape the model. Then the fused model contradicts the camera or the
+taxels although the model of the grasps before it did not.
+
+The alternative here is the *earlier shape*: the estimate the grasps before the last gave
+(the stage selected among them, with any alternative it took; computed the same way, so
+recursively), located by the last grasp alone. The last grasp's bias is fused with the
+plane held and the points fixed (Stage 1 on that grasp, from the earlier state and its
+covariance plus ``Q``), so it says where the object now stands but not what it looks like.
+The alternative replaces an inconsistent last stage only when it passes every test of the
+self-diagnosis on all the grasps and the camera; its covariance carries the plane's
+uncertainty from the earlier estimate (:func:`.hypotheses.unheld_covariance`). Every test is
+on the evidence, never on ground truth.
+
+No motion test (:func:`.hypotheses.moved_free_space`) applies: the object was released and
+grasped again since the camera saw it, so its motion since then is real.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..errors import estimate_failed
+from ..types import DepthObservation, Hypothesis, StageEstimate
+from .consistency import ConsistencySettings, assess
+from .geometry import PLANE
+from .hypotheses import Refuse, held_problem, unheld_covariance
+from .iekf import FusionProblem
+from .problem import stage_estimate
+
+#: The name the alternative's stages carry (``result.json``'s ``hypothesis``).
+EARLIER_SHAPE = "earlier shape"
+_PLANE = tuple(range(PLANE.start, PLANE.stop))
+
+
+def locating_problem(fusion: FusionProblem, earlier: StageEstimate) -> FusionProblem:
+    """The last grasp of ``fusion`` alone, fused from ``earlier`` (the estimate of the
+    grasps before it): its points, its state as the prior mean and its covariance plus
+    ``Q`` as the prior, with the plane held (:func:`.hypotheses.held_problem`)."""
+    problem = replace(
+        fusion,
+        points_m=earlier.points,
+        g_init=np.array(earlier.grasp_g[-1], dtype=float),
+        covariance_init=np.asarray(earlier.covariance, dtype=float) + fusion.regrasp_noise,
+        grasps=fusion.grasps[-1:],
+    )
+    return held_problem(problem, _PLANE)
+
+
+def earlier_shape_stages(
+    fusion: FusionProblem,
+    stages: Sequence[StageEstimate],
+    refuse: Refuse,
+    view: DepthObservation | None,
+    settings: ConsistencySettings,
+    tree: cKDTree,
+) -> list[StageEstimate]:
+    """``stages`` (diagnosed, Stage 0 first) with the last stage replaced by the earlier
+    shape located by the last grasp, when the last stage is inconsistent and the earlier
+    shape passes every test. Runs only with two or more grasps; the earlier estimate is
+    :func:`.problem.estimate_result` of ``refuse`` on the grasps before the last."""
+    from .problem import estimate_result
+
+    last = stages[-1]
+    if len(fusion.grasps) < 2 or last.status != "inconsistent":
+        return list(stages)
+    started = time.perf_counter()
+    before = replace(fusion, grasps=fusion.grasps[:-1])
+    earlier = estimate_result(before, refuse(before), started, view, settings, refuse).selected
+    if estimate_failed(earlier.status) or len(earlier.grasp_g) != len(before.grasps):
+        return list(stages)
+    problem = locating_problem(fusion, earlier)
+    located = refuse(problem)[0]
+    if estimate_failed(located.status):
+        return list(stages)
+    grasp_g = (*earlier.grasp_g, located.g)
+    verdict = assess(
+        earlier.points, located.g, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree
+    )
+    if not verdict.consistent:
+        return list(stages)
+    covariance = unheld_covariance(
+        np.asarray(located.covariance, dtype=float),
+        np.asarray(earlier.covariance, dtype=float) + fusion.regrasp_noise,
+        _PLANE,
+    )
+    estimate = stage_estimate(
+        last.stage,
+        located.g,
+        covariance,
+        earlier.points,
+        fusion.pivot_m,
+        last.iterations + located.iterations,
+        located.status,
+        last.seconds + time.perf_counter() - started,
+        located.active_points,
+        located.trace,
+        grasp_g,
+    )
+    reason = last.consistency.reason if last.consistency is not None else ""
+    replaced = replace(
+        estimate, consistency=verdict, hypothesis=Hypothesis(EARLIER_SHAPE, 1.0, reason)
+    )
+    return [*stages[:-1], replaced]

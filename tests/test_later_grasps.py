@@ -1,0 +1,95 @@
+"""A later grasp that contradicts the fused model only locates the earlier shape
+(pipeline.estimation.later_grasps), on the synthetic cylinder with real fusions."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import partial
+
+import numpy as np
+import pytest
+from estimation_scenes import cylinder_scene, fusion_problem
+from scipy.spatial import cKDTree
+
+from pipeline.estimation.consistency import ConsistencySettings
+from pipeline.estimation.covariances import normal_ellipsoids
+from pipeline.estimation.iekf import GraspContacts, IekfSettings, fuse
+from pipeline.estimation.later_grasps import EARLIER_SHAPE, earlier_shape_stages
+from pipeline.estimation.problem import estimate_result
+
+FIRST_BIAS = (0.03, 0.003, -0.002, 0.001)
+#: The object moved 2.5 mm along the grasp and 1 mm across it before the second grasp.
+SECOND_BIAS = (0.03, 0.0055, -0.001, 0.001)
+
+
+def _contacts(taxels_m, normals, pads):
+    return GraspContacts(
+        positions_m=taxels_m,
+        pads=pads,
+        window=normal_ellipsoids(normals, 0.006, 0.0017),
+        noise=normal_ellipsoids(normals, 0.001, 0.003),
+    )
+
+
+def _two_grasps(scale: float = 1.0):
+    """The cylinder grasped twice, the object moved in between; the second grasp's taxels
+    lie ``scale`` times as far from the axis (another object when not 1)."""
+    first, second = (cylinder_scene(800, bias=b) for b in (FIRST_BIAS, SECOND_BIAS))
+    axis = second.axis_world_m
+    taxels = second.taxels_m.copy()
+    taxels[:, :2] = axis[:2] + scale * (taxels[:, :2] - axis[:2])
+    problem = fusion_problem(first, np.zeros(6))
+    grasps = (
+        _contacts(first.taxels_m, first.normals, first.pads),
+        _contacts(taxels, second.normals, second.pads),
+    )
+    return replace(problem, grasps=grasps), second
+
+
+def _diagnosed(problem):
+    """Every stage diagnosed (no camera), with the last forced to ``inconsistent`` as a
+    later grasp that reshaped the model wrongly would leave it."""
+    settings = ConsistencySettings()
+    refuse = partial(fuse, settings=IekfSettings(), last_stage=2)
+    result = estimate_result(problem, refuse(problem), 0.0, None, settings)
+    stages = list(result.stages)
+    stages[-1] = replace(stages[-1], status="inconsistent")
+    tree = cKDTree(problem.points_m)
+    return stages, refuse, settings, tree
+
+
+def test_the_earlier_shape_located_by_the_last_grasp_replaces_an_inconsistent_last_stage():
+    problem, second = _two_grasps()
+    stages, refuse, settings, tree = _diagnosed(problem)
+    revised = earlier_shape_stages(problem, stages, refuse, None, settings, tree)
+    last = revised[-1]
+    assert last.hypothesis is not None and last.hypothesis.name == EARLIER_SHAPE
+    assert last.consistency.consistent and last.status in ("converged", "max_iterations")
+    # The shape is the first grasp's estimate: its plane and its points.
+    before = replace(problem, grasps=problem.grasps[:1])
+    earlier = estimate_result(before, refuse(before), 0.0, None, settings).selected
+    assert last.plane == earlier.plane
+    np.testing.assert_array_equal(last.points, earlier.points)
+    # The second grasp located it: the bias is the object's second pose along the grasp.
+    assert last.bias.translation_m[0] == pytest.approx(second.g_true[1], abs=0.001)
+    assert len(last.grasp_g) == 2
+    # Its plane is as uncertain as the earlier estimate's, not held exactly.
+    assert last.covariance[5, 5] == pytest.approx(earlier.covariance[5, 5])
+    assert all(a is b for a, b in zip(revised[:-1], stages[:-1], strict=True))
+
+
+def test_a_last_grasp_on_another_object_is_not_explained_away():
+    problem, _ = _two_grasps(scale=1.4)
+    stages, refuse, settings, tree = _diagnosed(problem)
+    revised = earlier_shape_stages(problem, stages, refuse, None, settings, tree)
+    assert all(a is b for a, b in zip(revised, stages, strict=True))
+
+
+def test_one_grasp_or_a_consistent_last_stage_is_left_alone():
+    problem, _ = _two_grasps()
+    stages, refuse, settings, tree = _diagnosed(problem)
+    single = replace(problem, grasps=problem.grasps[:1])
+    consistent = [*stages[:-1], replace(stages[-1], status="converged")]
+    for fusion, given in ((single, stages), (problem, consistent)):
+        revised = earlier_shape_stages(fusion, given, refuse, None, settings, tree)
+        assert all(a is b for a, b in zip(revised, given, strict=True))
