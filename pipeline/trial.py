@@ -31,8 +31,8 @@ from .camera_file import camera_to_json
 from .catalogue import CatalogueObject, load_object
 from .config import Config
 from .errors import StageFailure, SymfuseError
-from .estimation.problem import diagonal_covariance
-from .evaluation import GroundTruth, evaluate_stage, object_motion
+from .estimation.map_params import regrasp_noise
+from .evaluation import GroundTruth, evaluate_stage, object_motion, opposing_contacts
 from .formats import (
     bias_to_json,
     contacts_to_json,
@@ -435,6 +435,7 @@ def _grasp_and_fuse(
         shift_m, tilt_rad = object_motion(obj.mesh, outcome.object_before, outcome.object_after)
         executed = {
             **({"object_pose_released": pose_to_json(released)} if k > 0 else {}),
+            "object_pose_grasped": pose_to_json(outcome.object_after),
             "executed": outcome.executed,
             "aperture_m": outcome.aperture_m,
             "joint_positions": outcome.joint_positions,
@@ -453,13 +454,8 @@ def _grasp_and_fuse(
             break
         with timer.phase("tactile"):
             contacts = stages["tactile"].read(world, outcome)
-        if k > 0 and len(contacts) == 0:
-            # Nothing to fuse, and the object may have moved where no taxel saw it: the
-            # estimate stays the last one, scored against the object as it was then.
-            stop = (
-                f"grasp {k + 1} touched nothing (the object moved {1e3 * shift_m:.1f} mm "
-                f"and tilted {np.degrees(tilt_rad):.1f} deg); not fused"
-            )
+        stop = unfused_reason(k, contacts, shift_m, tilt_rad)
+        if stop:
             break
         grasps.append(contacts)
         plans.append(plan)
@@ -488,6 +484,22 @@ def _grasp_and_fuse(
     document["taxels_in_contact"] = sum(len(c) for c in grasps)
     document["stop_reason"] = stop
     return fused
+
+
+def unfused_reason(k: int, contacts: Contacts, shift_m: float, tilt_rad: float) -> str:
+    """Why grasp ``k`` (from 0) is not fused, or ``""``: a later grasp that touched nothing
+    or one side only (no two pads pressing from opposing sides,
+    :func:`~pipeline.evaluation.opposing_contacts`). Nothing held the object against the
+    pads that touched: they pushed it by an amount no taxel measures, so the contacts
+    cannot locate it, and the estimate stays the last one, scored against the object as it
+    was then. ``shift_m`` and ``tilt_rad``: how the grasp moved the object."""
+    if k == 0 or opposing_contacts(contacts):
+        return ""
+    touched = "nothing" if len(contacts) == 0 else "one side only"
+    return (
+        f"grasp {k + 1} touched {touched} (the object moved {1e3 * shift_m:.1f} mm "
+        f"and tilted {np.degrees(tilt_rad):.1f} deg); not fused"
+    )
 
 
 def _initial_state(
@@ -532,9 +544,7 @@ def measurement_model(config: Config, registry: StageRegistry) -> MeasurementMod
         noise_std_m=(params.noise_along_normal_m, params.noise_across_normal_m),
         point_std_m=params.point_std_m,
         facing_filter=params.facing_filter,
-        regrasp_noise=diagonal_covariance(
-            (params.regrasp_b_theta_rad, *[params.regrasp_b_xyz_m] * 3, 0.0, 0.0)
-        ),
+        regrasp_noise=regrasp_noise(params),
     )
 
 

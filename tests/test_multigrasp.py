@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,7 +20,8 @@ from pipeline.next_grasp import (
 )
 from pipeline.perception.grasp_geometry import hand_pose
 from pipeline.sim.hands import GRIPPERS
-from pipeline.types import Bias, GraspPlan, StageEstimate, SymmetryPlane
+from pipeline.trial import unfused_reason
+from pipeline.types import Bias, Contacts, GraspPlan, StageEstimate, SymmetryPlane
 
 
 @pytest.fixture(scope="module")
@@ -37,8 +39,9 @@ def test_two_grasp_trial_records_each_grasp(two_grasps):
     assert grasps[0]["chosen_by"] == {"strategy": "first"}
     assert grasps[1]["chosen_by"]["strategy"] == "information"
     assert grasps[1]["chosen_by"]["alternatives"] >= 1
-    scores = grasps[1]["chosen_by"]["scores_mm2"]
-    assert scores[grasps[1]["chosen_by"]["chosen"]] == max(scores) > 0.0
+    chosen_by = grasps[1]["chosen_by"]
+    expected = np.multiply(chosen_by["scores_mm2"], chosen_by["planner_scores"])
+    assert expected[chosen_by["chosen"]] == expected.max() > 0.0
     for grasp in grasps:
         assert grasp["executed"] and grasp["taxels_in_contact"] > 20
         assert grasp["pads_in_contact"] == ["left", "right"]
@@ -95,6 +98,26 @@ def test_until_std_stops_once_the_model_is_known_well_enough(tmp_path):
     assert len(document["grasps"]) == 1
     assert document["stop_reason"].startswith("uncertainty reached: ")
     assert "after 1 grasp(s)" in document["stop_reason"]
+
+
+def test_a_later_grasp_on_one_side_only_is_not_fused():
+    def contacts(*pads):
+        normals = {"left": [1.0, 0.0, 0.0], "right": [-1.0, 0.0, 0.0], "top": [0.0, 0.0, -1.0]}
+        return Contacts(
+            np.zeros((len(pads), 3)),
+            np.array([normals[p] for p in pads]).reshape(-1, 3),
+            list(pads),
+            np.arange(len(pads)),
+        )
+
+    both, one = contacts("left", "right", "right"), contacts("left", "left")
+    assert unfused_reason(0, one, 0.04, 0.0) == ""  # the first grasp is the paper's
+    assert unfused_reason(1, both, 0.004, 0.0) == ""
+    assert unfused_reason(1, one, 0.0432, 0.0) == (
+        "grasp 2 touched one side only (the object moved 43.2 mm and tilted 0.0 deg); not fused"
+    )
+    assert "touched nothing" in unfused_reason(2, contacts(), 0.0, 0.0)
+    assert "one side only" in unfused_reason(1, contacts("left", "top"), 0.0, 0.0)
 
 
 def test_stop_rule():
@@ -186,6 +209,20 @@ def test_strategies_choose_among_the_alternatives():
     )
     assert informed.scores[0] == 0.0
     assert informed.chosen == int(np.argmax(informed.scores)) != 0
+    # The planner's score weighs the gain: a grasp it rates poorly (a pad meeting an
+    # edge, a push that may tip the object) is taken only for a gain as much larger.
+    best = informed.chosen
+    other = 3 - best  # the other grasp that touches the box
+    ratio = informed.scores[other] / informed.scores[best]
+    for factor, expected in ((0.9, other), (1.1, best)):
+        weighed = list(plans)
+        weighed[best] = replace(plans[best], score=factor * ratio)
+        weighed[other] = replace(plans[other], score=1.0)
+        choice = choose_next_grasp(
+            "information", _Planner(weighed), stage, gripper, MODEL, np.random.default_rng(0)
+        )
+        assert choice.scores == informed.scores and choice.chosen == expected
+        assert choice.to_json()["planner_scores"][other] == 1.0
     draws = [
         choose_next_grasp("random", planner, stage, gripper, MODEL, np.random.default_rng(s)).chosen
         for s in range(20)

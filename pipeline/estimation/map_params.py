@@ -76,8 +76,18 @@ class MapParams:
     regrasp_b_theta_rad: float = param(
         0.02, "Q: std of the yaw the object gains when re-grasped (rad)", at_least=0.0
     )
-    regrasp_b_xyz_m: float = param(
-        0.005, "Q: std of each translation component gained when re-grasped (m)", at_least=0.0
+    regrasp_b_xy_m: float = param(
+        0.005,
+        "Q: std of each horizontal translation component gained when re-grasped: the "
+        "release and the next grasp slide the object on the table (m)",
+        at_least=0.0,
+    )
+    regrasp_b_z_m: float = param(
+        0.0005,
+        "Q: std of the vertical translation gained when re-grasped: the object stays on the "
+        "table, and the vertical calibration error does not change between grasps; side "
+        "contacts barely observe b_z, so a wide Q lets a later grasp lift the model (m)",
+        at_least=0.0,
     )
     divergence_sigmas: float = param(
         10.0, "diverged when b or m leave this many prior stds around Stage 0", above=0.0
@@ -120,7 +130,7 @@ def fusion_problem(
     points = checked_points(problem, estimator)
     pivot = points.mean(axis=0)
     noise = (p.noise_along_normal_m, p.noise_across_normal_m)
-    xy, q_xyz = p.prior_b_xy_m, p.regrasp_b_xyz_m
+    xy = p.prior_b_xy_m
     g_init = initial_state(problem, pivot)
     stds = (p.prior_b_theta_rad, xy, xy, p.prior_b_z_m, p.prior_m_r_m, p.prior_m_theta_rad)
     return FusionProblem(
@@ -130,8 +140,16 @@ def fusion_problem(
         covariance_init=bias_plane_covariance(stds, g_init[5], pivot),
         point_variance_m2=np.full(len(points), p.point_std_m**2),
         grasps=tuple(grasp_contacts(c, window_std_m, noise, facing_filter) for c in problem.grasps),
-        regrasp_noise=diagonal_covariance((p.regrasp_b_theta_rad, q_xyz, q_xyz, q_xyz, 0, 0)),
+        regrasp_noise=regrasp_noise(p),
     )
+
+
+def regrasp_noise(params: MapParams) -> np.ndarray:
+    """``Q``, the ``(6, 6)`` covariance over ``g`` the object's motion adds before every
+    grasp after the first: the bias' yaw and translation, not the plane."""
+    p = params
+    q_xy, q_z = p.regrasp_b_xy_m, p.regrasp_b_z_m
+    return diagonal_covariance((p.regrasp_b_theta_rad, q_xy, q_xy, q_z, 0.0, 0.0))
 
 
 def consistency_settings(params: MapParams) -> ConsistencySettings:

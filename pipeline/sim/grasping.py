@@ -70,7 +70,8 @@ class GraspSettings:
         check_every_steps: contact is checked every this many physics steps.
         max_close_s: closing gives up after this much simulated time.
         settle_s: simulated time the grasp is held before the final poses are read.
-        release_s: time taken to open and back off when the hand still holds the object.
+        release_s: time taken to open, and again to back off, when the hand still holds
+            the object.
         release_lift_m: how far the palm backs off along its -z when releasing.
         press_together: fingers in contact wait (no squeeze) until every finger has
             stopped, then all press at once; otherwise each presses as soon as it stops.
@@ -137,10 +138,15 @@ def _outcome(
 
 
 def _release(client: int, hand: Hand, opening_m: float, settings: GraspSettings) -> None:
-    """Open the fingers and back the palm off along -z of the hand."""
+    """Open the fingers with the palm held still, then back the palm off along -z of the
+    hand: fingers that open while the palm rises drag the object along by their pads'
+    friction (a box slid by a centimetre and turned by degrees)."""
     hand.command(hand.open_configuration(opening_m))
     T_robot_hand = hand.pose()
     steps = max(1, round(settings.release_s / settings.timestep_s))
+    for _ in range(steps):
+        hand.move_to(T_robot_hand)
+        pb.stepSimulation(physicsClientId=client)
     for step in range(1, steps + 1):
         target = T_robot_hand.copy()
         target[:3, 3] -= T_robot_hand[:3, 2] * settings.release_lift_m * step / steps
