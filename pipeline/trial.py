@@ -451,11 +451,13 @@ def _grasp_and_fuse(
                 raise StageFailure(f"grasp not executed: {outcome.reason}")
         elif not outcome.executed:
             stop = f"grasp {k + 1} not executed: {outcome.reason}"
+            document["unfused_grasp"] = attempt_to_json(k, plan, chosen_by, executed)
             break
         with timer.phase("tactile"):
             contacts = stages["tactile"].read(world, outcome)
         stop = unfused_reason(k, contacts, shift_m, tilt_rad)
         if stop:
+            document["unfused_grasp"] = attempt_to_json(k, plan, chosen_by, executed, contacts)
             break
         grasps.append(contacts)
         plans.append(plan)
@@ -484,6 +486,31 @@ def _grasp_and_fuse(
     document["taxels_in_contact"] = sum(len(c) for c in grasps)
     document["stop_reason"] = stop
     return fused
+
+
+def attempt_to_json(
+    k: int,
+    plan: GraspPlan,
+    chosen_by: dict[str, Any],
+    executed: dict[str, Any],
+    contacts: Contacts | None = None,
+) -> dict[str, Any]:
+    """``result.json``'s ``unfused_grasp``: the later grasp a trial stopped on (not
+    executed, or touching too little to fuse), as planned, chosen and executed."""
+    touched = {}
+    if contacts is not None:
+        touched = {
+            "taxels_in_contact": len(contacts),
+            "pads_in_contact": sorted(set(contacts.pads.tolist())),
+        }
+    return {
+        "grasp": k + 1,
+        "gripper": plan.gripper,
+        "chosen_by": chosen_by,
+        "plan": plan_to_json(plan),
+        **executed,
+        **touched,
+    }
 
 
 def unfused_reason(k: int, contacts: Contacts, shift_m: float, tilt_rad: float) -> str:

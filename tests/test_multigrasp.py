@@ -20,7 +20,7 @@ from pipeline.next_grasp import (
 )
 from pipeline.perception.grasp_geometry import hand_pose
 from pipeline.sim.hands import GRIPPERS
-from pipeline.trial import unfused_reason
+from pipeline.trial import attempt_to_json, unfused_reason
 from pipeline.types import Bias, Contacts, GraspPlan, StageEstimate, SymmetryPlane
 
 
@@ -118,6 +118,13 @@ def test_a_later_grasp_on_one_side_only_is_not_fused():
     )
     assert "touched nothing" in unfused_reason(2, contacts(), 0.0, 0.0)
     assert "one side only" in unfused_reason(1, contacts("left", "top"), 0.0, 0.0)
+    # The grasp the trial stopped on is recorded as planned, chosen and executed.
+    executed = {"executed": True, "object_shift_mm": 43.2}
+    record = attempt_to_json(1, _plan(0.0), {"strategy": "paper"}, executed, one)
+    assert record["grasp"] == 2 and record["plan"]["gripper"] == "pg70"
+    assert record["object_shift_mm"] == 43.2
+    assert record["taxels_in_contact"] == 2 and record["pads_in_contact"] == ["left"]
+    assert "taxels_in_contact" not in attempt_to_json(1, _plan(0.0), {}, executed)
 
 
 def test_stop_rule():
