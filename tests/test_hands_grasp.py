@@ -13,7 +13,7 @@ import yourdfpy
 from pipeline.errors import ConfigError
 from pipeline.pad_layout import pad_grid
 from pipeline.perception import sdh_geometry
-from pipeline.sim.grasping import execute_grasp, object_pose, opposed_fingers
+from pipeline.sim.grasping import execute_grasp, object_pose, opposed_fingers, release
 from pipeline.sim.hands import GRIPPERS, Hand
 from pipeline.types import GraspPlan
 from robots import ROOT
@@ -231,6 +231,24 @@ def test_regrasp_releases_and_grasps_again(client):
     np.testing.assert_allclose(
         second.object_before.position_m, first.object_after.position_m, atol=3 * MM
     )
+
+
+def test_releasing_an_sdh_grasp_leaves_the_object_where_it_was(client):
+    # Fingers 1 and 2 turned to face each other (spread 90 deg) across a 60 mm box: the
+    # release opens them and backs off without turning them back about the box (turning
+    # them back to spread 0 slid it 6 mm, and a cylinder 40 mm).
+    box = _box(client, [0.03, 0.03, 0.085], [0.5, 0.1, 0.085])
+    pb.changeDynamics(box, -1, mass=0.3, physicsClientId=client)
+    hand = Hand.load(client, "sdh")
+    spread = np.pi / 2
+    plan = _top_grasp("sdh", 0.5, 0.1, 0.353, 0.11, spread_rad=spread)
+    outcome = execute_grasp(client, hand, plan, box)
+    assert outcome.executed, outcome.reason
+    assert hand.touches(box)
+    released = release(client, hand, box, plan.opening_m)
+    moved = released.position_m - outcome.object_after.position_m
+    assert np.hypot(moved[0], moved[1]) < 2 * MM
+    assert not hand.touches(box)
 
 
 def test_refused_and_impossible_plans_are_not_executed(client):

@@ -140,8 +140,17 @@ def _outcome(
 def _release(client: int, hand: Hand, opening_m: float, settings: GraspSettings) -> None:
     """Open the fingers with the palm held still, then back the palm off along -z of the
     hand: fingers that open while the palm rises drag the object along by their pads'
-    friction (a box slid by a centimetre and turned by degrees)."""
-    hand.command(hand.open_configuration(opening_m))
+    friction (a box slid by a centimetre and turned by degrees). Only the joints that close
+    the fingers open; the others (the SDH-2's spread) stay where the grasp put them, since
+    turning the fingers about the object sweeps it aside (a cylinder by 40 mm)."""
+    closing = {joint for finger in hand.model.fingers for joint in finger.joints}
+    held = hand.joint_positions()
+    hand.command(
+        {
+            name: value if name in closing else held[name]
+            for name, value in hand.open_configuration(opening_m).items()
+        }
+    )
     T_robot_hand = hand.pose()
     steps = max(1, round(settings.release_s / settings.timestep_s))
     for _ in range(steps):
