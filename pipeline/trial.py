@@ -495,8 +495,9 @@ def attempt_to_json(
     executed: dict[str, Any],
     contacts: Contacts | None = None,
 ) -> dict[str, Any]:
-    """``result.json``'s ``unfused_grasp``: the later grasp a trial stopped on (not
-    executed, or touching too little to fuse), as planned, chosen and executed."""
+    """A grasp as planned, chosen and executed (and what it touched, when read): the part
+    of a ``grasps`` entry before the estimate, and ``result.json``'s ``unfused_grasp``, the
+    later grasp a trial stopped on (not executed, or touching too little to fuse)."""
     touched = {}
     if contacts is not None:
         touched = {
@@ -596,14 +597,8 @@ def grasp_to_json(
         )
     ]
     return {
-        "grasp": k + 1,
-        "gripper": plan.gripper,
+        **attempt_to_json(k, plan, chosen_by, executed, contacts),
         "planner": planner,
-        "chosen_by": chosen_by,
-        "plan": plan_to_json(plan),
-        **executed,
-        "taxels_in_contact": len(contacts),
-        "pads_in_contact": sorted(set(contacts.pads.tolist())),
         "status": fused.result.final.status,
         **selection_to_json(fused.result),
         "uncertainty": known.to_json(),
