@@ -18,6 +18,7 @@ where a ``float`` is declared; nothing else is converted silently; a ``float`` i
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import typing
 from collections.abc import Mapping
@@ -185,7 +186,11 @@ def build(params_cls: type, values: Mapping[str, Any], section: str) -> Any:
     for key in values:
         if key not in hints:
             listing = ", ".join(known) if known else "none"
-            raise ConfigError(f"unknown config key '{section}.{key}' (known keys: {listing})")
+            close = difflib.get_close_matches(key, known, n=1)
+            guess = f"did you mean '{close[0]}'? " if close else ""
+            raise ConfigError(
+                f"unknown config key '{section}.{key}' ({guess}known keys: {listing})"
+            )
     converted = {k: _convert(v, hints[k], f"{section}.{k}") for k, v in values.items()}
     params = params_cls(**converted)
     check_bounds(params, section)

@@ -52,10 +52,17 @@ def test_unknown_key_is_named(registry, tmp_path):
     with pytest.raises(ConfigError) as error:
         load_config(registry, [path])
     assert str(error.value) == (
-        "unknown config key 'trial.sede' "
-        "(known keys: object, gripper, seed, x_m, y_m, yaw_deg, pictures, units, grasps, "
+        "unknown config key 'trial.sede' (did you mean 'seed'? "
+        "known keys: object, gripper, seed, x_m, y_m, yaw_deg, pictures, units, grasps, "
         "next_grasp, until_std_mm)"
     )
+    # A renamed key points to its new name.
+    with pytest.raises(ConfigError, match="did you mean 'regrasp_b_xy_m'"):
+        load_config(registry, overrides=["estimator.iekf.regrasp_b_xyz_m=0.002"])
+    # Nothing close: no guess.
+    with pytest.raises(ConfigError) as error:
+        load_config(registry, overrides=["trial.zzzz=1"])
+    assert "did you mean" not in str(error.value)
 
 
 def test_unknown_section_is_named(registry):
