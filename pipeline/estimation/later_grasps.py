@@ -34,14 +34,14 @@ from scipy.spatial import cKDTree
 from ..errors import estimate_failed
 from ..types import DepthObservation, Hypothesis, StageEstimate
 from .consistency import ConsistencySettings, assess
-from .geometry import PLANE
-from .hypotheses import Refuse, held_problem, unheld_covariance
+from .hypotheses import HYPOTHESES, Refuse, held_problem, unheld_covariance
 from .iekf import FusionProblem
 from .problem import stage_estimate
 
 #: The name the alternative's stages carry (``result.json``'s ``hypothesis``).
 EARLIER_SHAPE = "earlier shape"
-_PLANE = tuple(range(PLANE.start, PLANE.stop))
+#: The components of ``g`` the last grasp does not move: the plane, as ``held-plane`` holds it.
+_PLANE = HYPOTHESES["held-plane"]
 
 
 def locating_problem(fusion: FusionProblem, earlier: StageEstimate) -> FusionProblem:
