@@ -83,6 +83,7 @@ def grasp_once(params: dict[str, Any]) -> dict[str, Any]:
         "grasp": None if best is None else candidate_to_json(best),
         "pads": sorted(set(contacts.pads.tolist())),
         "taxels": len(contacts),
+        "reapproaches": outcome.reapproaches,
         "opposing": opposing_contacts(contacts),
         "shift_mm": 1e3 * shift_m,
         "tilt_deg": float(np.degrees(tilt_rad)),

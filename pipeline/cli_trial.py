@@ -207,8 +207,13 @@ def run(args: argparse.Namespace) -> int:
     print(trial_summary(record))
     print(selection_line(record.result))
     grasp = record.document["grasp"]
+    moved_aside = (
+        f"; the descent met the object and moved aside {grasp['reapproaches']} time(s)"
+        if grasp["reapproaches"]
+        else ""
+    )
     print(
-        f"grasp: {record.document['hand']['reason']}; the object moved "
+        f"grasp: {record.document['hand']['reason']}{moved_aside}; the object moved "
         f"{grasp['object_shift_mm']:.1f} mm and tilted {grasp['object_tilt_deg']:.1f} deg"
     )
     if len(record.document["grasps"]) > 1 or settings.until_std_mm > 0:

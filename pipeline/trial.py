@@ -441,6 +441,7 @@ def _grasp_and_fuse(
             "joint_positions": outcome.joint_positions,
             "T_robot_hand": np.asarray(outcome.T_robot_hand).tolist(),
             "reason": outcome.reason,
+            "reapproaches": outcome.reapproaches,
             "object_shift_mm": 1e3 * shift_m,
             "object_tilt_deg": float(np.degrees(tilt_rad)),
         }

@@ -559,6 +559,8 @@ class GraspOutcome:
         object_before: true object pose before the grasp.
         object_after: true object pose after the grasp settled.
         reason: why it was not executed, else empty.
+        reapproaches: times the descent met the object and the hand moved aside and
+            descended again.
     """
 
     executed: bool
@@ -568,6 +570,7 @@ class GraspOutcome:
     object_before: ObjectPose
     object_after: ObjectPose
     reason: str = ""
+    reapproaches: int = 0
 
 
 class SceneObject(Protocol):

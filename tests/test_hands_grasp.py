@@ -4,6 +4,7 @@ datasheet geometry and the physics of simple objects."""
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 import pybullet as pb
@@ -13,7 +14,13 @@ import yourdfpy
 from pipeline.errors import ConfigError
 from pipeline.pad_layout import pad_grid
 from pipeline.perception import sdh_geometry
-from pipeline.sim.grasping import execute_grasp, object_pose, opposed_fingers, release
+from pipeline.sim.grasping import (
+    HAND_GRASP_SETTINGS,
+    execute_grasp,
+    object_pose,
+    opposed_fingers,
+    release,
+)
 from pipeline.sim.hands import GRIPPERS, Hand
 from pipeline.types import GraspPlan
 from robots import ROOT
@@ -285,8 +292,63 @@ def test_refused_and_impossible_plans_are_not_executed(client):
         )
 
 
+@pytest.mark.parametrize("guarded", [True, False])
+def test_a_jaw_landing_on_the_object_moves_aside_instead_of_shoving_it(client, guarded):
+    # A 50 mm box 10 mm off the palm axis towards the left jaw: its edge lies 2.5 mm under
+    # the open left jaw (inner face 32.5 mm from the axis), as a calibration error puts it.
+    box = _box(client, [0.025, 0.03, 0.04], [0.49, 0.1, 0.04])
+    hand = Hand.load(client, "pg70")
+    plan = _top_grasp("pg70", 0.5, 0.1, 0.08 - 0.02 + 0.125, 0.065)
+    settings = replace(HAND_GRASP_SETTINGS["pg70"], descent_guard_N=1.0 if guarded else 0.0)
+    outcome = execute_grasp(client, hand, plan, box, settings)
+    moved = np.linalg.norm(outcome.object_after.position_m - outcome.object_before.position_m)
+    if guarded:
+        # The left jaw opens along -x: one re-approach 4 mm that way clears the edge.
+        assert outcome.executed, outcome.reason
+        assert outcome.reapproaches == 1
+        np.testing.assert_allclose(
+            outcome.T_robot_hand[:3, 3], plan.T_robot_hand[:3, 3] - [0.004, 0.0, 0.0], atol=2 * MM
+        )
+        assert moved < 1 * MM
+        assert np.all(hand.pad_contact_forces(box) > 1.0)
+    else:
+        assert outcome.reapproaches == 0
+        assert moved > 2.5 * MM  # the jaw came down on the edge and pushed the box aside
+
+
+def test_when_every_try_lands_the_hand_descends_blind_on_the_plan(client):
+    # 70 mm wide: wider than the open jaws (65 mm), both land wherever the hand goes. The
+    # landing side alternates, so the steps go 4, 2, 1 mm; then the plan's own pose.
+    box = _box(client, [0.035, 0.03, 0.04], [0.5, 0.1, 0.04])
+    hand = Hand.load(client, "pg70")
+    plan = _top_grasp("pg70", 0.5, 0.1, 0.08 - 0.02 + 0.125, 0.065)
+    outcome = execute_grasp(client, hand, plan, box)
+    assert outcome.reapproaches == 3
+    np.testing.assert_allclose(outcome.T_robot_hand[:2, 3], plan.T_robot_hand[:2, 3], atol=2 * MM)
+
+
+def test_a_palm_landing_on_the_object_stops_the_descent(client):
+    box = _box(client, [0.025, 0.03, 0.04], [0.5, 0.1, 0.04])
+    hand = Hand.load(client, "pg70")
+    # The housing reaches 78 mm below the palm: this palm ends 38 mm inside the box.
+    plan = _top_grasp("pg70", 0.5, 0.1, 0.08 + 0.04, 0.065)
+    outcome = execute_grasp(client, hand, plan, box)
+    assert not outcome.executed
+    assert "the palm met the object during the descent" in outcome.reason
+    assert outcome.reapproaches == 0
+    moved = np.linalg.norm(outcome.object_after.position_m - outcome.object_before.position_m)
+    assert moved < 2 * MM
+
+
+def test_pg70_fingers_face_each_other(client):
+    hand = Hand.load(client, "pg70")
+    facings = hand.model.facings(0.0)
+    for origin, facing in zip(hand.pad_poses()[1], facings, strict=True):
+        assert _in_hand(hand, origin)[:2] @ facing < -0.02  # the pad closes towards the axis
+
+
 def test_a_hand_blocked_by_the_table_reports_it(client):
-    box = _box(client, [0.021, 0.04, 0.06], [0.5, 0.1, 0.06])
+    box = _box(client, [0.021, 0.04, 0.06], [0.7, 0.1, 0.06])  # clear of the hand
     hand = Hand.load(client, "pg70")
     # Fingertips 154 mm below the palm would end 30 mm under the table top.
     plan = _top_grasp("pg70", 0.5, 0.1, 0.124, 0.065)

@@ -214,6 +214,32 @@ def test_a_mugs_near_wall_and_its_inside_seen_over_the_rim_are_one_object():
     assert len(result.objects[0]) == len(near) + len(inside)
 
 
+def test_footprints_within_the_clustering_radius_are_one_object():
+    # A mug seen over its rim with its floor and rim hidden: the near wall's outside
+    # (radius 40 mm, 88 deg either side of the camera's -x, up to 60 mm) and the far
+    # wall's inside (radius 36 mm, 85 deg either side of +x, from 75 mm) are 15 mm apart
+    # in space, and their footprints' hulls 4.5 mm apart. A box 12 mm beyond the near
+    # wall's hull is another object.
+    near = _arc(0.040, 92.0, 268.0, 0.72, 0.76)
+    far = _arc(0.036, -85.0, 85.0, 0.775, 0.80)
+    x, y, z = np.meshgrid(np.arange(-0.09, -0.0519, 0.002), np.arange(-0.02, 0.0201, 0.002), [0.75])
+    box = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    points = np.vstack([near, far, box])
+    table = table_from_height(0.7)
+    labels = dbscan_labels(points, 0.01, 10)
+    assert len(np.unique(labels)) == 3
+    parts = np.cumsum([0, len(near), len(far), len(box)])
+
+    def objects(gap_m):
+        merged = merge_overlapping_footprints(points, labels, table, gap_m=gap_m)
+        return [set(np.unique(merged[a:b]).tolist()) for a, b in itertools.pairwise(parts)]
+
+    apart = objects(0.0)
+    assert len(set().union(*apart)) == 3
+    walls, far_wall, other = objects(0.01)
+    assert walls == far_wall != other
+
+
 def test_merging_footprints_keeps_noise_and_apart_clusters():
     labels = np.array([0, 0, 0, -1, 1, 1, 1])
     points = np.array(

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, cKDTree
 
 from pipeline.catalogue import list_objects, load_object
 from pipeline.params import build
@@ -99,21 +99,55 @@ def test_dbscan_matches_the_definition(scene):
     assert (labels[~core & ~reached] == -1).all(), name
 
 
+def footprint_gap_m(hull_of: np.ndarray, points: np.ndarray) -> float:
+    """Least distance (m) in the table's xy plane from ``points`` to the convex hull of
+    ``hull_of``'s footprint, 0 when one lies inside: every point against every edge."""
+    outline = hull_of[ConvexHull(hull_of[:, :2]).vertices, :2]  # counter-clockwise
+    start, edge = outline, np.roll(outline, -1, axis=0) - outline
+    xy = points[:, None, :2]
+    along = np.clip(
+        np.einsum("pek,ek->pe", xy - start, edge) / np.einsum("ek,ek->e", edge, edge), 0.0, 1.0
+    )
+    nearest = start + along[..., None] * edge
+    distance = np.linalg.norm(xy - nearest, axis=2).min(axis=1)
+    cross = edge[:, 0] * (xy[..., 1] - start[:, 1]) - edge[:, 1] * (xy[..., 0] - start[:, 0])
+    distance[np.all(cross >= 0.0, axis=1)] = 0.0
+    return float(distance.min())
+
+
 def test_segmentation_keeps_the_same_object(scene):
+    # The object is the largest DBSCAN cluster of the definition, joined by every other
+    # cluster whose footprint on the table comes within eps of it (an open object's near
+    # wall and its inside are apart in space); a point that two clusters' cores reach may
+    # go either way.
     name, points, table_height_m = scene
     table = table_from_height(table_height_m)
     result = segment_points(points, table, min_height_m=MIN_HEIGHT_M, eps_m=EPS_M)
     above = np.flatnonzero(table.height_m(points) >= MIN_HEIGHT_M)
     core, component, reach = reference_core_components(points[above], EPS_M, MIN_POINTS)
-    biggest = np.argmax(np.bincount(component[core]))
     clusters_reaching = np.bincount(reach[:, 0], minlength=len(above))
     ambiguous = set(above[clusters_reaching > 1].tolist())
-    only_biggest = reach[(reach[:, 1] == biggest) & (clusters_reaching[reach[:, 0]] == 1), 0]
-    reference = set(above[core & (component == biggest)].tolist()) | set(above[only_biggest])
+    members = {
+        c: set(above[core & (component == c)].tolist())
+        | set(above[reach[(reach[:, 1] == c) & (clusters_reaching[reach[:, 0]] == 1), 0]])
+        for c in np.unique(component[core])
+    }
     kept = set(result.indices.tolist())
-    assert reference <= kept, name
-    assert kept - reference <= ambiguous, name
+    joined = {c for c, m in members.items() if m <= kept}
+    assert np.argmax(np.bincount(component[core])) in joined, name
+    assert kept - set().union(*(members[c] for c in joined)) <= ambiguous, name
     assert len(kept) > 500, name
+
+    def apart_m(a: set[int], b: set[int]) -> float:
+        first, second = points[sorted(a)], points[sorted(b)]
+        return min(footprint_gap_m(first, second), footprint_gap_m(second, first))
+
+    for c, m in members.items():
+        if c in joined and len(joined) > 1:
+            rest = set().union(*(members[j] for j in joined if j != c))
+            assert apart_m(rest, m) <= EPS_M + 1e-6, name
+        elif c not in joined:
+            assert all(apart_m(members[j], m) > EPS_M - 1e-6 for j in joined), name
 
 
 def test_voxel_subsampling_matches_the_definition(scene):

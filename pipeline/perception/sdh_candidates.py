@@ -284,9 +284,9 @@ def _swept_profile(step: int, clearance_m: float) -> tuple[np.ndarray, np.ndarra
 #: that side's top edge (m).
 _EDGE_DEPTH_M = 0.015
 #: Score factor of a grasp with a top edge behind a distal link (:func:`_top_edge_above_pad`):
-#: such a grasp is taken only where no other comes close, as on a box too tall for the pads
-#: to reach clear of its top edge.
-_EDGE_PENALTY = 0.25
+#: such a grasp is taken only where no other comes near, as on a box too tall for the pads
+#: to reach clear of its top edge (docs/method.md §5 has what a quarter and a fiftieth did).
+_EDGE_PENALTY = 0.1
 
 
 def _top_edge_above_pad(

@@ -67,7 +67,7 @@ def segment_points(
     above = np.flatnonzero((height >= min_height_m) & (height <= max_height_m))
     kept = above[voxel_subsample_indices(points_robot[above], voxel_m)]
     labels = dbscan_labels(points_robot[kept], eps_m, min_points)
-    labels = merge_overlapping_footprints(points_robot[kept], labels, table)
+    labels = merge_overlapping_footprints(points_robot[kept], labels, table, gap_m=eps_m)
     clusters = int(labels.max()) + 1 if len(labels) else 0
     sizes = np.bincount(labels[labels >= 0], minlength=clusters)
     order = np.argsort(-sizes, kind="stable")
@@ -79,12 +79,16 @@ def segment_points(
 
 
 def merge_overlapping_footprints(
-    points_robot: np.ndarray, labels: np.ndarray, table: TablePlane
+    points_robot: np.ndarray, labels: np.ndarray, table: TablePlane, gap_m: float = 0.0
 ) -> np.ndarray:
     """``labels`` (``-1``: noise) with every two clusters merged when a point of one lies
-    inside the convex hull of the other's footprint (its points projected onto the table
-    plane), renumbered ``0..K-1``."""
-    from scipy.spatial import ConvexHull, Delaunay, QhullError
+    within ``gap_m`` of the convex hull of the other's footprint (its points projected
+    onto the table plane), renumbered ``0..K-1``.
+
+    The hull is dilated by ``gap_m`` as a 16-gon about each vertex (within 2 % of a
+    disc): two parts of one object whose footprints nearly touch, apart in space only
+    because the surface joining them is unseen or sparse, are then one object."""
+    from scipy.spatial import ConvexHull, Delaunay
 
     normal = np.asarray(table.normal, dtype=np.float64)
     u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
@@ -92,6 +96,8 @@ def merge_overlapping_footprints(
     flat = points_robot @ np.column_stack([u, np.cross(normal, u)])
     count = int(labels.max()) + 1 if len(labels) else 0
     parent = np.arange(count)
+    angles = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)
+    disc = max(gap_m, 1e-9) * np.column_stack([np.cos(angles), np.sin(angles)])
 
     def root(i: int) -> int:
         while parent[i] != i:
@@ -100,13 +106,13 @@ def merge_overlapping_footprints(
 
     for i in range(count):
         footprint = flat[labels == i]
-        try:
-            hull = Delaunay(footprint[ConvexHull(footprint).vertices])
-        except QhullError:  # on one line: no area for another cluster to lie in
-            continue
-        # Only points within the footprint's bounding box can lie inside it.
+        # Joggled ("QJ"): a footprint on one line, or of a point or two, still has a hull.
+        outline = footprint[ConvexHull(footprint, qhull_options="QJ").vertices]
+        dilated = (outline[:, None, :] + disc[None, :, :]).reshape(-1, 2)
+        hull = Delaunay(dilated[ConvexHull(dilated, qhull_options="QJ").vertices])
+        # Only points within the dilated footprint's bounding box can lie inside it.
         near = np.flatnonzero(
-            np.all((flat >= footprint.min(axis=0)) & (flat <= footprint.max(axis=0)), axis=1)
+            np.all((flat >= dilated.min(axis=0)) & (flat <= dilated.max(axis=0)), axis=1)
         )
         inside = near[hull.find_simplex(flat[near]) >= 0]
         for j in np.unique(labels[inside][labels[inside] >= 0]):

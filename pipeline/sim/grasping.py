@@ -8,7 +8,17 @@ Sequence (:func:`execute_grasp`):
 3. teleport the open hand to the pre-grasp pose, ``plan.pregrasp_height_m`` above
    ``plan.T_robot_hand`` along +z of frame R; refuse if the hand overlaps the object there;
 4. descend to ``plan.T_robot_hand`` at ``descent_speed_m_s`` (the base constraint's target is
-   moved every step); stop with ``executed=False`` if the hand is blocked on the way;
+   moved every step), guarded: once the hand bears down on the object with
+   ``descent_guard_N`` (the upward part of the contact forces, what a wrist force sensor
+   feels; a finger brushing a side does not count), it stops. A finger landing on the
+   object means the object reaches further that side than the cloud said (a calibration
+   error, a lid wider than the cloud shows), and descending on would shove it aside: the
+   hand lifts back to the pre-grasp height, moves the way that finger opens and descends
+   again, at most ``reapproaches`` times; the move is ``reapproach_step_m``, halved each
+   time the landing finger is on the other side from the last (the room lies in between).
+   When the last try lands too, the hand descends on the planned pose unguarded and
+   pushes, as a blind hand would.
+   Stop with ``executed=False`` if the palm lands or the hand is blocked on the way;
 5. close every finger at its own speed (position control with a force cap) until its pads
    report sufficient contact - at least ``min_contact_taxels`` taxels within
    ``contact_gap_m`` of the object (ray probes) and at least ``min_contact_force_N`` summed
@@ -57,6 +67,11 @@ class GraspSettings:
     Attributes:
         timestep_s: physics timestep used during the grasp (restored afterwards).
         descent_speed_m_s: palm speed from the pre-grasp to the grasp pose.
+        descent_guard_N: upward hand-object contact force that stops the descent (0: the
+            descent is not guarded and pushes on).
+        reapproaches: times a stopped descent is tried again, moved aside.
+        reapproach_step_m: how far the hand moves aside each time, along the direction the
+            finger that touched opens: about a camera-to-robot calibration error.
         blocked_tolerance_m: palm position error after the descent that counts as blocked.
         force_fraction: fraction of each joint's URDF effort limit used as its force/torque
             cap while closing (PG-70: 0.2 x 200 N = 40 N per jaw).
@@ -79,6 +94,9 @@ class GraspSettings:
 
     timestep_s: float = 1.0 / 240.0
     descent_speed_m_s: float = 0.3
+    descent_guard_N: float = 1.0
+    reapproaches: int = 3
+    reapproach_step_m: float = 0.004
     blocked_tolerance_m: float = 0.005
     force_fraction: float = 0.2
     contact_gap_m: float = 0.001
@@ -125,9 +143,11 @@ def _outcome(
     before: ObjectPose,
     executed: bool,
     reason: str = "",
+    reapproaches: int = 0,
 ) -> GraspOutcome:
     return GraspOutcome(
         executed=executed,
+        reapproaches=reapproaches,
         aperture_m=hand.aperture() if executed else math.nan,
         joint_positions=hand.joint_positions(),
         T_robot_hand=hand.pose(),
@@ -314,35 +334,87 @@ def _execute(
         _release(client, hand, plan.opening_m, s)
         before = object_pose(client, object_id)
 
-    T_grasp = np.asarray(plan.T_robot_hand, dtype=np.float64)
-    T_pregrasp = T_grasp.copy()
-    T_pregrasp[2, 3] += plan.pregrasp_height_m
-    hand.set_opening(plan.opening_m, plan.spread_rad)
-    hand.reset_pose(T_pregrasp)
-    pb.performCollisionDetection(physicsClientId=client)
-    if hand.touches(object_id):
-        return _outcome(
-            client, hand, object_id, before, False, "hand overlaps the object at the pre-grasp pose"
-        )
+    T_grasp = np.asarray(plan.T_robot_hand, dtype=np.float64).copy()
+    facings = hand.model.facings(plan.spread_rad)
+    reapproaches, step_m, previous, guard_N = 0, s.reapproach_step_m, None, s.descent_guard_N
 
-    steps = max(1, math.ceil(plan.pregrasp_height_m / (s.descent_speed_m_s * s.timestep_s)))
-    for step in range(1, steps + 1):
-        target = T_grasp.copy()
-        target[2, 3] += plan.pregrasp_height_m * (1.0 - step / steps)
-        hand.move_to(target)
-        pb.stepSimulation(physicsClientId=client)
+    def not_executed(reason: str) -> GraspOutcome:
+        return _outcome(client, hand, object_id, before, False, reason, reapproaches)
+
+    while True:
+        T_pregrasp = T_grasp.copy()
+        T_pregrasp[2, 3] += plan.pregrasp_height_m
+        hand.set_opening(plan.opening_m, plan.spread_rad)
+        hand.reset_pose(T_pregrasp)
+        pb.performCollisionDetection(physicsClientId=client)
+        if hand.touches(object_id):
+            return not_executed("hand overlaps the object at the pre-grasp pose")
+        if not _descend_stopped(
+            client, hand, object_id, T_grasp, plan.pregrasp_height_m, guard_N, s
+        ):
+            break
+        finger, _ = hand.bearing_down(object_id)
+        if finger is None:
+            return not_executed(
+                "the palm met the object during the descent, "
+                f"{1e3 * (hand.pose()[2, 3] - T_grasp[2, 3]):.0f} mm above the grasp pose"
+            )
+        _lift(client, hand, T_pregrasp[2, 3], s)
+        if reapproaches == s.reapproaches:
+            # Every place tried lands on the object: descend on the plan, as a blind hand
+            # would, and push.
+            T_grasp, guard_N = np.asarray(plan.T_robot_hand, dtype=np.float64).copy(), 0.0
+            continue
+        # The finger opens against its facing; the object reaches further that way.
+        outward = -(T_grasp[:3, :2] @ facings[finger])
+        outward /= np.linalg.norm(outward)
+        if previous is not None and outward @ previous < 0.0:
+            step_m /= 2.0  # the other side landed now: the room lies in between
+        T_grasp[:3, 3] += step_m * outward
+        previous = outward
+        reapproaches += 1
     _step(client, 2)
     miss_m = float(np.linalg.norm(hand.pose()[:3, 3] - T_grasp[:3, 3]))
     if miss_m > s.blocked_tolerance_m:
-        return _outcome(
-            client,
-            hand,
-            object_id,
-            before,
-            False,
-            f"hand blocked {miss_m * 1e3:.1f} mm short of the grasp pose during the descent",
+        return not_executed(
+            f"hand blocked {miss_m * 1e3:.1f} mm short of the grasp pose during the descent"
         )
 
     _close(client, hand, object_id, open_targets, plan.spread_rad, s)
     _step(client, max(1, round(s.settle_s / s.timestep_s)))
-    return _outcome(client, hand, object_id, before, True)
+    return _outcome(client, hand, object_id, before, True, "", reapproaches)
+
+
+def _descend_stopped(
+    client: int,
+    hand: Hand,
+    object_id: int,
+    T_grasp: np.ndarray,
+    height_m: float,
+    guard_N: float,
+    s: GraspSettings,
+) -> bool:
+    """Lower the palm from ``height_m`` above ``T_grasp`` onto it (step 4 of the module
+    docstring); True when the hand bore down on the object with ``guard_N`` on the way
+    (0: no guard)."""
+    steps = max(1, math.ceil(height_m / (s.descent_speed_m_s * s.timestep_s)))
+    for step in range(1, steps + 1):
+        target = T_grasp.copy()
+        target[2, 3] += height_m * (1.0 - step / steps)
+        hand.move_to(target)
+        pb.stepSimulation(physicsClientId=client)
+        if guard_N > 0.0 and hand.bearing_down(object_id)[1] >= guard_N:
+            return True
+    return False
+
+
+def _lift(client: int, hand: Hand, height_m: float, s: GraspSettings) -> None:
+    """Raise the palm straight up to ``height_m`` (frame R) at the descent speed."""
+    start = hand.pose()
+    rise = max(height_m - start[2, 3], 0.0)
+    steps = max(1, math.ceil(rise / (s.descent_speed_m_s * s.timestep_s)))
+    for step in range(1, steps + 1):
+        target = start.copy()
+        target[2, 3] += rise * step / steps
+        hand.move_to(target)
+        pb.stepSimulation(physicsClientId=client)

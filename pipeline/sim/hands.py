@@ -182,7 +182,7 @@ def _pg70_model() -> HandModel:
         fingers,
         _pg70_open_configuration,
         _pg70_aperture,
-        lambda spread_rad: np.array([[-1.0, 0.0], [1.0, 0.0]]),
+        lambda spread_rad: np.array([[1.0, 0.0], [-1.0, 0.0]]),  # left jaw at -x, right at +x
     )
 
 
@@ -551,6 +551,22 @@ class Hand:
             if finger is not None:
                 forces[finger] += contact[9]
         return forces
+
+    def bearing_down(self, object_id: int) -> tuple[int | None, float]:
+        """How hard the hand bears down on the object now: the summed upward component of
+        the hand-object contact normal forces (N; what a wrist force sensor reads as the
+        descent meeting resistance, not a finger brushing a side) and the finger bearing
+        hardest (:attr:`HandModel.fingers` index; None for the palm or no contact)."""
+        upward = [
+            (contact[9] * max(contact[7][2], 0.0), contact[3])
+            for contact in pb.getContactPoints(
+                bodyA=self.body_id, bodyB=object_id, physicsClientId=self.client
+            )
+        ]
+        if not upward:
+            return None, 0.0
+        link = max(upward)[1]
+        return self._finger_of_link.get(link), float(sum(force for force, _ in upward))
 
     def touches(self, object_id: int) -> bool:
         """True when any part of the hand is in contact with the object now."""
