@@ -97,7 +97,7 @@ def merge_overlapping_footprints(
     count = int(labels.max()) + 1 if len(labels) else 0
     parent = np.arange(count)
     angles = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)
-    disc = max(gap_m, 1e-9) * np.column_stack([np.cos(angles), np.sin(angles)])
+    disc = gap_m * np.column_stack([np.cos(angles), np.sin(angles)])
 
     def root(i: int) -> int:
         while parent[i] != i:

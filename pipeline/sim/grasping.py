@@ -351,9 +351,7 @@ def _execute(
         pb.performCollisionDetection(physicsClientId=client)
         if hand.touches(object_id):
             return not_executed("hand overlaps the object at the pre-grasp pose")
-        if not _descend_stopped(
-            client, hand, object_id, T_grasp, plan.pregrasp_height_m, guard_N, s
-        ):
+        if not _move_palm(client, hand, object_id, T_pregrasp, T_grasp, guard_N, s):
             break
         finger, _ = hand.bearing_down(object_id)
         if finger is None:
@@ -361,7 +359,11 @@ def _execute(
                 "the palm met the object during the descent, "
                 f"{1e3 * (hand.pose()[2, 3] - T_grasp[2, 3]):.0f} mm above the grasp pose"
             )
-        _lift(client, hand, T_pregrasp[2, 3], s)
+        stopped = hand.pose()
+        stopped[:3, :3] = T_grasp[:3, :3]
+        lifted = stopped.copy()
+        lifted[2, 3] = T_pregrasp[2, 3]
+        _move_palm(client, hand, object_id, stopped, lifted, 0.0, s)
         if reapproaches == s.reapproaches:
             # Every place tried lands on the object: descend on the plan, as a blind hand
             # would, and push.
@@ -387,36 +389,25 @@ def _execute(
     return _outcome(client, hand, object_id, before, True, "", reapproaches)
 
 
-def _descend_stopped(
+def _move_palm(
     client: int,
     hand: Hand,
     object_id: int,
-    T_grasp: np.ndarray,
-    height_m: float,
+    T_from: np.ndarray,
+    T_to: np.ndarray,
     guard_N: float,
     s: GraspSettings,
 ) -> bool:
-    """Lower the palm from ``height_m`` above ``T_grasp`` onto it (step 4 of the module
-    docstring); True when the hand bore down on the object with ``guard_N`` on the way
-    (0: no guard)."""
-    steps = max(1, math.ceil(height_m / (s.descent_speed_m_s * s.timestep_s)))
+    """Move the palm in a straight line from ``T_from`` to ``T_to`` (same orientation) at
+    ``descent_speed_m_s``; True when the hand bore down on the object with ``guard_N`` on
+    the way and stopped (0: no guard)."""
+    travel = T_to[:3, 3] - T_from[:3, 3]
+    steps = max(1, math.ceil(np.linalg.norm(travel) / (s.descent_speed_m_s * s.timestep_s)))
     for step in range(1, steps + 1):
-        target = T_grasp.copy()
-        target[2, 3] += height_m * (1.0 - step / steps)
+        target = T_to.copy()
+        target[:3, 3] = T_from[:3, 3] + travel * step / steps
         hand.move_to(target)
         pb.stepSimulation(physicsClientId=client)
         if guard_N > 0.0 and hand.bearing_down(object_id)[1] >= guard_N:
             return True
     return False
-
-
-def _lift(client: int, hand: Hand, height_m: float, s: GraspSettings) -> None:
-    """Raise the palm straight up to ``height_m`` (frame R) at the descent speed."""
-    start = hand.pose()
-    rise = max(height_m - start[2, 3], 0.0)
-    steps = max(1, math.ceil(rise / (s.descent_speed_m_s * s.timestep_s)))
-    for step in range(1, steps + 1):
-        target = start.copy()
-        target[2, 3] += rise * step / steps
-        hand.move_to(target)
-        pb.stepSimulation(physicsClientId=client)
