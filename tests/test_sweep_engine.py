@@ -229,6 +229,9 @@ def test_ctrl_c_during_a_pool_run_keeps_finished_rows_and_reraises(tmp_path):
                 if done.wait(0.2):
                     return
 
+    # A process started as a background job of a shell without job control inherits SIGINT
+    # ignored (the test then failed in such runs); a terminal's Ctrl-C is what is tested.
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
     watcher = threading.Thread(target=interrupt_after_the_first_row)
     watcher.start()
     interrupted = False
@@ -240,6 +243,8 @@ def test_ctrl_c_during_a_pool_run_keeps_finished_rows_and_reraises(tmp_path):
             watcher.join()
     except KeyboardInterrupt:
         interrupted = True
+    finally:
+        signal.signal(signal.SIGINT, inherited)
     assert interrupted, (
         f"no KeyboardInterrupt: presses at {pressed} rows written, "
         f"{len(read_rows(results))} rows at the end, "
