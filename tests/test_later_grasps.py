@@ -78,6 +78,32 @@ def test_the_earlier_shape_located_by_the_last_grasp_replaces_an_inconsistent_la
     assert all(a is b for a, b in zip(revised[:-1], stages[:-1], strict=True))
 
 
+def test_a_location_the_taxels_fit_worse_than_a_shorter_step_is_not_taken():
+    """The filter's location is put 6 mm past the object's second pose along the grasp (as a
+    misfit at a part the mirror image completes wrongly drags it): the estimate takes the
+    shorter step of the filter's that the taxels fit best, near the true pose."""
+    problem, second = _two_grasps()
+    stages, refuse, settings, tree = _diagnosed(problem)
+    misled_by = np.array([0.0, 0.006, 0.0, 0.0, 0.0, 0.0])
+
+    def misled(fusion):
+        outcomes = refuse(fusion)
+        locating = len(fusion.grasps) == 1 and not np.any(fusion.covariance_init[4:, 4:])
+        if not locating:
+            return outcomes
+        return (replace(outcomes[0], g=outcomes[0].g + misled_by), *outcomes[1:])
+
+    revised = earlier_shape_stages(problem, stages, misled, None, settings, tree)
+    last = revised[-1]
+    assert last.hypothesis is not None and last.hypothesis.name == EARLIER_SHAPE
+    assert 0.0 < last.hypothesis.step < 1.0
+    true_x = second.g_true[1]
+    assert abs(last.bias.translation_m[0] - true_x) < 0.002
+    # Unmisled, the filter's own location fits best and is taken whole.
+    plain = earlier_shape_stages(problem, stages, refuse, None, settings, tree)[-1]
+    assert plain.hypothesis.step == 1.0
+
+
 def test_a_last_grasp_on_another_object_is_not_explained_away():
     problem, _ = _two_grasps(scale=1.4)
     stages, refuse, settings, tree = _diagnosed(problem)

@@ -13,6 +13,15 @@ The alternative here is the *earlier shape*: the estimate the grasps before the 
 recursively), located by the last grasp alone. The last grasp's bias is fused with the
 plane held and the points fixed (Stage 1 on that grasp, from the earlier state and its
 covariance plus ``Q``), so it says where the object now stands but not what it looks like.
+The filter's location is not taken on trust. Where the contacts meet a part the mirror
+image completes wrongly (a spray bottle's trigger head), the located bias can fit the last
+grasp's taxels worse than the object standing where the earlier estimate left it: pressing
+on one spot, the pads pin the object only along their closing direction, and the misfit
+drags it along the rest (a yaw about the object's centre that the head barely feels). So
+the bias is taken at the fraction of the filter's step (:data:`LOCATING_STEPS`, from 1, the
+filter's bias, to 0, not moved) whose model the taxels fit best (lowest pad-averaged NIS),
+as the hypotheses of :mod:`.hypotheses` take the best-fitting bounded step.
+
 The alternative replaces an inconsistent last stage only when it passes every test of the
 self-diagnosis on all the grasps and the camera; its covariance carries the plane's
 uncertainty from the earlier estimate (:func:`.hypotheses.unheld_covariance`). Every test is
@@ -42,6 +51,9 @@ from .problem import stage_estimate
 EARLIER_SHAPE = "earlier shape"
 #: The components of ``g`` the last grasp does not move: the plane, as ``held-plane`` holds it.
 _PLANE = HYPOTHESES["held-plane"]
+#: The fractions of the filter's bias step from the earlier estimate that are put to the
+#: taxels: the filter's own, two shorter ones, and none (the object did not move).
+LOCATING_STEPS = (1.0, 0.5, 0.25, 0.0)
 
 
 def locating_problem(fusion: FusionProblem, earlier: StageEstimate) -> FusionProblem:
@@ -67,9 +79,10 @@ def earlier_shape_stages(
     tree: cKDTree,
 ) -> list[StageEstimate]:
     """``stages`` (diagnosed, Stage 0 first) with the last stage replaced by the earlier
-    shape located by the last grasp, when the last stage is inconsistent and the earlier
-    shape passes every test. Runs only with two or more grasps; the earlier estimate is
-    :func:`.problem.estimate_result` of ``refuse`` on the grasps before the last."""
+    shape located by the last grasp (the best-fitting of :data:`LOCATING_STEPS`), when the
+    last stage is inconsistent and the earlier shape passes every test. Runs only with two
+    or more grasps; the earlier estimate is :func:`.problem.estimate_result` of ``refuse``
+    on the grasps before the last."""
     from .problem import estimate_result
 
     last = stages[-1]
@@ -84,12 +97,19 @@ def earlier_shape_stages(
     located = refuse(problem)[0]
     if estimate_failed(located.status):
         return list(stages)
-    grasp_g = (*earlier.grasp_g, located.g)
-    verdict = assess(
-        earlier.points, located.g, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree
-    )
-    if not verdict.consistent:
+    start = np.asarray(earlier.grasp_g[-1], dtype=float)
+    steps = []
+    for step in LOCATING_STEPS:
+        g = start + step * (located.g - start)
+        grasp_g = (*earlier.grasp_g, g)
+        verdict = assess(
+            earlier.points, g, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree
+        )
+        if verdict.consistent:
+            steps.append((verdict.nis, step, g, grasp_g, verdict))
+    if not steps:
         return list(stages)
+    _, step, g, grasp_g, verdict = min(steps, key=lambda entry: entry[0])
     covariance = unheld_covariance(
         np.asarray(located.covariance, dtype=float),
         np.asarray(earlier.covariance, dtype=float) + fusion.regrasp_noise,
@@ -97,7 +117,7 @@ def earlier_shape_stages(
     )
     estimate = stage_estimate(
         last.stage,
-        located.g,
+        g,
         covariance,
         earlier.points,
         fusion.pivot_m,
@@ -110,6 +130,6 @@ def earlier_shape_stages(
     )
     reason = last.consistency.reason if last.consistency is not None else ""
     replaced = replace(
-        estimate, consistency=verdict, hypothesis=Hypothesis(EARLIER_SHAPE, 1.0, reason)
+        estimate, consistency=verdict, hypothesis=Hypothesis(EARLIER_SHAPE, step, reason)
     )
     return [*stages[:-1], replaced]
