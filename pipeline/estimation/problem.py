@@ -186,9 +186,11 @@ def estimate_result(
     if refuse is not None:
         from .hypotheses import revise
         from .later_grasps import earlier_shape_stages
+        from .outlier_pads import outlier_pad_stages
 
         diagnosed = earlier_shape_stages(fusion, diagnosed, refuse, view, consistency, tree)
         diagnosed = revise(fusion, diagnosed, refuse, view, consistency, tree)
+        diagnosed = outlier_pad_stages(fusion, diagnosed, refuse, view, consistency, tree)
     selected, reason = select_stage(diagnosed)
     return EstimateResult(stages=tuple(diagnosed), selected_stage=selected, selection_reason=reason)
 
