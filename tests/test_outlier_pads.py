@@ -87,5 +87,5 @@ def test_only_a_grasp_of_three_pads_or_more_with_a_contradicted_stage_0_qualifie
             problem = case.problem
         fusion = fusion_problem(problem, params, "iekf", window, params.facing_filter)
         initial = estimate_result(fusion, (), 0.0, problem.view, settings).stages[0]
-        found = outlier_pad(fusion, initial, problem.view, settings, cKDTree(fusion.points_m))
+        found = outlier_pad(fusion, initial, settings, cKDTree(fusion.points_m))
         assert (found is not None) == singled_out, (gripper, handle, found)

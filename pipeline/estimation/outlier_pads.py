@@ -56,7 +56,6 @@ def without_pad(fusion: FusionProblem, pad: str) -> FusionProblem:
 def outlier_pad(
     fusion: FusionProblem,
     initial: StageEstimate,
-    view: DepthObservation | None,
     settings: ConsistencySettings,
     tree: cKDTree,
 ) -> str | None:
@@ -71,27 +70,27 @@ def outlier_pad(
         return None
     explaining = []
     for pad in pads:
-        left = vision_alone(without_pad(fusion, str(pad)), initial, view, settings, tree)
+        left = taxels_on_stage_0(without_pad(fusion, str(pad)), initial, settings, tree)
         if left.nis <= left.nis_threshold:
             explaining.append(str(pad))
     return explaining[0] if len(explaining) == 1 else None
 
 
-def vision_alone(
+def taxels_on_stage_0(
     fusion: FusionProblem,
     initial: StageEstimate,
-    view: DepthObservation | None,
     settings: ConsistencySettings,
     tree: cKDTree,
 ) -> Consistency:
-    """Stage 0 (``initial``) diagnosed against ``fusion``'s taxels."""
+    """The taxel test of Stage 0 (``initial``) against ``fusion``'s taxels. The free-space
+    test does not depend on the taxels, and Stage 0's has run already."""
     return assess(
         initial.points,
         fusion.g_init,
         [fusion.g_init] * len(fusion.grasps),
         fusion.pivot_m,
         fusion.grasps,
-        view,
+        None,
         settings,
         tree,
     )
@@ -113,11 +112,11 @@ def outlier_pad_stages(
     if view is None or last.status != "inconsistent":
         return list(stages)
     started = time.perf_counter()
-    pad = outlier_pad(fusion, initial, view, settings, tree)
+    pad = outlier_pad(fusion, initial, settings, tree)
     if pad is None:
         return list(stages)
     reduced = without_pad(fusion, pad)
-    vision = vision_alone(reduced, initial, view, settings, tree)
+    vision = taxels_on_stage_0(reduced, initial, settings, tree)
     outcomes = refuse(reduced)
     spent = time.perf_counter() - started
     revised = list(stages)
