@@ -99,17 +99,24 @@ def earlier_shape_stages(
         return list(stages)
     start = np.asarray(earlier.grasp_g[-1], dtype=float)
     steps = []
+    # The steps differ only in the bias, which the free-space test (made before the bias)
+    # does not see: the taxels rank them, and the camera judges the chosen one.
     for step in LOCATING_STEPS:
         g = start + step * (located.g - start)
         grasp_g = (*earlier.grasp_g, g)
-        verdict = assess(
-            earlier.points, g, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree
+        taxels = assess(
+            earlier.points, g, grasp_g, fusion.pivot_m, fusion.grasps, None, settings, tree
         )
-        if verdict.consistent:
-            steps.append((verdict.nis, step, g, grasp_g, verdict))
+        if taxels.consistent:
+            steps.append((taxels.nis, step, g, grasp_g))
     if not steps:
         return list(stages)
-    _, step, g, grasp_g, verdict = min(steps, key=lambda entry: entry[0])
+    _, step, g, grasp_g = min(steps, key=lambda entry: entry[0])
+    verdict = assess(
+        earlier.points, g, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree
+    )
+    if not verdict.consistent:
+        return list(stages)
     covariance = unheld_covariance(
         np.asarray(located.covariance, dtype=float),
         np.asarray(earlier.covariance, dtype=float) + fusion.regrasp_noise,
