@@ -166,15 +166,16 @@ def _by_strategy(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[st
     return {s: [row for row in rows if row["params"]["strategy"] == s] for s in STRATEGIES}
 
 
+def _second_grasp_reduction(row: Mapping[str, Any]) -> float:
+    """How much the second grasp reduced Stage 2's median deviation (mm)."""
+    return after_grasp(row, 1, "stage2_deviation_median_mm") - after_grasp(
+        row, 2, "stage2_deviation_median_mm"
+    )
+
+
 def second_grasp_gain(rows: Sequence[Mapping[str, Any]]) -> tuple[float, float]:
     """Mean and median reduction of Stage 2's median deviation (mm) from grasp 1 to 2."""
-    gains = np.array(
-        [
-            after_grasp(row, 1, "stage2_deviation_median_mm")
-            - after_grasp(row, 2, "stage2_deviation_median_mm")
-            for row in rows
-        ]
-    )
+    gains = np.array([_second_grasp_reduction(row) for row in rows])
     gains = gains[np.isfinite(gains)]
     if not gains.size:
         return float("nan"), float("nan")
@@ -192,14 +193,12 @@ def paired_gain_difference(
     than ``second``'s, paired by pose (the two share the scene and the first grasp): the
     mean difference over the poses where both made their second grasp (mm), its 95 %
     bootstrap interval over those poses (percentile, seeded) and their number. NaN when no
-    pose has both, an interval of the mean alone when only one has."""
+    pose has both; the mean alone bounds the interval when one pose has, or all differ alike."""
     gains: dict[str, dict[tuple[str, float], float]] = {first: {}, second: {}}
     for row in rows:
         strategy = row["params"]["strategy"]
         if strategy in gains:
-            gains[strategy][_pose(row)] = after_grasp(
-                row, 1, "stage2_deviation_median_mm"
-            ) - after_grasp(row, 2, "stage2_deviation_median_mm")
+            gains[strategy][_pose(row)] = _second_grasp_reduction(row)
     differences = np.array(
         [gain - gains[second][pose] for pose, gain in gains[first].items() if pose in gains[second]]
     )
