@@ -214,7 +214,8 @@ def run(args: argparse.Namespace) -> int:
     )
     print(
         f"grasp: {record.document['hand']['reason']}{moved_aside}; the object moved "
-        f"{grasp['object_shift_mm']:.1f} mm and tilted {grasp['object_tilt_deg']:.1f} deg"
+        f"{grasp['object_shift_mm']:.1f} mm, turned {grasp['object_turn_deg']:.1f} deg and "
+        f"tilted {grasp['object_tilt_deg']:.1f} deg"
     )
     if len(record.document["grasps"]) > 1 or settings.until_std_mm > 0:
         print(grasps_summary(record.document))

@@ -161,6 +161,15 @@ def object_motion(
     return float(np.linalg.norm(shift)), float(np.arccos(cosine))
 
 
+def object_turn(before: ObjectPose, after: ObjectPose) -> float:
+    """The angle a grasp turned the object about the vertical (rad, counter-clockwise seen
+    from above, in (-pi, pi]): the change of the heading of its x axis projected on the
+    table. A round object turning in the jaws keeps its centre, so :func:`object_motion`
+    does not show it; the estimator's bias yaw should."""
+    headings = [np.arctan2(pose.transform[1, 0], pose.transform[0, 0]) for pose in (before, after)]
+    return float(np.pi - (np.pi - (headings[1] - headings[0])) % (2.0 * np.pi))
+
+
 def opposing_contacts(contacts: Contacts, tolerance_deg: float = 30.0) -> bool:
     """Whether the contacts press on opposing sides: the horizontal mean normals of the
     touching pads are not all within an arc narrower than ``180 - tolerance_deg`` deg, i.e.

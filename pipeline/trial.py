@@ -32,7 +32,13 @@ from .catalogue import CatalogueObject, load_object
 from .config import Config
 from .errors import StageFailure, SymfuseError
 from .estimation.map_params import regrasp_noise
-from .evaluation import GroundTruth, evaluate_stage, object_motion, opposing_contacts
+from .evaluation import (
+    GroundTruth,
+    evaluate_stage,
+    object_motion,
+    object_turn,
+    opposing_contacts,
+)
 from .formats import (
     bias_to_json,
     contacts_to_json,
@@ -444,6 +450,9 @@ def _grasp_and_fuse(
             "reapproaches": outcome.reapproaches,
             "object_shift_mm": 1e3 * shift_m,
             "object_tilt_deg": float(np.degrees(tilt_rad)),
+            "object_turn_deg": float(
+                np.degrees(object_turn(outcome.object_before, outcome.object_after))
+            ),
         }
         if k == 0:
             document["grasp"] = executed

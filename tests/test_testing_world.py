@@ -148,6 +148,7 @@ def test_a_whole_trial_runs_in_the_analytic_world_with_the_built_in_stages(tmp_p
     document = json.loads((tmp_path / "trial" / "result.json").read_text())
     assert document["status"] == "converged" and document["gripper"] == PARALLEL_HAND
     assert document["grasp"]["object_shift_mm"] == 0.0  # nothing moves in this world
+    assert document["grasp"]["object_turn_deg"] == 0.0
 
     # The contacts lie on the true surface, pressed in by the pads' press.
     contacts = json.loads((tmp_path / "trial" / "contacts.json").read_text())
