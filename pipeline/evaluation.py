@@ -12,10 +12,12 @@ IoU of the completed model's convex hull with the true solid (:mod:`pipeline.met
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy.stats import chi2
 
 from .metrics import (
     SolidGrid,
@@ -30,7 +32,7 @@ from .metrics import (
     solid_grid,
     surface_scores,
 )
-from .types import Contacts, ObjectPose, StageEstimate, SymmetryPlane
+from .types import Bias, Contacts, ObjectPose, StageEstimate, SymmetryPlane
 
 if TYPE_CHECKING:
     import trimesh
@@ -47,6 +49,10 @@ class GroundTruth:
         axis_xy_m: a point on the true symmetry axis/plane (the object origin), frame R.
         thickness_m: true thickness for box-like objects, else None.
         diameter_m: true diameter for cylinders, else None.
+        cloud_motion: ``(4, 4)`` the rigid motion that takes the camera's cloud onto the
+            object after the grasp (the object's motion since the view, after undoing the
+            camera's calibration error): the bias the estimator should find. None when the
+            sensor does not know its calibration error.
 
     The surface samples and the solid every stage is scored against are computed once, on
     first use.
@@ -59,6 +65,7 @@ class GroundTruth:
     axis_xy_m: np.ndarray
     thickness_m: float | None = None
     diameter_m: float | None = None
+    cloud_motion: np.ndarray | None = None
 
     @functools.cached_property
     def surface_samples(self) -> np.ndarray:
@@ -71,6 +78,10 @@ class GroundTruth:
         """The true object's solid on a grid of cells (for the volumetric IoU)."""
         return solid_grid(self.vertices, self.faces)
 
+
+#: The 99 % quantile of the chi-square distribution with 4 degrees of freedom: the bound a
+#: truthful covariance keeps :func:`bias_errors`' ``bias_nees`` under 99 % of the time.
+BIAS_NEES_BOUND = float(chi2.ppf(0.99, 4))
 
 #: Points sampled on the true surface for recall and Chamfer distance: the recall's standard
 #: error is below 0.4 percentage points.
@@ -111,6 +122,8 @@ def evaluate_stage(
         **plane_errors(plane, truth),
         **shape_scores(stage.completed, distances, truth),
     }
+    if truth.cloud_motion is not None:
+        metrics.update(bias_errors(stage.bias, stage.covariance, plane, truth.cloud_motion))
     if truth.thickness_m is not None:
         try:
             fit = box_thickness(stage.completed, plane, grasp_centre_xy_m)
@@ -123,6 +136,49 @@ def evaluate_stage(
         circle = fit_circle_taubin(side_wall(stage.completed))
         metrics.update(_measure("diameter", circle.diameter_m, truth.diameter_m))
     return metrics, distances
+
+
+def bias_errors(
+    bias: Bias, covariance: np.ndarray, plane: SymmetryPlane, motion: np.ndarray
+) -> dict[str, float]:
+    """The estimated bias against the true one, and the standard deviations its covariance
+    claimed.
+
+    The true bias with the estimate's pivot ``c`` is the yaw of ``motion`` and the
+    displacement it gives ``c``. The translation error is split along the normal of
+    ``plane`` (the estimated plane after the bias: the direction opposed pads press,
+    ``across``) and horizontally within it (``along``, which pads on a flat side hardly
+    see). ``bias_nees`` is the normalised estimation error squared ``e^T P_b^-1 e`` over the
+    four bias components ``(yaw, x, y, z)``: a covariance that tells the truth makes it
+    chi-square with 4 degrees of freedom (mean 4, below :data:`BIAS_NEES_BOUND` 99 % of the
+    time); inf when the covariance claims a component exactly known that is not.
+
+    Args:
+        bias: the estimated bias (its pivot is used for the truth as well).
+        covariance: ``(6, 6)`` covariance of ``(b_theta, b_x, b_y, b_z, m_r, m_theta)``.
+        plane: the estimated plane after the bias, frame R.
+        motion: ``(4, 4)`` the true motion from the camera's cloud to the object.
+    """
+    pivot = bias.pivot_m
+    true_yaw = float(np.arctan2(motion[1, 0], motion[0, 0]))
+    true_shift = motion[:3, :3] @ pivot + motion[:3, 3] - pivot
+    yaw_error = float(np.pi - (np.pi - (bias.yaw_rad - true_yaw)) % (2.0 * np.pi))
+    error = np.concatenate([[yaw_error], bias.translation_m - true_shift])
+    block = np.asarray(covariance, dtype=float)[:4, :4]
+    normal = np.append(plane.normal[:2], 0.0)
+    along = np.array([-normal[1], normal[0], 0.0])
+    metrics = {
+        "bias_yaw_error_deg": float(np.degrees(yaw_error)),
+        "bias_yaw_std_deg": float(np.degrees(np.sqrt(block[0, 0]))),
+    }
+    for name, direction in (("across", normal), ("along", along)):
+        metrics[f"bias_{name}_error_mm"] = float(direction @ error[1:]) * 1e3
+        metrics[f"bias_{name}_std_mm"] = float(np.sqrt(direction @ block[1:, 1:] @ direction)) * 1e3
+    try:
+        metrics["bias_nees"] = float(error @ np.linalg.solve(block, error))
+    except np.linalg.LinAlgError:
+        metrics["bias_nees"] = math.inf
+    return metrics
 
 
 def shape_scores(

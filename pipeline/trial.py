@@ -123,9 +123,23 @@ def pose_to_json(pose: ObjectPose) -> dict[str, Any]:
     }
 
 
-def ground_truth(obj: CatalogueObject, pose_after: ObjectPose) -> GroundTruth:
-    """The object's truth in frame R after the grasp."""
+def ground_truth(
+    obj: CatalogueObject,
+    pose_after: ObjectPose,
+    pose_seen: ObjectPose | None = None,
+    calibration_error: np.ndarray | None = None,
+) -> GroundTruth:
+    """The object's truth in frame R after the grasp.
+
+    With the object's pose when the camera saw it (``pose_seen``) and the camera's
+    calibration error (:attr:`DepthObservation.calibration_error`) the truth also holds the
+    bias the estimator should find: the motion from where the cloud put the object,
+    ``calibration_error @ T_seen``, to where it is after the grasp.
+    """
     T = pose_after.transform
+    cloud_motion = None
+    if pose_seen is not None and calibration_error is not None:
+        cloud_motion = T @ np.linalg.inv(calibration_error @ pose_seen.transform)
     vertices = np.asarray(obj.mesh.vertices) @ T[:3, :3].T + T[:3, 3]
     plane = None
     if obj.symmetry == "planar" and obj.symmetry_plane is not None:
@@ -141,6 +155,7 @@ def ground_truth(obj: CatalogueObject, pose_after: ObjectPose) -> GroundTruth:
         axis_xy_m=T[:2, 3].copy(),
         thickness_m=dims.get("thickness") if obj.kind == "box" else None,
         diameter_m=dims.get("diameter") if obj.kind == "cylinder" else None,
+        cloud_motion=cloud_motion,
     )
 
 
@@ -331,6 +346,7 @@ def _simulate(
             obj,
             world,
             observation,
+            pose_before,
             cloud,
             proposal,
             choice,
@@ -386,6 +402,7 @@ def _grasp_and_fuse(
     obj: CatalogueObject,
     world: World,
     observation: DepthObservation,
+    pose_seen: ObjectPose,
     cloud: PointCloud,
     proposal: SymmetryInit,
     choice: HandChoice,
@@ -479,7 +496,9 @@ def _grasp_and_fuse(
         with timer.phase("estimator"):
             result = estimate(config, registry, cloud, init, grasps, observation)
         with timer.phase("evaluation"):
-            truth = ground_truth(obj, outcome.object_after)
+            truth = ground_truth(
+                obj, outcome.object_after, pose_seen, observation.calibration_error
+            )
             centre = np.asarray(plan.T_robot_hand)[:2, 3]
             evaluated = [evaluate_stage(stage, truth, centre) for stage in result.stages]
         known = uncertainty(result.selected)

@@ -85,6 +85,9 @@ class DepthObservation:
             error relative to the truth, which the estimator's bias absorbs).
         table_height_m: z of the table top in frame ``R`` when the source knows it, else None.
         object_mask: ``(H, W) bool`` ground-truth object pixels (simulation only), else None.
+        calibration_error: ``(4, 4)`` the rigid motion the believed camera pose applies to
+            every point the camera measures, ``T_believed T_true^-1`` in frame ``R``
+            (simulation only, for scoring the estimated bias), else None.
         frame_from_support: True when the source had no robot frame and built one on the
             support plane (:mod:`pipeline.perception.support`): its origin is then a
             convention that ``symfuse complete`` moves below the segmented object.
@@ -97,12 +100,15 @@ class DepthObservation:
     table_height_m: float | None = None
     object_mask: np.ndarray | None = None
     frame_from_support: bool = False
+    calibration_error: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         shape = (self.intrinsics.height, self.intrinsics.width)
         if self.depth_m.shape != shape:
             raise ValueError(f"depth image shape {self.depth_m.shape} != intrinsics {shape}")
         _as_transform(self.T_robot_camera, "T_robot_camera")
+        if self.calibration_error is not None:
+            _as_transform(self.calibration_error, "calibration_error")
 
 
 @dataclass(frozen=True)

@@ -115,6 +115,10 @@ def test_calibration_error_moves_the_cloud_by_a_planar_motion_about_the_target(w
     rotation = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
     expected = (points_true - pivot) @ rotation.T + pivot + [0.01, 0.0, 0.0]
     np.testing.assert_allclose(points_wrong, expected, atol=2e-4)
+    # The observation states that motion, for scoring the estimated bias.
+    np.testing.assert_allclose(true.calibration_error, np.eye(4), atol=1e-12)
+    error = wrong.calibration_error
+    np.testing.assert_allclose(points_true @ error[:3, :3].T + error[:3, 3], expected, atol=1e-9)
 
 
 def test_stereo_sees_the_box_with_z_squared_noise(world):

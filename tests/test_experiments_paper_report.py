@@ -150,3 +150,23 @@ def test_deviation_report_averages_the_finished_trials(sweep, tmp_path):
     fscores = " / ".join(f"{row[f'stage{k}_fscore_2mm']:.2f}" for k in (0, 1, 2))
     assert "## Shape scores" in text
     assert f" | {fscores} | " in text.split("## Per trial")[1]
+
+
+def test_the_deviation_report_sets_the_bias_error_beside_the_claimed_std(sweep, tmp_path):
+    _, rows = sweep
+    row = rows[0]
+    document = json.loads(Path(row["params"]["trial_dir"], "result.json").read_text())
+    metrics = document["stages"][2]["metrics"]
+    assert row["stage2_bias_along_error_mm"] == pytest.approx(metrics["bias_along_error_mm"])
+    assert row["stage2_bias_nees"] == pytest.approx(metrics["bias_nees"])
+    report_deviation(
+        rows, tmp_path, name="demo", title="demo", groups={"all": rows}, figures=[], paper=()
+    )
+    text = (tmp_path / "report.md").read_text()
+    cells = " | ".join(
+        f"{abs(row[f'stage2_bias_{name}_error_{unit}']):.1f} / "
+        f"{row[f'stage2_bias_{name}_std_{unit}']:.1f}"
+        for name, unit in (("across", "mm"), ("along", "mm"), ("yaw", "deg"))
+    )
+    outside = " / ".join(f"{100 * (row[f'stage{k}_bias_nees'] > 13.2767):.0f} %" for k in (1, 2))
+    assert f"| all | 1 | {cells} | {outside} |" in text.split("## Bias against the truth")[1]

@@ -15,6 +15,7 @@ from .common import failures_section, fmt
 from .paper_report import (
     DEVIATION_TARGET_MM,
     SHAPE_HEADER,
+    bias_section,
     deviation_box_figure,
     met,
     shape_cells,
@@ -95,6 +96,7 @@ def report_deviation(
         f"grows by more than {DIVERGED_GROWTH_MM:g} mm over Stage 0).",
     ]
     lines += ["", *shape_score_section(groups)]
+    lines += bias_section(groups)
     lines += ["", "## Per trial", "", *_deviation_trial_table(rows)]
     paths = []
     for stem, categories, xlabel in figures:

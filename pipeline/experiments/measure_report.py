@@ -14,7 +14,14 @@ from ..figures import BoxPanel, box_plot_figure
 from ..sweep import write_csv
 from .common import failures_section, fmt
 from .definitions import MeasureTable
-from .paper_report import SHAPE_HEADER, deviation_box_figure, met, shape_cells, shape_score_section
+from .paper_report import (
+    SHAPE_HEADER,
+    bias_section,
+    deviation_box_figure,
+    met,
+    shape_cells,
+    shape_score_section,
+)
 from .paper_trial import DIVERGED_GROWTH_MM
 from .rows import INIT_LABELS, STAGES, count_rows, failure_lines, finished_rows, group_rows, value
 
@@ -131,6 +138,7 @@ def report_measure(
         )
         tables += ["", *_measure_table(group, study, init)]
     ps_diverged = count_rows(by_init.get("ps", [])).diverged
+    labelled = {INIT_LABELS.get(init, init): group for init, group in by_init.items()}
     lines += [
         "",
         f"- Stage 2 error <= {study.target_pct:g} % (paper's after-fusion figure): "
@@ -143,9 +151,8 @@ def report_measure(
         f"({ps_diverged} diverged). A trial diverges when the estimator says so or its median "
         f"deviation grows by more than {DIVERGED_GROWTH_MM:g} mm over Stage 0.",
         "",
-        *shape_score_section(
-            {INIT_LABELS.get(init, init): group for init, group in by_init.items()}
-        ),
+        *shape_score_section(labelled),
+        *bias_section(labelled),
         "",
         "## Per trial",
         *tables,

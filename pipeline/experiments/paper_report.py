@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ..evaluation import BIAS_NEES_BOUND
 from ..figures import BoxPanel, box_plot_figure
 from .common import fmt
 from .rows import STAGES, count_rows, finished_rows, mean_five_numbers, mean_value
@@ -93,6 +94,48 @@ def shape_score_section(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> li
     for label, group in groups.items():
         cells = shape_cells(finished_rows(group))
         lines.append(f"| {label} | {count_rows(group).text()} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def bias_section(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:
+    """The "Bias against the truth" table: per group, Stage 2's bias error across and along
+    the plane and in yaw beside the std its covariance claims (medians over the finished
+    trials), and the share of trials whose bias lies outside the covariance's 99 % region
+    (:func:`pipeline.evaluation.bias_errors`), after a blank line; empty when no row has
+    the scores (a sensor that does not know its calibration error)."""
+    scored = {
+        label: [row for row in finished_rows(group) if "stage2_bias_nees" in row]
+        for label, group in groups.items()
+    }
+    if not any(scored.values()):
+        return []
+    lines = [
+        "",
+        "## Bias against the truth",
+        "",
+        "How far Stage 2's bias is from the true motion of the camera's cloud onto the object "
+        "(the camera's calibration error and the object's motion in the grasp): across the "
+        "plane (the direction opposed pads press), along it and in yaw, as |error| / the std "
+        "the covariance claims, medians over a group's trials. Outside 99 %: the share of "
+        f"trials whose bias NEES exceeds {BIAS_NEES_BOUND:.1f}, 1 % for a covariance that "
+        "tells the truth (Stage 1 / Stage 2).",
+        "",
+        "| group | trials | across (mm) | along (mm) | yaw (deg) | outside 99 % |",
+        "|---|---|---|---|---|---|",
+    ]
+    for label, rows in scored.items():
+        if not rows:
+            continue
+        cells = []
+        for name, unit in (("across", "mm"), ("along", "mm"), ("yaw", "deg")):
+            error = np.median([abs(row[f"stage2_bias_{name}_error_{unit}"]) for row in rows])
+            std = np.median([row[f"stage2_bias_{name}_std_{unit}"] for row in rows])
+            cells.append(f"{fmt(error)} / {fmt(std)}")
+        outside = [
+            np.mean([row[f"stage{k}_bias_nees"] > BIAS_NEES_BOUND for row in rows]) for k in (1, 2)
+        ]
+        shares = " / ".join(f"{100 * share:.0f} %" for share in outside)
+        lines.append(f"| {label} | {len(rows)} | " + " | ".join(cells) + f" | {shares} |")
     return lines
 
 

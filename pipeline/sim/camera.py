@@ -223,4 +223,5 @@ def observe(
         T_robot_camera=T_believed,
         table_height_m=float(world.table_height_m),
         object_mask=object_mask,
+        calibration_error=T_believed @ np.linalg.inv(T_robot_camera),
     )
