@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from .metrics import (
     SolidGrid,
@@ -81,7 +81,7 @@ class GroundTruth:
 
 #: The 99 % quantile of the chi-square distribution with 4 degrees of freedom: the bound a
 #: truthful covariance keeps :func:`bias_errors`' ``bias_nees`` under 99 % of the time.
-BIAS_NEES_BOUND = float(chi2.ppf(0.99, 4))
+BIAS_NEES_BOUND = float(2.0 * gammaincinv(2.0, 0.99))
 
 #: Points sampled on the true surface for recall and Chamfer distance: the recall's standard
 #: error is below 0.4 percentage points.
