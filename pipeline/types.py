@@ -471,6 +471,10 @@ class StageEstimate:
         grasp_g: the ``(6,)`` state ``(b_theta, b_x, b_y, b_z, m_r, m_theta)`` each grasp's
             taxels are compared under, in grasp order (the bias differs between grasps when
             the object was re-grasped); empty when the estimator does not say.
+        filter_covariance: the ``(6, 6)`` covariance of ``g`` the estimator's own iteration
+            ended with, when it differs from ``covariance`` (the built-in IEKF's, which also
+            counts the taxels across their normals); a later grasp is fused from it. None:
+            ``covariance``.
     """
 
     stage: int
@@ -487,6 +491,7 @@ class StageEstimate:
     consistency: Consistency | None = None
     hypothesis: Hypothesis | None = None
     grasp_g: tuple[np.ndarray, ...] = ()
+    filter_covariance: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -88,13 +88,20 @@ def fusion_problem(
     window_std_m: tuple[float, float] = (0.006, 0.0017),
     noise_std_m: tuple[float, float] = (0.001, 0.003),
     grasps: int = 1,
+    reported_across_m: float | None = None,
 ) -> FusionProblem:
-    """A :class:`FusionProblem` for the scene; ``grasps`` repeats the same contacts."""
+    """A :class:`FusionProblem` for the scene; ``grasps`` repeats the same contacts. With
+    ``reported_across_m`` the reported covariance counts the taxels with that std across
+    their normals (else with ``noise_std_m``)."""
+    posterior_noise = None
+    if reported_across_m is not None:
+        posterior_noise = normal_ellipsoids(scene.normals, noise_std_m[0], reported_across_m)
     contacts = GraspContacts(
         positions_m=scene.taxels_m,
         pads=scene.pads,
         window=normal_ellipsoids(scene.normals, *window_std_m),
         noise=normal_ellipsoids(scene.normals, *noise_std_m),
+        posterior_noise=posterior_noise,
     )
     q = np.zeros((6, 6))
     q[[0, 1, 2, 3], [0, 1, 2, 3]] = [0.01**2, 0.002**2, 0.002**2, 0.002**2]

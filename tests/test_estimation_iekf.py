@@ -170,9 +170,9 @@ def test_converged_iterate_is_the_map_least_squares_minimiser():
     np.testing.assert_array_equal(points[untouched], points_prior[untouched])
 
 
-@pytest.mark.parametrize("grasps", [1, 2])
-def test_structured_and_dense_agree(scene, grasps):
-    problem = fusion_problem(scene, G_INIT, grasps=grasps)
+@pytest.mark.parametrize(("grasps", "reported_across_m"), [(1, None), (2, None), (2, 1.0)])
+def test_structured_and_dense_agree(scene, grasps, reported_across_m):
+    problem = fusion_problem(scene, G_INIT, grasps=grasps, reported_across_m=reported_across_m)
     settings = IekfSettings(max_iterations=8)
     structured = fuse(problem, settings)
     dense = fuse(problem, settings, covariance_model=DenseCovariance)
@@ -221,3 +221,29 @@ def test_leaving_the_sane_region_is_reported_as_diverged(scene):
     outcomes = fuse(problem, IekfSettings(divergence_sigmas=1e-3))
     assert [o.status for o in outcomes] == ["diverged", "diverged"]
     np.testing.assert_array_equal(outcomes[1].g, G_INIT)
+
+
+def test_the_reported_covariance_counts_the_taxels_along_their_normals_only(scene):
+    """The pads press along x. Their frozen-weight residuals across the normal make the
+    filter's own covariance claim the cylinder's y position nearly as well as its x; the
+    reported one, counting each taxel along its normal only, keeps y at the prior's std and
+    still learns x; with the paper's noise it is the filter's own. Oracle: the information
+    form with the Jacobian of the iterate the last gain was computed at."""
+    settings = IekfSettings(schedule="standard", refine_gates=False)
+    honest = fusion_problem(scene, G_INIT, reported_across_m=1.0)
+    stage_1 = fuse(honest, settings, last_stage=1)[0]
+    own = stage_1.grasp_covariance[-1]
+    prior = np.sqrt(np.diag(honest.covariance_init))
+    assert np.sqrt(own[2, 2]) < 0.2 * prior[2]  # the filter's claim on y
+    assert np.sqrt(stage_1.covariance[2, 2]) > 0.95 * prior[2]
+    assert np.sqrt(stage_1.covariance[1, 1]) < 0.2 * prior[1]
+    paper = fuse(fusion_problem(scene, G_INIT), settings, last_stage=1)[0]
+    np.testing.assert_allclose(paper.covariance, paper.grasp_covariance[-1], atol=1e-15)
+
+    g = stage_1.trace[-2].g
+    measurement = _frozen(scene, honest, g, honest.points_m)
+    lin = linearise(measurement, g, honest.points_m, honest.pivot_m, with_points=False)
+    H = lin.bias_plane_jacobian
+    noise = block_diagonal(honest.grasps[0].posterior_noise[measurement.taxel])
+    information = np.linalg.inv(honest.covariance_init) + H.T @ np.linalg.solve(noise, H)
+    np.testing.assert_allclose(stage_1.covariance, np.linalg.inv(information), rtol=1e-6)

@@ -119,3 +119,26 @@ def test_one_grasp_or_a_consistent_last_stage_is_left_alone():
     for fusion, given in ((single, stages), (problem, consistent)):
         revised = earlier_shape_stages(fusion, given, refuse, None, settings, tree)
         assert all(a is b for a, b in zip(revised, given, strict=True))
+
+
+def test_the_earlier_shape_is_located_from_the_filters_own_covariance():
+    """The filter steps with its own model, so a later grasp locates the earlier shape from
+    the covariance its iteration ended with, not the one the stage reports; an estimate
+    without one is located from the reported covariance."""
+    from pipeline.estimation.later_grasps import locating_problem
+    from pipeline.estimation.problem import stage_estimate
+
+    problem, _ = _two_grasps()
+    g = problem.g_init
+    reported = np.diag([0.05, 0.01, 0.01, 0.002, 0.03, 0.2]) ** 2
+    own = np.diag([0.02, 0.001, 0.0004, 0.001, 0.01, 0.1]) ** 2
+    earlier = stage_estimate(
+        1, g, reported, problem.points_m, problem.pivot_m, 3, "converged", 0.0, 0, (), [g], own
+    )
+    bias = slice(0, 4)
+    located = locating_problem(problem, earlier)
+    expected = own + problem.regrasp_noise
+    np.testing.assert_allclose(located.covariance_init[bias, bias], expected[bias, bias])
+    without = locating_problem(problem, replace(earlier, filter_covariance=None))
+    expected = reported + problem.regrasp_noise
+    np.testing.assert_allclose(without.covariance_init[bias, bias], expected[bias, bias])

@@ -21,6 +21,14 @@ def normal_ellipsoids(
     return sigma_along_m**2 * outer + sigma_across_m**2 * (np.eye(3)[None] - outer)
 
 
+#: The std across a taxel's normal (m) with which the covariance a stage reports counts a
+#: taxel: so large that the taxel tells nothing there. The residual across the normal
+#: compares the taxel with the weighted mean of the points near it, and on a flat side that
+#: mean slides along with the object; with the weights frozen (paper eq. 12) the filter
+#: counts it as a measurement of where the object sits along the side (docs/method.md §4).
+NO_INFORMATION_M = 1.0
+
+
 def correspondence_covariances(
     window: np.ndarray, jacobians: np.ndarray, state_covariance: np.ndarray
 ) -> np.ndarray:

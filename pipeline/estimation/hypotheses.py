@@ -354,14 +354,11 @@ def _as_stage(
     uncertainty put back (:func:`unheld_covariance`). ``seconds`` is the fused stage's time
     plus what the hypotheses cost.
     """
+    prior = np.asarray(fusion.covariance_init, dtype=float)
     estimate = stage_estimate(
         fused.stage,
         chosen.g,
-        unheld_covariance(
-            np.asarray(outcome.covariance, dtype=float),
-            np.asarray(fusion.covariance_init, dtype=float),
-            held,
-        ),
+        unheld_covariance(np.asarray(outcome.covariance, dtype=float), prior, held),
         chosen.points,
         fusion.pivot_m,
         fused.iterations + outcome.iterations,
@@ -370,6 +367,7 @@ def _as_stage(
         outcome.active_points,
         outcome.trace,
         chosen.grasp_g,
+        unheld_covariance(np.asarray(outcome.filter_covariance, dtype=float), prior, held),
     )
     hypothesis = Hypothesis(
         name=chosen.name,

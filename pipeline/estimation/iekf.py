@@ -88,7 +88,7 @@ from .correspondences import (
 )
 from .geometry import image_step_bound
 from .indexsets import union
-from .measurement import Linearisation, freeze, linearise
+from .measurement import FrozenMeasurement, Linearisation, freeze, linearise
 from .structured import StructuredCovariance
 
 Schedule = Literal["standard", "alternative", "hybrid"]
@@ -158,6 +158,8 @@ class GraspContacts:
         noise: ``(M, 3, 3)`` measurement noise ``R`` (m^2).
         normals: ``(M, 3)`` unit taxel normals for the surface-orientation filter of the
             correspondences (:mod:`.surface`), or None to weigh every point.
+        posterior_noise: ``(M, 3, 3)`` the noise the reported covariance counts each taxel
+            with (m^2; :func:`run_stage`), None for ``noise``.
     """
 
     positions_m: np.ndarray
@@ -165,6 +167,12 @@ class GraspContacts:
     window: np.ndarray
     noise: np.ndarray
     normals: np.ndarray | None = None
+    posterior_noise: np.ndarray | None = None
+
+    @property
+    def reported_noise(self) -> np.ndarray:
+        """``posterior_noise``, or ``noise`` when there is none."""
+        return self.noise if self.posterior_noise is None else self.posterior_noise
 
 
 @dataclass(frozen=True)
@@ -206,13 +214,16 @@ class StageOutcome:
 
     Attributes:
         g: final ``(6,)`` bias and plane.
-        covariance: final ``(6, 6)`` covariance of ``g``.
+        covariance: final ``(6, 6)`` covariance of ``g`` as the stage reports it: the
+            posterior with each taxel counted by its ``posterior_noise`` (see
+            :func:`run_stage`).
         points: ``(N, 3)`` final points (the Stage-0 array itself in Stage 1).
         status: worst grasp status.
         iterations: iterations summed over grasps.
         active_points: points inside some gate at the last iteration of the last grasp.
         seconds: wall time of the stage.
-        grasp_g, grasp_covariance: ``g`` and its covariance after each grasp.
+        grasp_g, grasp_covariance: ``g`` and the filter's own covariance after each grasp
+            (Stage 2's gates).
         trace: every iteration's record, over the grasps in order.
     """
 
@@ -227,6 +238,12 @@ class StageOutcome:
     grasp_covariance: tuple[np.ndarray, ...]
     trace: tuple[IterationRecord, ...] = ()
 
+    @property
+    def filter_covariance(self) -> np.ndarray:
+        """The filter's own covariance of ``g`` after the last grasp (``covariance`` when
+        no grasp was fused)."""
+        return self.grasp_covariance[-1] if self.grasp_covariance else self.covariance
+
 
 @dataclass(frozen=True)
 class _GraspResult:
@@ -238,6 +255,9 @@ class _GraspResult:
     #: The last iteration's gain, to commit; None when the prior is kept (see the status).
     gain: Gain | None = None
     trace: tuple[IterationRecord, ...] = ()
+    #: The last iteration's measurement and linearisation (with ``gain``).
+    measurement: FrozenMeasurement | None = None
+    linearisation: Linearisation | None = None
 
 
 def _correspondences(
@@ -362,7 +382,9 @@ def update_grasp(
             status = "converged"
             break
     active = int(corr.active_points().size)
-    return _GraspResult(g_i, points_i, status, iterations, active, gain, tuple(trace))
+    return _GraspResult(
+        g_i, points_i, status, iterations, active, gain, tuple(trace), measurement, lin
+    )
 
 
 def worst_status(statuses: list[GraspStatus]) -> GraspStatus:
@@ -382,6 +404,7 @@ def run_stage(
     grasps in order."""
     started = time.perf_counter()
     covariance = covariance_model(problem.covariance_init, problem.point_variance_m2)
+    reported = covariance_model(problem.covariance_init, problem.point_variance_m2)
     halfwidth = settings.divergence_sigmas * np.sqrt(
         np.diag(problem.covariance_init + max(len(problem.grasps) - 1, 0) * problem.regrasp_noise)
     )
@@ -392,6 +415,7 @@ def run_stage(
     for k, contacts in enumerate(problem.grasps):
         if k > 0:
             covariance.add_bias_plane_noise(problem.regrasp_noise)
+            reported.add_bias_plane_noise(problem.regrasp_noise)
         if stage == 1:
             g_start, gate = g, covariance.bias_plane()
         else:
@@ -426,6 +450,8 @@ def run_stage(
         if result.gain is not None:
             keep_points = stage == 2 and k < len(problem.grasps) - 1
             covariance.commit(result.gain, with_points=keep_points)
+            noise = contacts.reported_noise[result.measurement.taxel]
+            reported.commit(reported.gain(result.linearisation, noise), with_points=keep_points)
         g, points = result.g, result.points
         statuses.append(result.status)
         iterations += result.iterations
@@ -435,7 +461,7 @@ def run_stage(
         trace += [replace(record, grasp=k) for record in result.trace]
     return StageOutcome(
         g=g,
-        covariance=covariance.bias_plane(),
+        covariance=reported.bias_plane(),
         points=points,
         status=worst_status(statuses),
         iterations=iterations,

@@ -58,16 +58,23 @@ LOCATING_STEPS = (1.0, 0.5, 0.25, 0.0)
 
 def locating_problem(fusion: FusionProblem, earlier: StageEstimate) -> FusionProblem:
     """The last grasp of ``fusion`` alone, fused from ``earlier`` (the estimate of the
-    grasps before it): its points, its state as the prior mean and its covariance plus
-    ``Q`` as the prior, with the plane held (:func:`.hypotheses.held_problem`)."""
+    grasps before it): its points, its state as the prior mean and the filter's own
+    covariance plus ``Q`` as the prior (the filter steps with its own model), with the
+    plane held (:func:`.hypotheses.held_problem`)."""
     problem = replace(
         fusion,
         points_m=earlier.points,
         g_init=np.array(earlier.grasp_g[-1], dtype=float),
-        covariance_init=np.asarray(earlier.covariance, dtype=float) + fusion.regrasp_noise,
+        covariance_init=_own_covariance(earlier) + fusion.regrasp_noise,
         grasps=fusion.grasps[-1:],
     )
     return held_problem(problem, _PLANE)
+
+
+def _own_covariance(estimate: StageEstimate) -> np.ndarray:
+    """The filter's own covariance of ``estimate`` (its reported one when it has none)."""
+    own = estimate.covariance if estimate.filter_covariance is None else estimate.filter_covariance
+    return np.asarray(own, dtype=float)
 
 
 def earlier_shape_stages(
@@ -122,6 +129,11 @@ def earlier_shape_stages(
         np.asarray(earlier.covariance, dtype=float) + fusion.regrasp_noise,
         _PLANE,
     )
+    own = unheld_covariance(
+        np.asarray(located.filter_covariance, dtype=float),
+        _own_covariance(earlier) + fusion.regrasp_noise,
+        _PLANE,
+    )
     estimate = stage_estimate(
         last.stage,
         g,
@@ -134,6 +146,7 @@ def earlier_shape_stages(
         located.active_points,
         located.trace,
         grasp_g,
+        own,
     )
     reason = last.consistency.reason if last.consistency is not None else ""
     replaced = replace(

@@ -49,6 +49,7 @@ def without_pad(fusion: FusionProblem, pad: str) -> FusionProblem:
         window=grasp.window[keep],
         noise=grasp.noise[keep],
         normals=None if grasp.normals is None else grasp.normals[keep],
+        posterior_noise=None if grasp.posterior_noise is None else grasp.posterior_noise[keep],
     )
     return replace(fusion, grasps=(reduced,))
 
@@ -156,6 +157,7 @@ def outlier_pad_stages(
             outcome.active_points,
             outcome.trace,
             outcome.grasp_g,
+            outcome.filter_covariance,
         )
         reason = stage.consistency.reason if stage.consistency is not None else ""
         revised[index] = replace(

@@ -21,7 +21,7 @@ from ..types import (
     StageEstimate,
     SymmetryPlane,
 )
-from .covariances import normal_ellipsoids
+from .covariances import NO_INFORMATION_M, normal_ellipsoids
 from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
 
 if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
@@ -53,7 +53,9 @@ def grasp_contacts(
     facing_filter: bool = True,
 ) -> GraspContacts:
     """Taxels of one grasp with ``C_t`` and ``R`` built from (along, across) normal stds;
-    with ``facing_filter`` their normals are kept for the surface-orientation filter."""
+    with ``facing_filter`` their normals are kept for the surface-orientation filter. The
+    reported covariance counts each taxel along its normal only (``posterior_noise``: the
+    same std along it, :data:`~.covariances.NO_INFORMATION_M` across)."""
     from .iekf import GraspContacts
 
     return GraspContacts(
@@ -62,6 +64,7 @@ def grasp_contacts(
         window=normal_ellipsoids(contacts.normals, *window_std_m),
         noise=normal_ellipsoids(contacts.normals, *noise_std_m),
         normals=contacts.normals if facing_filter else None,
+        posterior_noise=normal_ellipsoids(contacts.normals, noise_std_m[0], NO_INFORMATION_M),
     )
 
 
@@ -77,9 +80,11 @@ def stage_estimate(
     active_points: int,
     trace: Sequence[IterationRecord] = (),
     grasp_g: Sequence[np.ndarray] = (),
+    filter_covariance: np.ndarray | None = None,
 ) -> StageEstimate:
     """A :class:`StageEstimate` with the completed model ``{f_b(p)} u {f_mb(p)}``;
-    ``grasp_g`` is the state each grasp's taxels are compared under."""
+    ``grasp_g`` is the state each grasp's taxels are compared under, ``covariance`` the
+    reported one and ``filter_covariance`` the filter's own (None: the same)."""
     completed = np.vstack([apply_bias(points, g, pivot_m), apply_mirror_bias(points, g, pivot_m)])
     return StageEstimate(
         stage=stage,
@@ -99,6 +104,9 @@ def stage_estimate(
             for r in trace
         ),
         grasp_g=tuple(np.array(g_k, dtype=float) for g_k in grasp_g),
+        filter_covariance=None
+        if filter_covariance is None
+        else np.array(filter_covariance, dtype=float),
     )
 
 
@@ -158,6 +166,7 @@ def estimate_result(
             o.active_points,
             o.trace,
             o.grasp_g,
+            o.filter_covariance,
         )
         for stage, o in enumerate(outcomes, start=1)
     ]
