@@ -89,19 +89,24 @@ def fusion_problem(
     noise_std_m: tuple[float, float] = (0.001, 0.003),
     grasps: int = 1,
     reported_across_m: float | None = None,
+    reported_pad_m: float | None = None,
 ) -> FusionProblem:
     """A :class:`FusionProblem` for the scene; ``grasps`` repeats the same contacts. With
     ``reported_across_m`` the reported covariance counts the taxels with that std across
-    their normals (else with ``noise_std_m``)."""
-    posterior_noise = None
+    their normals (else with ``noise_std_m``), with ``reported_pad_m`` also with that error
+    along the normals shared by each pad's taxels."""
+    posterior_noise = pad_errors = None
     if reported_across_m is not None:
         posterior_noise = normal_ellipsoids(scene.normals, noise_std_m[0], reported_across_m)
+    if reported_pad_m is not None:
+        pad_errors = reported_pad_m * scene.normals
     contacts = GraspContacts(
         positions_m=scene.taxels_m,
         pads=scene.pads,
         window=normal_ellipsoids(scene.normals, *window_std_m),
         noise=normal_ellipsoids(scene.normals, *noise_std_m),
         posterior_noise=posterior_noise,
+        pad_errors_m=pad_errors,
     )
     q = np.zeros((6, 6))
     q[[0, 1, 2, 3], [0, 1, 2, 3]] = [0.01**2, 0.002**2, 0.002**2, 0.002**2]

@@ -12,6 +12,7 @@ from estimation_scenes import cylinder_scene, fusion_problem
 from filterpy.kalman import ExtendedKalmanFilter
 
 from pipeline.estimation.correspondences import PointIndex, exclusive_sides, find_correspondences
+from pipeline.estimation.covariances import shared_pad_noise
 from pipeline.estimation.dense import DenseCovariance
 from pipeline.estimation.geometry import apply_bias, apply_mirror_bias
 from pipeline.estimation.iekf import IekfSettings, fuse
@@ -170,9 +171,12 @@ def test_converged_iterate_is_the_map_least_squares_minimiser():
     np.testing.assert_array_equal(points[untouched], points_prior[untouched])
 
 
-@pytest.mark.parametrize(("grasps", "reported_across_m"), [(1, None), (2, None), (2, 1.0)])
-def test_structured_and_dense_agree(scene, grasps, reported_across_m):
-    problem = fusion_problem(scene, G_INIT, grasps=grasps, reported_across_m=reported_across_m)
+@pytest.mark.parametrize(("grasps", "reported"), [(1, None), (2, None), (2, (1.0, 0.001))])
+def test_structured_and_dense_agree(scene, grasps, reported):
+    across, pad = (None, None) if reported is None else reported
+    problem = fusion_problem(
+        scene, G_INIT, grasps=grasps, reported_across_m=across, reported_pad_m=pad
+    )
     settings = IekfSettings(max_iterations=8)
     structured = fuse(problem, settings)
     dense = fuse(problem, settings, covariance_model=DenseCovariance)
@@ -239,11 +243,46 @@ def test_the_reported_covariance_counts_the_taxels_along_their_normals_only(scen
     assert np.sqrt(stage_1.covariance[1, 1]) < 0.2 * prior[1]
     paper = fuse(fusion_problem(scene, G_INIT), settings, last_stage=1)[0]
     np.testing.assert_allclose(paper.covariance, paper.grasp_covariance[-1], atol=1e-15)
+    np.testing.assert_allclose(stage_1.covariance, _information_form(scene, honest, stage_1))
 
-    g = stage_1.trace[-2].g
-    measurement = _frozen(scene, honest, g, honest.points_m)
-    lin = linearise(measurement, g, honest.points_m, honest.pivot_m, with_points=False)
+
+def test_an_error_a_pad_shares_bounds_what_its_taxels_tell_together(scene):
+    """With 1 mm shared by each pad's taxels the two pads cannot locate the cylinder along x
+    better than 1 mm / sqrt(2), however many taxels touch (alone they claim far less); the
+    information form with the full noise matrix is the oracle."""
+    settings = IekfSettings(schedule="standard", refine_gates=False)
+    alone = fuse(fusion_problem(scene, G_INIT, reported_across_m=1.0), settings, last_stage=1)
+    shared = fusion_problem(scene, G_INIT, reported_across_m=1.0, reported_pad_m=0.001)
+    stage_1 = fuse(shared, settings, last_stage=1)[0]
+    assert np.sqrt(alone[0].covariance[1, 1]) < 0.0004
+    assert 0.001 / np.sqrt(2.0) < np.sqrt(stage_1.covariance[1, 1]) < 0.001
+    np.testing.assert_allclose(stage_1.covariance, _information_form(scene, shared, stage_1))
+
+
+def _information_form(scene, problem, outcome):
+    """``(P0^-1 + H^T R^-1 H)^-1`` at the iterate of the last gain, ``R`` the reported
+    noise: block-diagonal per taxel plus, by hand, the error each pad's taxels share."""
+    g = outcome.trace[-2].g
+    measurement = _frozen(scene, problem, g, problem.points_m)
+    lin = linearise(measurement, g, problem.points_m, problem.pivot_m, with_points=False)
     H = lin.bias_plane_jacobian
-    noise = block_diagonal(honest.grasps[0].posterior_noise[measurement.taxel])
-    information = np.linalg.inv(honest.covariance_init) + H.T @ np.linalg.solve(noise, H)
-    np.testing.assert_allclose(stage_1.covariance, np.linalg.inv(information), rtol=1e-6)
+    contacts = problem.grasps[0]
+    noise = block_diagonal(contacts.posterior_noise[measurement.taxel])
+    if contacts.pad_errors_m is not None:
+        errors = contacts.pad_errors_m[measurement.taxel]
+        pads = contacts.pads[measurement.taxel]
+        for i in range(len(errors)):
+            for j in range(len(errors)):
+                if pads[i] == pads[j]:
+                    noise[3 * i : 3 * i + 3, 3 * j : 3 * j + 3] += np.outer(errors[i], errors[j])
+    information = np.linalg.inv(problem.covariance_init) + H.T @ np.linalg.solve(noise, H)
+    return np.linalg.inv(information)
+
+
+def test_shared_pad_noise_by_hand():
+    u = np.array([[0.001, 0.0, 0.0], [0.002, 0.0, 0.0], [0.0, 0.003, 0.0]])
+    matrix = shared_pad_noise(u, np.array(["left", "left", "right"]))
+    expected = np.zeros((9, 9))
+    expected[0, 0], expected[0, 3], expected[3, 0], expected[3, 3] = 1e-6, 2e-6, 2e-6, 4e-6
+    expected[7, 7] = 9e-6
+    np.testing.assert_allclose(matrix, expected, atol=1e-18)

@@ -47,7 +47,8 @@ def _problem(rng):
     contacts = Contacts(positions, normals, ["left", "left", "right", "right"], [0, 1, 0, 1])
     # The paper's noise across the normal too, so that the oracles below test the score's
     # algebra on a measurement that informs every direction.
-    return points, g, pivot, replace(grasp_contacts(contacts, WINDOW, NOISE), posterior_noise=None)
+    taxels = grasp_contacts(contacts, WINDOW, NOISE)
+    return points, g, pivot, replace(taxels, posterior_noise=None, pad_errors_m=None)
 
 
 def _frozen(points, g, pivot, taxels, covariance):

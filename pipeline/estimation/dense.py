@@ -15,7 +15,7 @@ import scipy.linalg
 
 from .geometry import BIAS_PLANE_DIM
 from .measurement import Linearisation
-from .structured import block_diagonal
+from .structured import noise_matrix
 
 
 class DenseGain:
@@ -31,7 +31,7 @@ class DenseGain:
         if linearisation.point_jacobian is not None:
             jacobian[:, BIAS_PLANE_DIM:] = linearisation.point_jacobian.dense(n_points)
         prior = covariance.matrix
-        innovation = jacobian @ prior @ jacobian.T + block_diagonal(noise)
+        innovation = jacobian @ prior @ jacobian.T + noise_matrix(noise)
         cholesky = scipy.linalg.cho_factor(innovation, lower=True)
         self.jacobian = jacobian
         self.gain = scipy.linalg.cho_solve(cholesky, jacobian @ prior).T

@@ -86,10 +86,11 @@ from .correspondences import (
     exclusive_sides,
     find_correspondences,
 )
+from .covariances import shared_pad_noise
 from .geometry import image_step_bound
 from .indexsets import union
 from .measurement import FrozenMeasurement, Linearisation, freeze, linearise
-from .structured import StructuredCovariance
+from .structured import StructuredCovariance, block_diagonal
 
 Schedule = Literal["standard", "alternative", "hybrid"]
 GraspStatus = Literal["converged", "max_iterations", "no_correspondence", "diverged"]
@@ -160,6 +161,9 @@ class GraspContacts:
             correspondences (:mod:`.surface`), or None to weigh every point.
         posterior_noise: ``(M, 3, 3)`` the noise the reported covariance counts each taxel
             with (m^2; :func:`run_stage`), None for ``noise``.
+        pad_errors_m: ``(M, 3)`` the error along its normal that each taxel shares with the
+            rest of its pad in the reported covariance, as its std times the normal (m);
+            None for none.
     """
 
     positions_m: np.ndarray
@@ -168,11 +172,21 @@ class GraspContacts:
     noise: np.ndarray
     normals: np.ndarray | None = None
     posterior_noise: np.ndarray | None = None
+    pad_errors_m: np.ndarray | None = None
 
     @property
     def reported_noise(self) -> np.ndarray:
         """``posterior_noise``, or ``noise`` when there is none."""
         return self.noise if self.posterior_noise is None else self.posterior_noise
+
+    def reported_noise_matrix(self, measurement: FrozenMeasurement) -> np.ndarray:
+        """The ``(3B, 3B)`` noise the reported covariance counts ``measurement``'s blocks
+        with: each taxel's ``reported_noise`` plus the error it shares with its pad."""
+        taxels = measurement.taxel
+        noise = block_diagonal(self.reported_noise[taxels])
+        if self.pad_errors_m is not None:
+            noise += shared_pad_noise(self.pad_errors_m[taxels], np.asarray(self.pads)[taxels])
+        return noise
 
 
 @dataclass(frozen=True)
@@ -450,7 +464,7 @@ def run_stage(
         if result.gain is not None:
             keep_points = stage == 2 and k < len(problem.grasps) - 1
             covariance.commit(result.gain, with_points=keep_points)
-            noise = contacts.reported_noise[result.measurement.taxel]
+            noise = contacts.reported_noise_matrix(result.measurement)
             reported.commit(reported.gain(result.linearisation, noise), with_points=keep_points)
         g, points = result.g, result.points
         statuses.append(result.status)

@@ -21,7 +21,7 @@ from ..types import (
     StageEstimate,
     SymmetryPlane,
 )
-from .covariances import NO_INFORMATION_M, normal_ellipsoids
+from .covariances import NO_INFORMATION_M, normal_ellipsoids, unit_normals
 from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
 
 if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
@@ -55,7 +55,9 @@ def grasp_contacts(
     """Taxels of one grasp with ``C_t`` and ``R`` built from (along, across) normal stds;
     with ``facing_filter`` their normals are kept for the surface-orientation filter. The
     reported covariance counts each taxel along its normal only (``posterior_noise``: the
-    same std along it, :data:`~.covariances.NO_INFORMATION_M` across)."""
+    same std along it, :data:`~.covariances.NO_INFORMATION_M` across), and counts that std
+    once more as an error all taxels of a pad share (``pad_errors_m``: the pad's
+    compliance)."""
     from .iekf import GraspContacts
 
     return GraspContacts(
@@ -65,6 +67,7 @@ def grasp_contacts(
         noise=normal_ellipsoids(contacts.normals, *noise_std_m),
         normals=contacts.normals if facing_filter else None,
         posterior_noise=normal_ellipsoids(contacts.normals, noise_std_m[0], NO_INFORMATION_M),
+        pad_errors_m=noise_std_m[0] * unit_normals(contacts.normals),
     )
 
 

@@ -43,6 +43,13 @@ def block_diagonal(blocks: np.ndarray) -> np.ndarray:
     return matrix.reshape(3 * count, 3 * count)
 
 
+def noise_matrix(noise: np.ndarray) -> np.ndarray:
+    """A measurement's noise as one ``(3B, 3B)`` matrix: ``(B, 3, 3)`` per-block covariances
+    go on the diagonal; a ``(3B, 3B)`` matrix (errors that blocks share) is taken as is."""
+    noise = np.asarray(noise, dtype=float)
+    return noise if noise.ndim == 2 else block_diagonal(noise)
+
+
 def columns3(positions: np.ndarray) -> np.ndarray:
     """State columns ``3 u + (0, 1, 2)`` of local point positions ``u``, flattened."""
     return (3 * positions[:, None] + np.arange(3)[None, :]).ravel()
@@ -77,7 +84,7 @@ class StructuredGain:
         #: ``D``: the local points' prior variances, the point part of ``B``.
         self._local_variance = covariance.point_variance[self._local]
 
-        innovation = self._h_g @ covariance.base_bias_plane @ self._h_g.T + block_diagonal(noise)
+        innovation = self._h_g @ covariance.base_bias_plane @ self._h_g.T + noise_matrix(noise)
         if self._point_jacobian is not None:
             innovation += self._point_jacobian.weighted_gram(self._local, self._local_variance)
         self._cross = []  # W_k = H V_k^T, (rows, rows_k)

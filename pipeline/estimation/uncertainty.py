@@ -53,7 +53,6 @@ from .correspondences import PointIndex, exclusive_sides, find_correspondences
 from .geometry import BIAS_PLANE_DIM, PLANE, side_jacobian
 from .iekf import GraspContacts
 from .measurement import freeze, linearise
-from .structured import block_diagonal
 
 
 def hidden_side_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
@@ -154,7 +153,6 @@ def predicted_measurement(
     linearisation = linearise(measurement, g, points_m, pivot_m, with_points=True)
     points = linearisation.point_jacobian
     local = points.points()
-    nuisance = points.weighted_gram(local, point_variance_m2[local]) + block_diagonal(
-        measurement.noise
-    )
+    nuisance = points.weighted_gram(local, point_variance_m2[local])
+    nuisance += contacts.reported_noise_matrix(measurement)
     return linearisation.bias_plane_jacobian, nuisance
