@@ -20,6 +20,7 @@ from pipeline.estimation.hypotheses import (
     holdable,
     motion_limit,
     moved_free_space,
+    shortened_covariance,
     unheld_covariance,
 )
 from pipeline.estimation.iekf import IekfSettings, fuse
@@ -227,3 +228,25 @@ def test_stage_zero_is_held_only_when_the_taxels_accept_it_and_it_is_less_contra
     assert holdable(stage_with(verdict(1.0, 150)), fused)  # only the image, and less
     assert not holdable(stage_with(verdict(6.0, 10)), fused)  # the taxels reject it
     assert not holdable(stage_with(verdict(1.0, 1000)), fused)  # more contradicted
+
+
+@pytest.mark.parametrize("step", [0.0, 0.25, 0.5, 1.0])
+def test_a_shortened_step_has_the_covariance_of_its_error_by_monte_carlo(step):
+    """Linear-Gaussian oracle: draw the prior error and the measurement noise, update by the
+    Kalman gain, take the state ``step`` of the way from the prior mean to the posterior
+    one; the sample covariance of its error matches :func:`shortened_covariance`."""
+    rng = np.random.default_rng(4)
+    root = rng.normal(size=(3, 3))
+    prior = root @ root.T + np.eye(3)
+    H = rng.normal(size=(2, 3))
+    R = np.diag([0.3, 0.5])
+    gain = prior @ H.T @ np.linalg.inv(H @ prior @ H.T + R)
+    posterior = (np.eye(3) - gain @ H) @ prior
+    samples = 200_000
+    prior_error = rng.multivariate_normal(np.zeros(3), prior, size=samples)
+    noise = rng.multivariate_normal(np.zeros(2), R, size=samples)
+    # e_post = e_prior - K (H e_prior + v): the posterior mean's error
+    posterior_error = prior_error - (prior_error @ H.T + noise) @ gain.T
+    error = (1.0 - step) * prior_error + step * posterior_error
+    expected = shortened_covariance(prior, (posterior + posterior.T) / 2.0, step)
+    np.testing.assert_allclose(np.cov(error.T), expected, atol=0.03 * np.abs(prior).max())

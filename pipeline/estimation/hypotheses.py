@@ -132,6 +132,20 @@ def unheld_covariance(
     return (covariance + covariance.T) / 2.0
 
 
+def shortened_covariance(prior: np.ndarray, posterior: np.ndarray, step: float) -> np.ndarray:
+    """The covariance of a state taken only ``step`` of the way from the prior mean to the
+    posterior one (a bounded hypothesis, a shortened location).
+
+    Its error is ``(1 - s) e_prior + s e_post``, and after a Kalman update
+    ``Cov(e_prior, e_post) = P_post``, so the covariance is
+    ``(1 - s)^2 P_prior + (1 - (1 - s)^2) P_post``: the posterior at ``s = 1``, the prior at
+    ``s = 0``. Reporting the posterior for a shortened step would claim what the taxels
+    would have told had the state gone all the way."""
+    kept = (1.0 - step) ** 2
+    covariance = kept * prior + (1.0 - kept) * posterior
+    return (covariance + covariance.T) / 2.0
+
+
 def moved_free_space(
     points_m: np.ndarray,
     g: np.ndarray,
@@ -351,14 +365,17 @@ def _as_stage(
     the fused model was set aside.
 
     Its covariance is the re-fusion's posterior with the held components' prior
-    uncertainty put back (:func:`unheld_covariance`). ``seconds`` is the fused stage's time
-    plus what the hypotheses cost.
+    uncertainty put back (:func:`unheld_covariance`), for a shortened step moved back
+    toward the prior's (:func:`shortened_covariance`); the filter's own covariance is the
+    re-fusion's, unshortened. ``seconds`` is the fused stage's time plus what the
+    hypotheses cost.
     """
     prior = np.asarray(fusion.covariance_init, dtype=float)
+    posterior = unheld_covariance(np.asarray(outcome.covariance, dtype=float), prior, held)
     estimate = stage_estimate(
         fused.stage,
         chosen.g,
-        unheld_covariance(np.asarray(outcome.covariance, dtype=float), prior, held),
+        shortened_covariance(prior, posterior, chosen.step),
         chosen.points,
         fusion.pivot_m,
         fused.iterations + outcome.iterations,

@@ -43,7 +43,13 @@ from scipy.spatial import cKDTree
 from ..errors import estimate_failed
 from ..types import DepthObservation, Hypothesis, StageEstimate
 from .consistency import ConsistencySettings, assess
-from .hypotheses import HYPOTHESES, Refuse, held_problem, unheld_covariance
+from .hypotheses import (
+    HYPOTHESES,
+    Refuse,
+    held_problem,
+    shortened_covariance,
+    unheld_covariance,
+)
 from .iekf import FusionProblem
 from .problem import stage_estimate
 
@@ -124,10 +130,11 @@ def earlier_shape_stages(
     )
     if not verdict.consistent:
         return list(stages)
-    covariance = unheld_covariance(
-        np.asarray(located.covariance, dtype=float),
-        np.asarray(earlier.covariance, dtype=float) + fusion.regrasp_noise,
-        _PLANE,
+    prior = np.asarray(earlier.covariance, dtype=float) + fusion.regrasp_noise
+    covariance = shortened_covariance(
+        prior,
+        unheld_covariance(np.asarray(located.covariance, dtype=float), prior, _PLANE),
+        step,
     )
     own = unheld_covariance(
         np.asarray(located.filter_covariance, dtype=float),
