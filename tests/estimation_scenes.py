@@ -95,9 +95,9 @@ def fusion_problem(
     ``reported_across_m`` the reported covariance counts the taxels with that std across
     their normals (else with ``noise_std_m``), with ``reported_pad_m`` also with that error
     along the normals shared by each pad's taxels."""
-    posterior_noise = pad_errors = None
+    reported_noise = pad_errors = None
     if reported_across_m is not None:
-        posterior_noise = normal_ellipsoids(scene.normals, noise_std_m[0], reported_across_m)
+        reported_noise = normal_ellipsoids(scene.normals, noise_std_m[0], reported_across_m)
     if reported_pad_m is not None:
         pad_errors = reported_pad_m * scene.normals
     contacts = GraspContacts(
@@ -105,7 +105,7 @@ def fusion_problem(
         pads=scene.pads,
         window=normal_ellipsoids(scene.normals, *window_std_m),
         noise=normal_ellipsoids(scene.normals, *noise_std_m),
-        posterior_noise=posterior_noise,
+        reported_noise=reported_noise,
         pad_errors_m=pad_errors,
     )
     q = np.zeros((6, 6))

@@ -267,7 +267,7 @@ def _information_form(scene, problem, outcome):
     lin = linearise(measurement, g, problem.points_m, problem.pivot_m, with_points=False)
     H = lin.bias_plane_jacobian
     contacts = problem.grasps[0]
-    noise = block_diagonal(contacts.posterior_noise[measurement.taxel])
+    noise = block_diagonal(contacts.reported_noise[measurement.taxel])
     if contacts.pad_errors_m is not None:
         errors = contacts.pad_errors_m[measurement.taxel]
         pads = contacts.pads[measurement.taxel]

@@ -48,7 +48,7 @@ def _problem(rng):
     # The paper's noise across the normal too, so that the oracles below test the score's
     # algebra on a measurement that informs every direction.
     taxels = grasp_contacts(contacts, WINDOW, NOISE)
-    return points, g, pivot, replace(taxels, posterior_noise=None, pad_errors_m=None)
+    return points, g, pivot, replace(taxels, reported_noise=None, pad_errors_m=None)
 
 
 def _frozen(points, g, pivot, taxels, covariance):
@@ -65,7 +65,7 @@ def _frozen(points, g, pivot, taxels, covariance):
         taxel_normals=taxels.normals,
         facing_g=g,
     )
-    return freeze(exclusive_sides(found), taxels.positions_m, taxels.reported_noise)
+    return freeze(exclusive_sides(found), taxels.positions_m, taxels.noise)
 
 
 def _numeric_jacobian(function, x, step=1e-7):

@@ -159,7 +159,7 @@ class GraspContacts:
         noise: ``(M, 3, 3)`` measurement noise ``R`` (m^2).
         normals: ``(M, 3)`` unit taxel normals for the surface-orientation filter of the
             correspondences (:mod:`.surface`), or None to weigh every point.
-        posterior_noise: ``(M, 3, 3)`` the noise the reported covariance counts each taxel
+        reported_noise: ``(M, 3, 3)`` the noise the reported covariance counts each taxel
             with (m^2; :func:`run_stage`), None for ``noise``.
         pad_errors_m: ``(M, 3)`` the error along its normal that each taxel shares with the
             rest of its pad in the reported covariance, as its std times the normal (m);
@@ -171,19 +171,16 @@ class GraspContacts:
     window: np.ndarray
     noise: np.ndarray
     normals: np.ndarray | None = None
-    posterior_noise: np.ndarray | None = None
+    reported_noise: np.ndarray | None = None
     pad_errors_m: np.ndarray | None = None
-
-    @property
-    def reported_noise(self) -> np.ndarray:
-        """``posterior_noise``, or ``noise`` when there is none."""
-        return self.noise if self.posterior_noise is None else self.posterior_noise
 
     def reported_noise_matrix(self, measurement: FrozenMeasurement) -> np.ndarray:
         """The ``(3B, 3B)`` noise the reported covariance counts ``measurement``'s blocks
-        with: each taxel's ``reported_noise`` plus the error it shares with its pad."""
+        with: each taxel's ``reported_noise`` (else ``noise``) plus the error it shares with
+        its pad."""
         taxels = measurement.taxel
-        noise = block_diagonal(self.reported_noise[taxels])
+        own = self.noise if self.reported_noise is None else self.reported_noise
+        noise = block_diagonal(own[taxels])
         if self.pad_errors_m is not None:
             noise += shared_pad_noise(self.pad_errors_m[taxels], np.asarray(self.pads)[taxels])
         return noise
@@ -229,7 +226,7 @@ class StageOutcome:
     Attributes:
         g: final ``(6,)`` bias and plane.
         covariance: final ``(6, 6)`` covariance of ``g`` as the stage reports it: the
-            posterior with each taxel counted by its ``posterior_noise`` (see
+            posterior with each taxel counted by its ``reported_noise`` (see
             :func:`run_stage`).
         points: ``(N, 3)`` final points (the Stage-0 array itself in Stage 1).
         status: worst grasp status.

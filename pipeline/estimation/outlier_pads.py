@@ -49,7 +49,7 @@ def without_pad(fusion: FusionProblem, pad: str) -> FusionProblem:
         window=grasp.window[keep],
         noise=grasp.noise[keep],
         normals=None if grasp.normals is None else grasp.normals[keep],
-        posterior_noise=None if grasp.posterior_noise is None else grasp.posterior_noise[keep],
+        reported_noise=None if grasp.reported_noise is None else grasp.reported_noise[keep],
         pad_errors_m=None if grasp.pad_errors_m is None else grasp.pad_errors_m[keep],
     )
     return replace(fusion, grasps=(reduced,))

@@ -54,7 +54,7 @@ def grasp_contacts(
 ) -> GraspContacts:
     """Taxels of one grasp with ``C_t`` and ``R`` built from (along, across) normal stds;
     with ``facing_filter`` their normals are kept for the surface-orientation filter. The
-    reported covariance counts each taxel along its normal only (``posterior_noise``: the
+    reported covariance counts each taxel along its normal only (``reported_noise``: the
     same std along it, :data:`~.covariances.NO_INFORMATION_M` across), and counts that std
     once more as an error all taxels of a pad share (``pad_errors_m``: the pad's
     compliance)."""
@@ -66,7 +66,7 @@ def grasp_contacts(
         window=normal_ellipsoids(contacts.normals, *window_std_m),
         noise=normal_ellipsoids(contacts.normals, *noise_std_m),
         normals=contacts.normals if facing_filter else None,
-        posterior_noise=normal_ellipsoids(contacts.normals, noise_std_m[0], NO_INFORMATION_M),
+        reported_noise=normal_ellipsoids(contacts.normals, noise_std_m[0], NO_INFORMATION_M),
         pad_errors_m=noise_std_m[0] * unit_normals(contacts.normals),
     )
 

@@ -125,7 +125,7 @@ def predicted_measurement(
     ``(g, points_m)``: its correspondences (eq. 9, gates from ``covariance``, one side per
     taxel), frozen weights and Jacobian (paper eqs. 10-12), as ``(H_g, H_p D H_p^T + R)``
     for :func:`hidden_side_gain_m2`, with ``R`` the noise the reported covariance counts
-    the taxels with (``contacts.reported_noise``), as the filter will after the grasp. No
+    the taxels with (``contacts.reported_noise_matrix``), as the filter will after the grasp. No
     taxel with a correspondence gives an empty ``H_g`` (``(0, 6)``): the grasp would teach
     nothing.
 
@@ -149,7 +149,7 @@ def predicted_measurement(
     found = exclusive_sides(found)
     if not found.supported_taxels().any():
         return np.zeros((0, BIAS_PLANE_DIM)), np.zeros((0, 0))
-    measurement = freeze(found, contacts.positions_m, contacts.reported_noise)
+    measurement = freeze(found, contacts.positions_m, contacts.noise)
     linearisation = linearise(measurement, g, points_m, pivot_m, with_points=True)
     points = linearisation.point_jacobian
     local = points.points()
