@@ -126,19 +126,19 @@ def pose_to_json(pose: ObjectPose) -> dict[str, Any]:
 def ground_truth(
     obj: CatalogueObject,
     pose_after: ObjectPose,
-    pose_seen: ObjectPose | None = None,
-    calibration_error: np.ndarray | None = None,
+    pose_seen: ObjectPose,
+    calibration_error: np.ndarray | None,
 ) -> GroundTruth:
     """The object's truth in frame R after the grasp.
 
-    With the object's pose when the camera saw it (``pose_seen``) and the camera's
-    calibration error (:attr:`DepthObservation.calibration_error`) the truth also holds the
-    bias the estimator should find: the motion from where the cloud put the object,
-    ``calibration_error @ T_seen``, to where it is after the grasp.
+    When the sensor knows its calibration error (:attr:`DepthObservation.calibration_error`)
+    the truth also holds the bias the estimator should find: the motion from where the
+    cloud put the object, ``calibration_error @ T_seen`` (``pose_seen``: the object when the
+    camera saw it), to where it is after the grasp.
     """
     T = pose_after.transform
     cloud_motion = None
-    if pose_seen is not None and calibration_error is not None:
+    if calibration_error is not None:
         cloud_motion = T @ np.linalg.inv(calibration_error @ pose_seen.transform)
     vertices = np.asarray(obj.mesh.vertices) @ T[:3, :3].T + T[:3, 3]
     plane = None
