@@ -12,10 +12,12 @@ strategy picks among them:
   uncertainty relative to the visible side, the object's shape
   (:func:`pipeline.estimation.uncertainty.hidden_side_gain_m2` with
   :func:`~pipeline.estimation.uncertainty.shape_gram`), from the
-  taxels it is predicted to touch on the current model (:func:`predicted_contacts`) and the
+  taxels it is predicted to touch on the current model (:func:`predicted_contacts`) where
+  no earlier grasp touched (:func:`new_places`) and the
   estimator's own measurement model, weighted by the planner's score of the grasp (in
   [0, 1]: how squarely its pads meet the sides and how far it is from tipping the object),
-  so that the expected gain counts only as much as the grasp is likely to deliver it.
+  so that the expected gain counts only as much as the grasp is likely to deliver it, among
+  the grasps the planner scores at least half its best (:data:`PLANNER_FLOOR`).
 
 The stop rule (:func:`stop_reason`) ends the trial once the plane offset and the hidden side
 are known well enough, or when the grasps run out.
@@ -28,6 +30,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.spatial
 
 from .metrics import plane_after_bias
 from .perception.pad_contact import (
@@ -50,6 +53,17 @@ from .types import (
 #: A predicted taxel touches the model when the surface in front of it lies within this of
 #: the pad at its first touch (m): the planners' default touch tolerance.
 TOUCH_TOLERANCE_M = 0.003
+
+#: A predicted taxel this close to a place an earlier grasp touched (m) reads the same
+#: surface: its own taxel cell (3.4 mm pitch) or the next, which is where the same plan lands
+#: again after the millimetres the object moves between grasps.
+SAME_PLACE_M = 0.005
+
+#: ``information`` chooses among the alternatives the planner scores at least this fraction
+#: of its best. Below it are grasps that meet an edge or hold the object off its centre, which
+#: turn it as the pads close: on the CD drive, third grasps there turned it 7-10 deg, more
+#: than the re-grasp noise ``Q`` lets the estimator follow.
+PLANNER_FLOOR = 0.5
 
 
 @dataclass(frozen=True)
@@ -225,17 +239,35 @@ def predicted_contacts(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarra
     return Contacts(np.array(positions), np.array(normals), pads, indices)
 
 
+def new_places(contacts: Contacts, touched_m: np.ndarray) -> Contacts:
+    """The taxels of ``contacts`` farther than :data:`SAME_PLACE_M` from every place in
+    ``touched_m`` (``(K, 3)``, frame R), the surface earlier grasps touched.
+
+    A taxel pressing where one pressed before reads the model's error at that place again:
+    the camera noise of the points there, the detail the mirror image misses, the pad's
+    compliance. That error repeats with the place; it does not average out as independent
+    noise would, so only the taxels on new surface count as new information.
+    """
+    if len(contacts) == 0 or len(touched_m) == 0:
+        return contacts
+    distance, _ = scipy.spatial.cKDTree(touched_m).query(contacts.positions)
+    return contacts.select(distance > SAME_PLACE_M)
+
+
 def information_scores(
     stage: StageEstimate,
     plans: tuple[GraspPlan, ...],
     gripper: GripperSpec,
     model: MeasurementModel,
+    earlier: tuple[GraspPlan, ...] = (),
 ) -> list[float]:
     """Each plan's expected reduction of the hidden side's mean squared positional std
     relative to the visible side (m^2, the shape; the bias, which the next release forgets,
-    is a nuisance) if its predicted taxels were fused into ``stage`` (module docstring), from
-    the covariance the estimator will fuse them with: ``stage``'s plus the re-grasp noise. All
-    zero when ``stage`` has no finite covariance (the planner's best is then taken)."""
+    is a nuisance) if its predicted taxels on new surface were fused into ``stage`` (module
+    docstring), from the covariance the estimator will fuse them with: ``stage``'s plus the
+    re-grasp noise. The surface the ``earlier`` plans (the grasps fused so far) reach on the
+    current model is not new (:func:`new_places`). All zero when ``stage`` has no finite
+    covariance (the planner's best is then taken)."""
     from .estimation.correspondences import PointIndex
     from .estimation.problem import grasp_contacts
     from .estimation.uncertainty import (
@@ -251,9 +283,11 @@ def information_scores(
     gram = shape_gram(points, g, pivot)
     index = PointIndex(points)
     variance = np.full(len(points), model.point_std_m**2)
+    touched = [predicted_contacts(plan, gripper, stage.completed).positions for plan in earlier]
+    touched_m = np.concatenate(touched) if touched else np.zeros((0, 3))
     scores = []
     for plan in plans:
-        contacts = predicted_contacts(plan, gripper, stage.completed)
+        contacts = new_places(predicted_contacts(plan, gripper, stage.completed), touched_m)
         if len(contacts) == 0:
             scores.append(0.0)
             continue
@@ -276,7 +310,8 @@ class NextGraspChoice:
         strategy: the strategy that chose it.
         alternatives: the feasible plans it chose among.
         scores: the information score of each alternative (m^2), ``information`` only;
-            the choice maximises it times the alternative's planner score.
+            the choice maximises it times the alternative's planner score among the
+            alternatives the planner scores at least :data:`PLANNER_FLOOR` of its best.
         chosen: index of ``plan`` among ``alternatives`` (None when refused).
     """
 
@@ -309,10 +344,12 @@ def choose_next_grasp(
     model: MeasurementModel,
     rng: np.random.Generator,
     viewpoint_m: np.ndarray | None = None,
+    earlier: tuple[GraspPlan, ...] = (),
 ) -> NextGraspChoice:
     """Plan the next grasp on ``stage``'s model with ``planner`` (a
     :class:`pipeline.stages.GraspPlanner`) and pick it by ``strategy``; ``viewpoint_m`` is
-    the camera's position when the object was seen (m, frame R)."""
+    the camera's position when the object was seen (m, frame R), ``earlier`` the plans of
+    the grasps fused so far."""
     cloud, proposal = model_for_planning(stage, viewpoint_m)
     if strategy == "paper":
         return NextGraspChoice(planner.plan(cloud, proposal, gripper), strategy)
@@ -322,7 +359,8 @@ def choose_next_grasp(
     if strategy == "random":
         chosen = int(rng.integers(len(alternatives)))
         return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
-    scores = tuple(information_scores(stage, alternatives, gripper, model))
-    expected = [s * _planner_score(plan) for s, plan in zip(scores, alternatives, strict=True)]
+    scores = tuple(information_scores(stage, alternatives, gripper, model, earlier))
+    rated = np.array([_planner_score(plan) for plan in alternatives])
+    expected = np.where(rated >= PLANNER_FLOOR * rated.max(), np.multiply(scores, rated), -1.0)
     chosen = int(np.argmax(expected))
     return NextGraspChoice(alternatives[chosen], strategy, alternatives, scores, chosen)

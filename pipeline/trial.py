@@ -445,6 +445,7 @@ def _grasp_and_fuse(
                     model,
                     rng,
                     cloud.viewpoint_m,
+                    tuple(plans),
                 )
             plan, chosen_by = following.plan, following.to_json()
             if plan.status != "ok":

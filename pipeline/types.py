@@ -333,6 +333,12 @@ class Contacts:
     def __len__(self) -> int:
         return len(self.positions)
 
+    def select(self, keep: np.ndarray) -> Contacts:
+        """The taxels where the boolean mask ``keep`` (``(M,)``) is true."""
+        return Contacts(
+            self.positions[keep], self.normals[keep], self.pads[keep], self.taxel_indices[keep]
+        )
+
 
 @dataclass(frozen=True)
 class SymmetryHypothesis:

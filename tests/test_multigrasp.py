@@ -12,9 +12,13 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.next_grasp import (
+    PLANNER_FLOOR,
+    SAME_PLACE_M,
     MeasurementModel,
     Uncertainty,
     choose_next_grasp,
+    information_scores,
+    new_places,
     predicted_contacts,
     stop_reason,
 )
@@ -40,8 +44,10 @@ def test_two_grasp_trial_records_each_grasp(two_grasps):
     assert grasps[1]["chosen_by"]["strategy"] == "information"
     assert grasps[1]["chosen_by"]["alternatives"] >= 1
     chosen_by = grasps[1]["chosen_by"]
-    expected = np.multiply(chosen_by["scores_mm2"], chosen_by["planner_scores"])
-    assert expected[chosen_by["chosen"]] == expected.max() > 0.0
+    rated = np.array(chosen_by["planner_scores"])
+    expected = np.multiply(chosen_by["scores_mm2"], rated)[rated >= PLANNER_FLOOR * rated.max()]
+    assert expected.max() > 0.0
+    assert np.multiply(chosen_by["scores_mm2"], rated)[chosen_by["chosen"]] == expected.max()
     for grasp in grasps:
         assert grasp["executed"] and grasp["taxels_in_contact"] > 20
         assert grasp["pads_in_contact"] == ["left", "right"]
@@ -240,3 +246,69 @@ def test_strategies_choose_among_the_alternatives():
         for s in range(20)
     ]
     assert draws == again
+
+
+def test_new_places_keeps_the_taxels_away_from_the_touched_surface():
+    x = np.array([0.0, 0.004, 0.006, 0.02])
+    contacts = Contacts(
+        np.column_stack([x, np.zeros(4), np.zeros(4)]),
+        np.tile([1.0, 0.0, 0.0], (4, 1)),
+        ["left", "left", "right", "right"],
+        np.arange(4),
+    )
+    touched = np.array([[0.0, 0.003, 0.0], [0.5, 0.5, 0.5]])
+    # Distances 3.0, 5.0, 6.7 and 20.2 mm; the same place is within 5 mm.
+    assert SAME_PLACE_M == 0.005
+    fresh = new_places(contacts, touched)
+    assert fresh.positions[:, 0].tolist() == [0.006, 0.02]
+    assert fresh.pads.tolist() == ["right", "right"] and fresh.taxel_indices.tolist() == [2, 3]
+    assert new_places(contacts, np.zeros((0, 3))) is contacts
+
+
+def test_a_grasp_where_an_earlier_one_pressed_teaches_only_its_new_taxels():
+    stage = _box_stage()
+    gripper = GRIPPERS["pg70"]
+    again, beside, apart = _plan(0.0), _plan(0.012), _plan(-0.03)
+    plans = (again, beside, apart)
+    alone = information_scores(stage, plans, gripper, MODEL)
+    after = information_scores(stage, plans, gripper, MODEL, earlier=(again,))
+    assert min(alone) > 0.0
+    # The same grasp again reads only surface it read: nothing new.
+    assert after[0] == 0.0
+    # One that overlaps it counts the columns past it; one clear of it loses nothing.
+    assert 0.0 < after[1] < alone[1]
+    fresh = new_places(
+        predicted_contacts(apart, gripper, stage.completed),
+        predicted_contacts(again, gripper, stage.completed).positions,
+    )
+    assert len(fresh) == len(predicted_contacts(apart, gripper, stage.completed))
+    assert after[2] == pytest.approx(alone[2], rel=1e-9)
+    # So the choice leaves the repeat, which the planner rates best, for new surface.
+    planner = _Planner(
+        [replace(again, score=1.0), replace(beside, score=0.5), replace(apart, score=0.5)]
+    )
+    first = choose_next_grasp(
+        "information", planner, stage, gripper, MODEL, np.random.default_rng(0)
+    )
+    assert first.chosen == 0
+    second = choose_next_grasp(
+        "information", planner, stage, gripper, MODEL, np.random.default_rng(0), earlier=(again,)
+    )
+    assert second.chosen in (1, 2) and second.scores[0] == 0.0
+
+
+def test_information_chooses_among_the_grasps_the_planner_rates_near_its_best():
+    stage = _box_stage()
+    gripper = GRIPPERS["pg70"]
+    again, apart = _plan(0.0), _plan(-0.03)
+    # After a grasp at the middle, that grasp again teaches nothing and one beside it a
+    # lot; rated under half the planner's best, the one beside it is out of the choice.
+    assert PLANNER_FLOOR == 0.5
+    for rating, chosen in ((0.49, 0), (0.51, 1)):
+        planner = _Planner([replace(again, score=1.0), replace(apart, score=rating)])
+        choice = choose_next_grasp(
+            "information", planner, stage, gripper, MODEL, np.random.default_rng(0),
+            earlier=(again,),
+        )  # fmt: skip
+        assert choice.scores[0] == 0.0 < choice.scores[1]
+        assert choice.chosen == chosen
