@@ -76,6 +76,7 @@ def test_report_counts_gains_and_worse_grasps(tmp_path):
     assert (
         "1.00 mm more than random's (95 % bootstrap interval 1.00 to 1.00 mm over 1 pose)" in text
     )
+    assert "1.50 mm more than paper's (95 % bootstrap interval 1.50 to 1.50 mm over 1 pose)" in text
     assert "| random | 3 | 1 (33.3 %) | 0 (0.0 %) | 2 | 1 (50.0 %) |" in text
     assert "| information | 4 | 0 (0.0 %) | 1 (25.0 %) | 2 | 0 (0.0 %) |" in text
 

@@ -292,15 +292,16 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             f"Information's mean reduction is {informed / drawn:.2f}x random's "
             f"(target >= 1.3x): {verdict}.",
         ]
-    difference, low, high, poses = paired_gain_difference(hard, "information", "random")
-    if poses:
-        lines += [
-            "",
-            f"Paired by pose, information's second grasp reduced the deviation by "
-            f"{fmt(difference, 2)} mm more than random's (95 % bootstrap interval "
-            f"{fmt(low, 2)} to {fmt(high, 2)} mm over {poses} pose{'s' * (poses != 1)}): an "
-            "interval that holds 0 does not tell the two strategies apart.",
-        ]
+    for other in ("random", "paper"):
+        difference, low, high, poses = paired_gain_difference(hard, "information", other)
+        if poses:
+            lines += [
+                "",
+                f"Paired by pose, information's second grasp reduced the deviation by "
+                f"{fmt(difference, 2)} mm more than {other}'s (95 % bootstrap interval "
+                f"{fmt(low, 2)} to {fmt(high, 2)} mm over {poses} pose{'s' * (poses != 1)}): "
+                "an interval that holds 0 does not tell the two strategies apart.",
+            ]
     lines += [
         "",
         "## Grasps that made the estimate worse",
