@@ -45,9 +45,10 @@ def test_two_grasp_trial_records_each_grasp(two_grasps):
     assert grasps[1]["chosen_by"]["alternatives"] >= 1
     chosen_by = grasps[1]["chosen_by"]
     rated = np.array(chosen_by["planner_scores"])
-    expected = np.multiply(chosen_by["scores_mm2"], rated)[rated >= PLANNER_FLOOR * rated.max()]
-    assert expected.max() > 0.0
-    assert np.multiply(chosen_by["scores_mm2"], rated)[chosen_by["chosen"]] == expected.max()
+    expected = np.multiply(chosen_by["scores_mm2"], rated)
+    eligible = expected[rated >= PLANNER_FLOOR * rated.max()]
+    assert eligible.max() > 0.0
+    assert expected[chosen_by["chosen"]] == eligible.max()
     for grasp in grasps:
         assert grasp["executed"] and grasp["taxels_in_contact"] > 20
         assert grasp["pads_in_contact"] == ["left", "right"]
@@ -277,11 +278,9 @@ def test_a_grasp_where_an_earlier_one_pressed_teaches_only_its_new_taxels():
     assert after[0] == 0.0
     # One that overlaps it counts the columns past it; one clear of it loses nothing.
     assert 0.0 < after[1] < alone[1]
-    fresh = new_places(
-        predicted_contacts(apart, gripper, stage.completed),
-        predicted_contacts(again, gripper, stage.completed).positions,
-    )
-    assert len(fresh) == len(predicted_contacts(apart, gripper, stage.completed))
+    apart_taxels = predicted_contacts(apart, gripper, stage.completed)
+    fresh = new_places(apart_taxels, predicted_contacts(again, gripper, stage.completed).positions)
+    assert len(fresh) == len(apart_taxels)
     assert after[2] == pytest.approx(alone[2], rel=1e-9)
     # So the choice leaves the repeat, which the planner rates best, for new surface.
     planner = _Planner(
