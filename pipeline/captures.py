@@ -28,7 +28,7 @@ import numpy as np
 from .camera_file import read_camera
 from .errors import InputError
 from .formats import read_npy, require_file
-from .types import CameraIntrinsics
+from .types import CameraIntrinsics, DepthObservation
 
 #: A median depth above this many metres means the values are millimetres (a depth
 #: camera's range ends well before 20 m; 20 mm is closer than any of them sees).
@@ -60,6 +60,36 @@ class Capture:
     T_robot_camera: np.ndarray | None
     table_height_m: float | None
     source: str
+
+    def view(
+        self,
+        T_robot_camera: np.ndarray,
+        table_height_m: float | None,
+        frame_from_support: bool = False,
+    ) -> DepthObservation:
+        """The capture as the pipeline's observation, its camera at ``T_robot_camera``; a
+        capture without colour gets its depth as a grey image (near bright, far dark, no
+        return black)."""
+        rgb = self.rgb if self.rgb is not None else depth_as_grey(self.depth_m)
+        return DepthObservation(
+            depth_m=self.depth_m,
+            rgb=rgb,
+            intrinsics=self.intrinsics,
+            T_robot_camera=T_robot_camera,
+            table_height_m=table_height_m,
+            frame_from_support=frame_from_support,
+        )
+
+
+def depth_as_grey(depth_m: np.ndarray) -> np.ndarray:
+    """``(H, W, 3) uint8`` stand-in colour image of a depth image: near bright, far dark,
+    no return black."""
+    depth = np.asarray(depth_m, dtype=np.float64)
+    valid = np.isfinite(depth)
+    near, far = np.percentile(depth[valid], [1.0, 99.0]) if valid.any() else (0.0, 1.0)
+    level = np.clip((far - depth) / max(far - near, 1e-6), 0.0, 1.0) * 205.0 + 50.0
+    grey = np.where(valid, level, 0.0).astype(np.uint8)
+    return np.repeat(grey[..., None], 3, axis=2)
 
 
 def checked_depth(depth_m: np.ndarray, where: str) -> np.ndarray:

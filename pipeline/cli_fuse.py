@@ -14,14 +14,21 @@ from . import __version__
 from .cli import _add_config_options, _add_output_options, _add_units_option, _load
 from .cli_summary import selection_line, stage_summary
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
-from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError, StageFailure, estimate_failed
+from .errors import (
+    EXIT_ESTIMATE_FAILED,
+    EXIT_OK,
+    ConfigError,
+    InputError,
+    StageFailure,
+    estimate_failed,
+)
 from .outdir import staged_output
 
 if TYPE_CHECKING:
     from .config import Config
     from .formats import RecordedGrasps
     from .registry import StageRegistry
-    from .types import PointCloud, SymmetryPlane
+    from .types import DepthObservation, PointCloud, SymmetryPlane
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -30,7 +37,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "fuse",
         help="run the estimator on a recorded cloud and contacts",
         description="Fuse a recorded object cloud (robot frame, metres) with recorded taxel "
-        "contacts; writes result.json, config.toml and completed_stage{0,1,2}.ply to --out.",
+        "contacts, and the depth image the cloud came from when given; writes result.json, "
+        "config.toml and completed_stage{0,1,2}.ply to --out.",
     )
     parser.add_argument("--cloud", type=Path, required=True, help="PLY, PCD or NPY (N x 3)")
     parser.add_argument("--contacts", type=Path, required=True, help="contacts JSON (README)")
@@ -43,8 +51,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     start.add_argument(
         "--init",
         metavar="NAME",
-        help="initialiser to guess the plane with (the default, vc, needs a depth image that "
-        "recorded data lacks: use ps or pca)",
+        help="initialiser to guess the plane with (the default, vc, needs --depth; without "
+        "it use ps or pca)",
+    )
+    parser.add_argument(
+        "--depth",
+        type=Path,
+        metavar="FILE",
+        help="the depth image the cloud came from (16-bit PNG in mm or NPY in m) with a "
+        "camera.json that gives T_robot_camera: the estimator then checks its model against "
+        "the space the camera saw empty, as a trial does",
+    )
+    parser.add_argument(
+        "--camera",
+        type=Path,
+        metavar="FILE",
+        help="camera.json of --depth (default: beside it)",
     )
     _add_units_option(parser, "the cloud and the contacts (overrides the contacts' own)")
     _add_config_options(parser)
@@ -82,17 +104,39 @@ def run(args: argparse.Namespace) -> int:
     overrides = [f"initialiser.use={args.init}"] if args.init else []
     registry, config = _load(args, overrides, reads=FUSE_READS)
     plane = parse_plane(args.plane) if args.plane else None
-    inputs = [args.cloud, args.contacts, *args.config]
+    if args.camera and not args.depth:
+        raise ConfigError("--camera describes the camera of --depth, which is not given")
+    inputs = [args.cloud, args.contacts, *filter(None, (args.depth, args.camera)), *args.config]
     with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
         cloud = read_cloud(args.cloud, units=args.units or "m")
         recorded = read_contacts(args.contacts, units=args.units)
-        status = _fuse_into(staging, args, config, registry, cloud, recorded, plane)
+        view = read_view(args.depth, args.camera) if args.depth else None
+        status = _fuse_into(staging, args, config, registry, cloud, recorded, plane, view)
     print(f"wrote {args.out}/ (result.json, config.toml, completed_stage{{0,1,2}}.ply)")
     record_if_asked(args, args.out)
     if estimate_failed(status):
         print(f"symfuse: error: estimate {status} (see {args.out}/result.json)", file=sys.stderr)
         return EXIT_ESTIMATE_FAILED
     return EXIT_OK
+
+
+def read_view(depth: Path, camera: Path | None) -> DepthObservation:
+    """``--depth`` (with ``--camera``) as the estimator's view of the scene.
+
+    Raises:
+        InputError: unreadable, or its camera has no pose in the robot frame (the cloud and
+            the contacts are in that frame).
+    """
+    from .captures import read_depth_image
+
+    capture = read_depth_image(depth, camera, None)
+    if capture.T_robot_camera is None:
+        where = camera or depth.with_name("camera.json")
+        raise InputError(
+            f"{where}: no T_robot_camera: the cloud and the contacts are in the robot frame, "
+            "so the depth image's camera must be placed in it"
+        )
+    return capture.view(capture.T_robot_camera, capture.table_height_m)
 
 
 def _fuse_into(
@@ -103,6 +147,7 @@ def _fuse_into(
     cloud: PointCloud,
     recorded: RecordedGrasps,
     plane: SymmetryPlane | None,
+    view: DepthObservation | None,
 ) -> str:
     """Run the estimator and write its results into ``out``; return the final status.
 
@@ -123,13 +168,17 @@ def _fuse_into(
     document = {
         "symfuse": __version__,
         "command": "fuse",
-        "inputs": {"cloud": str(args.cloud), "contacts": str(args.contacts)},
+        "inputs": {
+            "cloud": str(args.cloud),
+            "contacts": str(args.contacts),
+            **({"depth": str(args.depth)} if view is not None else {}),
+        },
         "points": len(cloud),
         "grasps": [len(c) for c in recorded.contacts],
         "config": config.to_dict(),
     }
     try:
-        run = fuse(config, registry, cloud, recorded.contacts, recorded.plans, plane)
+        run = fuse(config, registry, cloud, recorded.contacts, recorded.plans, plane, view)
     except StageFailure as exc:
         document.update(status="failed", reason=str(exc))
         write_json(out / "result.json", document)

@@ -46,25 +46,27 @@ def initialise_from_recording(
     cloud: PointCloud,
     grasps: Sequence[Contacts],
     plans: Sequence[GraspPlan | None],
+    view: DepthObservation | None = None,
 ) -> SymmetryInit:
-    """Run the configured initialiser on a bare cloud plus the first grasp's contacts.
+    """Run the configured initialiser on a recorded cloud (and ``view``, the depth image it
+    came from, when there is one) plus the first grasp's contacts.
 
     Raises:
-        ConfigError: the initialiser needs a depth image, which a recording does not have.
+        ConfigError: the initialiser needs a depth image, and there is none.
     """
     name = config.choices["initialiser"]
     initialiser = config.create(registry, "initialiser")
-    if initialiser.needs_observation:
+    if initialiser.needs_observation and view is None:
         usable = [
             n
             for n in registry.names("initialiser")
             if not registry.get("initialiser", n).cls.needs_observation
         ]
         raise ConfigError(
-            f"initialiser '{name}' needs a depth image, which recorded data does not have; "
-            f"give --plane NX,NY,D or --init one of: {', '.join(usable)}"
+            f"initialiser '{name}' needs the depth image the cloud came from; give --depth "
+            f"FILE, --plane NX,NY,D or --init one of: {', '.join(usable)}"
         )
-    proposal = initialiser.propose(cloud, None)
+    proposal = initialiser.propose(cloud, view)
     return initialiser.refine(proposal, cloud, plans[0] if plans else None, grasps[0])
 
 
@@ -127,15 +129,19 @@ def fuse(
     grasps: Sequence[Contacts],
     plans: Sequence[GraspPlan | None] = (),
     plane: SymmetryPlane | None = None,
+    view: DepthObservation | None = None,
 ) -> FusionRun:
     """Fuse a recorded cloud (frame R) with recorded contacts.
 
     Args:
         plane: the initial symmetry plane; when None the configured initialiser guesses it.
         plans: the recorded grasp plan of each grasp, where known (PS uses it for the bias).
+        view: the depth image the cloud came from, its camera pose in frame R, when
+            recorded: initialisers that need it can run, and the estimator checks its model
+            against the space the camera saw empty, as in a trial.
     """
     if plane is not None:
         init = SymmetryInit(plane=plane, bias=Bias(pivot_m=np.mean(cloud.points, axis=0)))
     else:
-        init = initialise_from_recording(config, registry, cloud, grasps, plans)
-    return FusionRun(init=init, result=estimate(config, registry, cloud, init, grasps))
+        init = initialise_from_recording(config, registry, cloud, grasps, plans, view)
+    return FusionRun(init=init, result=estimate(config, registry, cloud, init, grasps, view))

@@ -17,17 +17,6 @@ from pipeline.stages import SensorSource, World
 from pipeline.types import DepthObservation
 
 
-def depth_as_grey(depth_m: np.ndarray) -> np.ndarray:
-    """``(H, W, 3) uint8`` stand-in colour image of a depth image: near bright, far dark,
-    no return black."""
-    depth = np.asarray(depth_m, dtype=np.float64)
-    valid = np.isfinite(depth)
-    near, far = np.percentile(depth[valid], [1.0, 99.0]) if valid.any() else (0.0, 1.0)
-    level = np.clip((far - depth) / max(far - near, 1e-6), 0.0, 1.0) * 205.0 + 50.0
-    grey = np.where(valid, level, 0.0).astype(np.uint8)
-    return np.repeat(grey[..., None], 3, axis=2)
-
-
 class Recorded(SensorSource):
     """A recorded capture: organised PCD, depth PNG/NPY + camera.json, or a ROS 1/2 bag.
 
@@ -99,13 +88,8 @@ class Recorded(SensorSource):
         capture = self.read()
         given = capture.T_robot_camera is not None
         T_robot_camera = capture.T_robot_camera if given else self.support_frame(capture)
-        return DepthObservation(
-            depth_m=capture.depth_m,
-            rgb=capture.rgb if capture.rgb is not None else depth_as_grey(capture.depth_m),
-            intrinsics=capture.intrinsics,
-            T_robot_camera=T_robot_camera,
-            table_height_m=capture.table_height_m if given else 0.0,
-            frame_from_support=not given,
+        return capture.view(
+            T_robot_camera, capture.table_height_m if given else 0.0, frame_from_support=not given
         )
 
 

@@ -139,7 +139,9 @@ def test_initialiser_by_name_and_one_that_needs_a_depth_image(recording, tmp_pat
         tmp_path / "vc",
     )
     assert code == 2
-    assert err.startswith("symfuse: error: initialiser 'vc' needs a depth image")
+    assert err.startswith(
+        "symfuse: error: initialiser 'vc' needs the depth image the cloud came from; give --depth"
+    )
     assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / "vc").exists()  # bad config: nothing left behind
 
@@ -265,3 +267,24 @@ def test_contacts_of_another_object_exit_3_as_inconsistent(tmp_path, run):
     assert not document["stages"][2]["consistency"]["consistent"]
     assert "taxels" in document["stages"][2]["consistency"]["reason"]
     assert "NO" in out
+
+
+def test_a_depth_image_needs_its_camera_placed_in_the_robot_frame(recording, tmp_path, run):
+    folder, _, plane = recording
+    np.save(tmp_path / "depth.npy", np.full((4, 6), 0.8, dtype=np.float32))
+    intrinsics = {"width": 6, "height": 4, "fx": 5.0, "fy": 5.0, "cx": 2.5, "cy": 1.5}
+    write_json(tmp_path / "camera.json", {"intrinsics": intrinsics})
+    common = ["fuse", "--cloud", folder / "cloud.ply", "--contacts", folder / "contacts.json",
+              f"--plane={plane}"]  # fmt: skip
+    code, _, err = run(*common, "--depth", tmp_path / "depth.npy", "--out", tmp_path / "a")
+    assert code == 2
+    assert err.strip() == (
+        f"symfuse: error: {tmp_path / 'camera.json'}: no T_robot_camera: the cloud and the "
+        "contacts are in the robot frame, so the depth image's camera must be placed in it"
+    )
+    assert not (tmp_path / "a").exists()
+    code, _, err = run(*common, "--camera", tmp_path / "camera.json", "--out", tmp_path / "b")
+    assert code == 2
+    assert err.strip() == (
+        "symfuse: error: --camera describes the camera of --depth, which is not given"
+    )

@@ -311,3 +311,50 @@ def test_information_chooses_among_the_grasps_the_planner_rates_near_its_best():
         )  # fmt: skip
         assert choice.scores[0] == 0.0 < choice.scores[1]
         assert choice.chosen == chosen
+
+
+@pytest.fixture(scope="module")
+def spray_head_twice(tmp_path_factory):
+    """The spray bottle seen from 20 deg, two grasps. Fusing them takes the camera's view:
+    the first grasp's fusion is set aside for a hypothesis (§9) and the second's for the
+    earlier shape (§11)."""
+    out = tmp_path_factory.mktemp("spray") / "trial"
+    code = main(
+        ["trial", "--object", "spray_bottle", "--init", "vc", "--yaw", "20", "--grasps", "2",
+         "--set", "trial.pictures=false", "--out", str(out)]
+    )  # fmt: skip
+    assert code == 0
+    return out
+
+
+def test_fuse_with_the_depth_image_reproduces_an_estimate_that_needed_the_camera(
+    spray_head_twice, tmp_path
+):
+    document = json.loads((spray_head_twice / "result.json").read_text())
+    trial = document["stages"]
+    assert any(stage.get("hypothesis") for stage in trial)
+    init = document["init"]
+    plane = ",".join(repr(v) for v in (*init["plane"]["normal"], init["plane"]["offset"]))
+    common = [
+        "fuse",
+        "--cloud", str(spray_head_twice / "cloud.ply"),
+        "--contacts", str(spray_head_twice / "contacts.json"),
+        "--config", str(spray_head_twice / "config.toml"),
+        "--plane", plane,
+    ]  # fmt: skip
+    depth = str(spray_head_twice / "depth.npy")
+    assert main([*common, "--depth", depth, "--out", str(tmp_path / "seen")]) == 0
+    seen = json.loads((tmp_path / "seen" / "result.json").read_text())
+    assert seen["inputs"]["depth"] == depth
+    assert seen["selected_stage"] == document["selected_stage"]
+    for a, b in zip(trial, seen["stages"], strict=True):
+        assert a["status"] == b["status"] and a.get("hypothesis") == b.get("hypothesis")
+        assert a["plane"]["normal"] == pytest.approx(b["plane"]["normal"], abs=1e-9)
+        assert a["plane"]["offset"] == pytest.approx(b["plane"]["offset"], abs=1e-9)
+        assert a["bias"]["translation"] == pytest.approx(b["bias"]["translation"], abs=1e-9)
+        assert np.allclose(a["covariance"], b["covariance"], atol=1e-12)
+    # Without the image only the taxels are checked, and the fused model stands.
+    assert main([*common, "--out", str(tmp_path / "blind")]) == 0
+    blind = json.loads((tmp_path / "blind" / "result.json").read_text())["stages"]
+    assert all(stage["consistency"]["checks"] == ["taxels"] for stage in blind)
+    assert not any(stage.get("hypothesis") for stage in blind)
