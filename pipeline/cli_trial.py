@@ -153,6 +153,7 @@ def grasps_summary(document: dict) -> str:
             [
                 entry["grasp"],
                 entry["chosen_by"]["strategy"],
+                entry["gripper"],
                 " ".join(entry["pads_in_contact"]),
                 entry["taxels_in_contact"],
                 entry["selected_stage"],
@@ -168,6 +169,7 @@ def grasps_summary(document: dict) -> str:
     header = [
         "grasp",
         "chosen by",
+        "hand",
         "pads",
         "taxels",
         "stage",

@@ -2,11 +2,13 @@
 (``trial.next_grasp``; docs/method.md §11).
 
 After each grasp the estimator has a completed model (its selected stage: points, plane,
-bias) and the covariance of the plane and bias. The hand's planner is asked for every
-feasible grasp on that model (:meth:`pipeline.stages.GraspPlanner.alternatives`), and one
-strategy picks among them:
+bias) and the covariance of the plane and bias. The planner of each hand the trial may use
+(:class:`NextHand`: the first grasp's hand, or every hand of the world when it changes
+hands) is asked for every feasible grasp on that model
+(:meth:`pipeline.stages.GraspPlanner.alternatives`), and one strategy picks among them:
 
-* ``paper``: the first grasp's rule again, the planner's own best plan on the current model;
+* ``paper``: the first grasp's rule again, the best-scored of the planners' own plans on
+  the current model;
 * ``random``: a feasible alternative drawn uniformly (seeded by the trial);
 * ``information``: the alternative with the largest expected reduction of the hidden side's
   uncertainty relative to the visible side, the object's shape
@@ -17,7 +19,8 @@ strategy picks among them:
   estimator's own measurement model, weighted by the planner's score of the grasp (in
   [0, 1]: how squarely its pads meet the sides and how far it is from tipping the object),
   so that the expected gain counts only as much as the grasp is likely to deliver it, among
-  the grasps the planner scores at least half its best (:data:`PLANNER_FLOOR`).
+  the grasps scored at least half the best (:data:`PLANNER_FLOOR`). The planners score on
+  one scale, as when the first grasp's hand is chosen (:mod:`pipeline.hand_choice`).
 
 The stop rule (:func:`stop_reason`) ends the trial once the plane offset and the hidden side
 are known well enough, or when the grasps run out.
@@ -26,6 +29,7 @@ are known well enough, or when the grasps run out.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -257,7 +261,7 @@ def new_places(contacts: Contacts, touched_m: np.ndarray) -> Contacts:
 def information_scores(
     stage: StageEstimate,
     plans: tuple[GraspPlan, ...],
-    gripper: GripperSpec,
+    grippers: Mapping[str, GripperSpec],
     model: MeasurementModel,
     earlier: tuple[GraspPlan, ...] = (),
 ) -> list[float]:
@@ -265,9 +269,10 @@ def information_scores(
     relative to the visible side (m^2, the shape; the bias, which the next release forgets,
     is a nuisance) if its predicted taxels on new surface were fused into ``stage`` (module
     docstring), from the covariance the estimator will fuse them with: ``stage``'s plus the
-    re-grasp noise. The surface the ``earlier`` plans (the grasps fused so far) reach on the
-    current model is not new (:func:`new_places`). All zero when ``stage`` has no finite
-    covariance (the planner's best is then taken)."""
+    re-grasp noise. Each plan's taxels are those of its own hand, ``grippers[plan.gripper]``.
+    The surface the ``earlier`` plans (the grasps fused so far) reach on the current model is
+    not new (:func:`new_places`). All zero when ``stage`` has no finite covariance (the
+    planner's best is then taken)."""
     from .estimation.correspondences import PointIndex
     from .estimation.problem import grasp_contacts
     from .estimation.uncertainty import (
@@ -283,11 +288,15 @@ def information_scores(
     gram = shape_gram(points, g, pivot)
     index = PointIndex(points)
     variance = np.full(len(points), model.point_std_m**2)
-    touched = [predicted_contacts(plan, gripper, stage.completed).positions for plan in earlier]
+    touched = [
+        predicted_contacts(plan, grippers[plan.gripper], stage.completed).positions
+        for plan in earlier
+    ]
     touched_m = np.concatenate(touched) if touched else np.zeros((0, 3))
     scores = []
     for plan in plans:
-        contacts = new_places(predicted_contacts(plan, gripper, stage.completed), touched_m)
+        predicted = predicted_contacts(plan, grippers[plan.gripper], stage.completed)
+        contacts = new_places(predicted, touched_m)
         if len(contacts) == 0:
             scores.append(0.0)
             continue
@@ -308,10 +317,10 @@ class NextGraspChoice:
     Attributes:
         plan: the plan to execute (refused when the planner found none).
         strategy: the strategy that chose it.
-        alternatives: the feasible plans it chose among.
+        alternatives: the feasible plans it chose among (every hand's).
         scores: the information score of each alternative (m^2), ``information`` only;
             the choice maximises it times the alternative's planner score among the
-            alternatives the planner scores at least :data:`PLANNER_FLOOR` of its best.
+            alternatives scored at least :data:`PLANNER_FLOOR` of the best.
         chosen: index of ``plan`` among ``alternatives`` (None when refused).
     """
 
@@ -328,6 +337,7 @@ class NextGraspChoice:
             "chosen": self.chosen,
             "scores_mm2": [1e6 * s for s in self.scores],
             "planner_scores": [_planner_score(plan) for plan in self.alternatives],
+            "grippers": [plan.gripper for plan in self.alternatives],
         }
 
 
@@ -336,30 +346,43 @@ def _planner_score(plan: GraspPlan) -> float:
     return 1.0 if math.isnan(plan.score) else float(plan.score)
 
 
+@dataclass(frozen=True)
+class NextHand:
+    """A hand a later grasp may be made with, and the planner that plans for it."""
+
+    planner: Any  # a pipeline.stages.GraspPlanner
+    gripper: GripperSpec
+
+
 def choose_next_grasp(
     strategy: str,
-    planner: Any,
+    hands: Sequence[NextHand],
     stage: StageEstimate,
-    gripper: GripperSpec,
     model: MeasurementModel,
     rng: np.random.Generator,
     viewpoint_m: np.ndarray | None = None,
     earlier: tuple[GraspPlan, ...] = (),
 ) -> NextGraspChoice:
-    """Plan the next grasp on ``stage``'s model with ``planner`` (a
-    :class:`pipeline.stages.GraspPlanner`) and pick it by ``strategy``; ``viewpoint_m`` is
-    the camera's position when the object was seen (m, frame R), ``earlier`` the plans of
-    the grasps fused so far."""
+    """Plan the next grasp on ``stage``'s model with each of ``hands`` and pick it by
+    ``strategy``; ``viewpoint_m`` is the camera's position when the object was seen (m,
+    frame R), ``earlier`` the plans of the grasps fused so far (each names its hand, which
+    is one of ``hands``)."""
     cloud, proposal = model_for_planning(stage, viewpoint_m)
     if strategy == "paper":
-        return NextGraspChoice(planner.plan(cloud, proposal, gripper), strategy)
-    alternatives = tuple(planner.alternatives(cloud, proposal, gripper))
+        plans = [hand.planner.plan(cloud, proposal, hand.gripper) for hand in hands]
+        feasible = [plan for plan in plans if plan.status == "ok"]
+        return NextGraspChoice(max(feasible, key=_planner_score, default=plans[0]), strategy)
+    alternatives = tuple(
+        plan for hand in hands for plan in hand.planner.alternatives(cloud, proposal, hand.gripper)
+    )
     if not alternatives:
-        return NextGraspChoice(planner.plan(cloud, proposal, gripper), strategy)
+        first = hands[0]
+        return NextGraspChoice(first.planner.plan(cloud, proposal, first.gripper), strategy)
     if strategy == "random":
         chosen = int(rng.integers(len(alternatives)))
         return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
-    scores = tuple(information_scores(stage, alternatives, gripper, model, earlier))
+    grippers = {hand.gripper.name: hand.gripper for hand in hands}
+    scores = tuple(information_scores(stage, alternatives, grippers, model, earlier))
     rated = np.array([_planner_score(plan) for plan in alternatives])
     expected = np.where(rated >= PLANNER_FLOOR * rated.max(), np.multiply(scores, rated), -1.0)
     chosen = int(np.argmax(expected))

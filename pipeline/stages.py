@@ -26,6 +26,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from .errors import ConfigError
 from .params import NoParams, build, check_bounds
 from .types import (
     CameraImage,
@@ -84,6 +85,7 @@ class World(StageImplementation):
         try:
             ...sense, world.add_hand(name), world.execute_grasp(plan), world.taxels(...)
             ...world.release(), world.execute_grasp(another_plan), ...
+            ...world.release(), world.remove_hand(), world.add_hand(other), ...
         finally:
             world.close()
 
@@ -98,6 +100,10 @@ class World(StageImplementation):
     #: Names of the hands :meth:`add_hand` accepts (``trial.gripper`` is checked against
     #: them, and hand choice asks every planner naming one of them).
     hands: ClassVar[tuple[str, ...]] = ()
+    #: Whether :meth:`remove_hand` can take the hand out between grasps, so that a later
+    #: grasp of a trial with ``trial.gripper = "auto"`` may be made by another hand (a
+    #: tool change). A world that cannot keeps the first grasp's hand throughout.
+    changes_hands: ClassVar[bool] = False
 
     table_height_m: float
     rng: np.random.Generator
@@ -136,6 +142,16 @@ class World(StageImplementation):
         Raises:
             ConfigError: unknown hand, or the world has a hand already.
         """
+
+    def remove_hand(self) -> None:
+        """Take the hand out of the scene, after :meth:`release`, so that :meth:`add_hand`
+        can bring in another (a tool change). Worlds that set :attr:`changes_hands`
+        implement it.
+
+        Raises:
+            ConfigError: the world cannot change its hand.
+        """
+        raise ConfigError(f"world '{self.name}' cannot change its hand")
 
     @abstractmethod
     def object_pose(self) -> ObjectPose:

@@ -53,6 +53,7 @@ from .formats import (
 from .hand_choice import HandChoice, choice_to_json, choose_grasp, create_planner
 from .next_grasp import (
     MeasurementModel,
+    NextHand,
     Uncertainty,
     choose_next_grasp,
     stop_reason,
@@ -423,8 +424,7 @@ def _grasp_and_fuse(
     """
     settings = config.trial
     until_m = 1e-3 * settings.until_std_mm if settings.until_std_mm > 0 else None
-    planner = create_planner(config, registry, choice.answer.planner)
-    gripper = world.gripper_spec(choice.plan.gripper)
+    hands = next_hands(config, registry, world, choice)
     model = measurement_model(config, registry)
     # The next-grasp draws have their own stream: the world's noise does not depend on them.
     rng = np.random.default_rng([settings.seed, 15])
@@ -439,9 +439,8 @@ def _grasp_and_fuse(
             with timer.phase("planner"):
                 following = choose_next_grasp(
                     settings.next_grasp,
-                    planner,
+                    tuple(hands.values()),
                     fused.result.selected,
-                    gripper,
                     model,
                     rng,
                     cloud.viewpoint_m,
@@ -455,6 +454,9 @@ def _grasp_and_fuse(
         with timer.phase("grasp"):
             if k > 0:
                 released = world.release()
+                if plan.gripper != world.gripper.name:
+                    world.remove_hand()
+                    world.add_hand(plan.gripper)
             outcome = world.execute_grasp(plan)
         shift_m, tilt_rad = object_motion(obj.mesh, outcome.object_before, outcome.object_after)
         executed = {
@@ -506,7 +508,14 @@ def _grasp_and_fuse(
         fused = Fused(init, result, truth, evaluated, outcome.object_after, tuple(grasps))
         document["grasps"].append(
             grasp_to_json(
-                k, plan, choice.answer.planner, chosen_by, executed, contacts, fused, known
+                k,
+                plan,
+                hands[plan.gripper].planner.name,
+                chosen_by,
+                executed,
+                contacts,
+                fused,
+                known,
             )
         )
         document["object_pose_after"] = pose_to_json(outcome.object_after)
@@ -516,6 +525,27 @@ def _grasp_and_fuse(
     document["taxels_in_contact"] = sum(len(c) for c in grasps)
     document["stop_reason"] = stop
     return fused
+
+
+def next_hands(
+    config: Config, registry: StageRegistry, world: World, choice: HandChoice
+) -> dict[str, NextHand]:
+    """The hands later grasps may be made with, by name, each with one planner.
+
+    With ``trial.gripper = "auto"`` in a world that changes hands
+    (:attr:`~pipeline.stages.World.changes_hands`), every hand a planner answered for when
+    the first grasp's hand was chosen: the next-grasp strategy then chooses the hand too
+    (a tool change, docs/method.md §11). Otherwise the first grasp's hand alone. The first
+    grasp's hand keeps its planner; another hand takes the first planner that answered
+    for it.
+    """
+    answers = (choice.answer, *choice.answers) if world.changes_hands else (choice.answer,)
+    hands: dict[str, NextHand] = {}
+    for answer in answers:
+        if answer.gripper not in hands:
+            planner = create_planner(config, registry, answer.planner)
+            hands[answer.gripper] = NextHand(planner, world.gripper_spec(answer.gripper))
+    return hands
 
 
 def attempt_to_json(

@@ -49,6 +49,7 @@ class Pybullet(World):
     #: The hands in ``robots/`` (:data:`pipeline.sim.hands.HAND_MODELS`, which imports
     #: PyBullet; a test keeps the two equal).
     hands = ("pg70", "sdh")
+    changes_hands = True
 
     @dataclass(frozen=True)
     class Params:
@@ -124,6 +125,10 @@ class Pybullet(World):
         self.sim.add_hand(name)
         self.gripper = self.sim.gripper
         self._opening_m = self.gripper.max_aperture_m
+
+    def remove_hand(self) -> None:
+        self.sim.remove_hand()
+        self.gripper = None
 
     def object_pose(self) -> ObjectPose:
         return self.sim.object_pose()

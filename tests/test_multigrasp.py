@@ -15,6 +15,7 @@ from pipeline.next_grasp import (
     PLANNER_FLOOR,
     SAME_PLACE_M,
     MeasurementModel,
+    NextHand,
     Uncertainty,
     choose_next_grasp,
     information_scores,
@@ -216,10 +217,12 @@ def test_strategies_choose_among_the_alternatives():
     plans = [_plan(0.3), far, _plan(0.04)]
     planner = _Planner(plans)
     gripper = GRIPPERS["pg70"]
-    paper = choose_next_grasp("paper", planner, stage, gripper, MODEL, np.random.default_rng(0))
+    paper = choose_next_grasp(
+        "paper", [NextHand(planner, gripper)], stage, MODEL, np.random.default_rng(0)
+    )
     assert paper.plan is plans[0] and paper.alternatives == ()
     informed = choose_next_grasp(
-        "information", planner, stage, gripper, MODEL, np.random.default_rng(0)
+        "information", [NextHand(planner, gripper)], stage, MODEL, np.random.default_rng(0)
     )
     assert informed.scores[0] == 0.0
     assert informed.chosen == int(np.argmax(informed.scores)) != 0
@@ -233,17 +236,25 @@ def test_strategies_choose_among_the_alternatives():
         weighed[best] = replace(plans[best], score=factor * ratio)
         weighed[other] = replace(plans[other], score=1.0)
         choice = choose_next_grasp(
-            "information", _Planner(weighed), stage, gripper, MODEL, np.random.default_rng(0)
+            "information",
+            [NextHand(_Planner(weighed), gripper)],
+            stage,
+            MODEL,
+            np.random.default_rng(0),
         )
         assert choice.scores == informed.scores and choice.chosen == expected
         assert choice.to_json()["planner_scores"][other] == 1.0
     draws = [
-        choose_next_grasp("random", planner, stage, gripper, MODEL, np.random.default_rng(s)).chosen
+        choose_next_grasp(
+            "random", [NextHand(planner, gripper)], stage, MODEL, np.random.default_rng(s)
+        ).chosen
         for s in range(20)
     ]
     assert set(draws) == {0, 1, 2}
     again = [
-        choose_next_grasp("random", planner, stage, gripper, MODEL, np.random.default_rng(s)).chosen
+        choose_next_grasp(
+            "random", [NextHand(planner, gripper)], stage, MODEL, np.random.default_rng(s)
+        ).chosen
         for s in range(20)
     ]
     assert draws == again
@@ -271,8 +282,8 @@ def test_a_grasp_where_an_earlier_one_pressed_teaches_only_its_new_taxels():
     gripper = GRIPPERS["pg70"]
     again, beside, apart = _plan(0.0), _plan(0.012), _plan(-0.03)
     plans = (again, beside, apart)
-    alone = information_scores(stage, plans, gripper, MODEL)
-    after = information_scores(stage, plans, gripper, MODEL, earlier=(again,))
+    alone = information_scores(stage, plans, {"pg70": gripper}, MODEL)
+    after = information_scores(stage, plans, {"pg70": gripper}, MODEL, earlier=(again,))
     assert min(alone) > 0.0
     # The same grasp again reads only surface it read: nothing new.
     assert after[0] == 0.0
@@ -287,11 +298,16 @@ def test_a_grasp_where_an_earlier_one_pressed_teaches_only_its_new_taxels():
         [replace(again, score=1.0), replace(beside, score=0.5), replace(apart, score=0.5)]
     )
     first = choose_next_grasp(
-        "information", planner, stage, gripper, MODEL, np.random.default_rng(0)
+        "information", [NextHand(planner, gripper)], stage, MODEL, np.random.default_rng(0)
     )
     assert first.chosen == 0
     second = choose_next_grasp(
-        "information", planner, stage, gripper, MODEL, np.random.default_rng(0), earlier=(again,)
+        "information",
+        [NextHand(planner, gripper)],
+        stage,
+        MODEL,
+        np.random.default_rng(0),
+        earlier=(again,),
     )
     assert second.chosen in (1, 2) and second.scores[0] == 0.0
 
@@ -306,18 +322,83 @@ def test_information_chooses_among_the_grasps_the_planner_rates_near_its_best():
     for rating, chosen in ((0.49, 0), (0.51, 1)):
         planner = _Planner([replace(again, score=1.0), replace(apart, score=rating)])
         choice = choose_next_grasp(
-            "information", planner, stage, gripper, MODEL, np.random.default_rng(0),
+            "information", [NextHand(planner, gripper)], stage, MODEL, np.random.default_rng(0),
             earlier=(again,),
         )  # fmt: skip
         assert choice.scores[0] == 0.0 < choice.scores[1]
         assert choice.chosen == chosen
 
 
+def test_the_next_grasp_is_chosen_among_every_hand_and_scored_with_its_own_pads():
+    stage = _box_stage()
+    big = GRIPPERS["pg70"]
+    # A second parallel hand whose pads have half the rows: it reads less of the faces.
+    pads = tuple(replace(pad, rows=pad.rows // 2) for pad in big.pads)
+    small = replace(big, name="short-pads", pads=pads)
+    here, apart = _plan(0.0), _plan(-0.03, gripper="short-pads")
+    hands = [
+        NextHand(_Planner([replace(here, score=0.6)]), big),
+        NextHand(_Planner([replace(apart, score=0.8)]), small),
+    ]
+    grippers = {"pg70": big, "short-pads": small}
+    rng = np.random.default_rng(0)
+    # paper: the best-scored plan of any hand, as for the first grasp.
+    assert choose_next_grasp("paper", hands, stage, MODEL, rng).plan.gripper == "short-pads"
+    informed = choose_next_grasp("information", hands, stage, MODEL, rng)
+    assert [p.gripper for p in informed.alternatives] == ["pg70", "short-pads"]
+    assert informed.to_json()["grippers"] == ["pg70", "short-pads"]
+    # Each alternative is scored with its own hand's taxels.
+    assert informed.scores == pytest.approx(
+        information_scores(stage, informed.alternatives, grippers, MODEL), rel=1e-12
+    )
+    same_place = replace(apart, gripper="pg70")
+    alone = information_scores(stage, (apart, same_place), grippers, MODEL)
+    assert 0.0 < alone[0] < alone[1]
+    # An earlier grasp by one hand makes its place old for every hand: the short pads
+    # there read nothing the PG-70's did not.
+    after = information_scores(stage, (apart,), grippers, MODEL, earlier=(same_place,))
+    assert after == [0.0]
+    draws = {
+        choose_next_grasp("random", hands, stage, MODEL, np.random.default_rng(s)).plan.gripper
+        for s in range(20)
+    }
+    assert draws == {"pg70", "short-pads"}
+
+
+def test_later_grasps_change_hands_only_in_a_world_that_can_after_an_auto_choice():
+    from pipeline.config import load_config
+    from pipeline.hand_choice import HandChoice, PlannerAnswer
+    from pipeline.registry import load_registry
+    from pipeline.testing import PARALLEL_HAND, AnalyticWorld
+    from pipeline.trial import next_hands
+    from plugins.pybullet_world import Pybullet
+
+    registry = load_registry()
+    config = load_config(registry)
+    answers = (
+        PlannerAnswer("pg70", "top-parallel", _plan(0.0)),
+        PlannerAnswer("sdh", "top-three-finger", _plan(0.0, gripper="sdh")),
+    )
+    auto = next_hands(config, registry, Pybullet(), HandChoice(answers[1], "", answers))
+    # The first grasp's hand first, each hand with the planner that answered for it.
+    assert list(auto) == ["sdh", "pg70"]
+    assert [hand.planner.name for hand in auto.values()] == ["top-three-finger", "top-parallel"]
+    assert auto["pg70"].gripper is GRIPPERS["pg70"]
+    named = HandChoice(answers[0], "trial.gripper = 'pg70'", answers[:1])
+    assert list(next_hands(config, registry, Pybullet(), named)) == ["pg70"]
+    parallel = PlannerAnswer(PARALLEL_HAND, "top-parallel", _plan(0.0, gripper=PARALLEL_HAND))
+    fixed = next_hands(
+        config, registry, AnalyticWorld(), HandChoice(parallel, "", (parallel, answers[1]))
+    )
+    assert list(fixed) == [PARALLEL_HAND]
+
+
 @pytest.fixture(scope="module")
 def spray_head_twice(tmp_path_factory):
-    """The spray bottle seen from 20 deg, two grasps. Fusing them takes the camera's view:
-    the first grasp's fusion is set aside for a hypothesis (§9) and the second's for the
-    earlier shape (§11)."""
+    """The spray bottle seen from 20 deg, two grasps: the PG-70 holds it only at its head,
+    where its second grasp would read the first's surface again; the SDH-2 reaches the
+    body. Fusing them takes the camera's view: the first grasp's fusion is set aside for a
+    hypothesis (§9) and the second's for the earlier shape (§11)."""
     out = tmp_path_factory.mktemp("spray") / "trial"
     code = main(
         ["trial", "--object", "spray_bottle", "--init", "vc", "--yaw", "20", "--grasps", "2",
@@ -325,6 +406,17 @@ def spray_head_twice(tmp_path_factory):
     )  # fmt: skip
     assert code == 0
     return out
+
+
+def test_a_trial_changes_hands_when_another_reaches_new_surface(spray_head_twice):
+    grasps = json.loads((spray_head_twice / "result.json").read_text())["grasps"]
+    assert [g["gripper"] for g in grasps] == ["pg70", "sdh"]
+    assert set(grasps[1]["chosen_by"]["grippers"]) == {"pg70", "sdh"}
+    assert grasps[1]["planner"] == "top-three-finger"
+    assert grasps[1]["executed"] and grasps[1]["taxels_in_contact"] > 20
+    assert set(grasps[1]["pads_in_contact"]) <= {"f1_distal", "f2_distal", "thumb_distal"}
+    contacts = json.loads((spray_head_twice / "contacts.json").read_text())["grasps"]
+    assert [g["plan"]["gripper"] for g in contacts] == ["pg70", "sdh"]
 
 
 def test_fuse_with_the_depth_image_reproduces_an_estimate_that_needed_the_camera(

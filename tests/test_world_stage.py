@@ -84,3 +84,35 @@ def test_release_withdraws_the_hand_and_a_second_grasp_holds_the_object_again():
         )
         again = world.taxels(0.0015, 0.001)
         assert np.sum(again.gaps_m <= 0.001) >= 4
+
+
+def test_a_released_hand_can_be_changed_for_another():
+    import pybullet
+
+    assert Pybullet.changes_hands
+    with Pybullet.create(_box(), "pg70", x=0.5, y=0.0, seed=1) as world:
+        client = world.sim.client
+        bodies = pybullet.getNumBodies(physicsClientId=client)
+        assert world.execute_grasp(_top_grasp(0.5, 0.0, 0.0)).executed
+        world.release()
+        world.remove_hand()
+        assert world.gripper is None
+        with pytest.raises(ConfigError, match="no hand"):
+            world.taxels(0.0015, 0.005)
+        world.add_hand("sdh")
+        # The PG-70 left the simulation whole: the SDH-2 took its place.
+        assert pybullet.getNumBodies(physicsClientId=client) == bodies
+        assert world.gripper.name == "sdh"
+        taxels = world.taxels(0.0015, 0.005)
+        assert set(taxels.pads) == {pad.name for pad in world.gripper.pads}
+        assert np.min(taxels.positions[:, 2]) > 0.5  # parked far above the object
+
+
+def test_a_world_that_cannot_change_hands_says_so():
+    from pipeline.testing import PARALLEL_HAND, AnalyticWorld
+
+    assert not AnalyticWorld.changes_hands
+    world = AnalyticWorld()
+    world.add_hand(PARALLEL_HAND)
+    with pytest.raises(ConfigError, match="world 'analytic' cannot change its hand"):
+        world.remove_hand()

@@ -294,6 +294,11 @@ class Hand:
         inertial = pb.getDynamicsInfo(body_id, -1, physicsClientId=client)
         self._T_com_palm = np.linalg.inv(_transform(np.array(inertial[3]), np.array(inertial[4])))
 
+    def remove(self) -> None:
+        """Take the hand out of its client: its holding constraint and its body."""
+        pb.removeConstraint(self._constraint_id, physicsClientId=self.client)
+        pb.removeBody(self.body_id, physicsClientId=self.client)
+
     @classmethod
     def load(
         cls,

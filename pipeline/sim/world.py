@@ -154,6 +154,14 @@ class PybulletWorld:
         self.hand = Hand.load(self.client, gripper)
         self.gripper = self.hand.spec
 
+    def remove_hand(self) -> None:
+        """Take the hand out of the simulation (a tool change); :meth:`add_hand` may then
+        bring in another. Nothing happens without a hand."""
+        if self.hand is not None:
+            self.hand.remove()
+            self.hand = None
+            self.gripper = None
+
     def __enter__(self) -> PybulletWorld:
         return self
 
