@@ -209,15 +209,16 @@ def draw_grasps(
     fused: Fused,
     document: dict[str, Any],
 ) -> None:
-    """``grasps.png``: the object from above with every grasp's pads numbered and the
-    selected stage's median deviation after each grasp."""
+    """``grasps.png``: the object from above with every grasp's pads numbered, how it was
+    chosen and by which hand, and the selected stage's median deviation after it."""
     from .figures import GraspMarks, grasps_figure
 
     marks = []
     for contacts, entry in zip(fused.contacts, document["grasps"], strict=True):
         stage = entry["selected_stage"]
         median_mm = 1e3 * entry["stages"][stage]["metrics"]["deviation_m"]["median"]
-        label = f"{entry['chosen_by']['strategy']}, then {median_mm:.1f} mm (Stage {stage})"
+        chosen = f"{entry['chosen_by']['strategy']} ({entry['gripper']})"
+        label = f"{chosen}, then {median_mm:.1f} mm (Stage {stage})"
         marks.append(GraspMarks(label, contacts.positions, contacts.pads))
     grasps_figure(
         out_path,
