@@ -287,6 +287,12 @@ def read_png(path: Path) -> np.ndarray:
         raise InputError(f"{path}: cannot read as an image: {exc}") from None
 
 
+def depth_camera_path(path: Path, camera_path: Path | None) -> Path:
+    """The ``camera.json`` of the depth image ``path``: ``camera_path`` when given, else
+    the one beside the image."""
+    return Path(camera_path) if camera_path else path.with_name("camera.json")
+
+
 def read_depth_image(path: Path, camera_path: Path | None, colour_path: Path | None) -> Capture:
     """A depth image (16-bit PNG in mm, or ``.npy`` in m) with its ``camera.json``.
 
@@ -311,7 +317,7 @@ def read_depth_image(path: Path, camera_path: Path | None, colour_path: Path | N
             )
         depth = raw.astype(np.float32) / 1000.0
     depth = checked_depth(depth, str(path))
-    camera_path = Path(camera_path) if camera_path else path.with_name("camera.json")
+    camera_path = depth_camera_path(path, camera_path)
     if not camera_path.exists():
         raise InputError(f"{path}: a depth image needs its camera: {camera_path} does not exist")
     camera = read_camera(camera_path)

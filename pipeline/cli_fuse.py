@@ -127,14 +127,13 @@ def read_view(depth: Path, camera: Path | None) -> DepthObservation:
         InputError: unreadable, or its camera has no pose in the robot frame (the cloud and
             the contacts are in that frame).
     """
-    from .captures import read_depth_image
+    from .captures import depth_camera_path, read_depth_image
 
     capture = read_depth_image(depth, camera, None)
     if capture.T_robot_camera is None:
-        where = camera or depth.with_name("camera.json")
         raise InputError(
-            f"{where}: no T_robot_camera: the cloud and the contacts are in the robot frame, "
-            "so the depth image's camera must be placed in it"
+            f"{depth_camera_path(depth, camera)}: no T_robot_camera: the cloud and the "
+            "contacts are in the robot frame, so the depth image's camera must be placed in it"
         )
     return capture.view(capture.T_robot_camera, capture.table_height_m)
 
