@@ -442,7 +442,8 @@ class Hypothesis:
         name: ``"held-plane"`` (fused again with the initialiser's plane held),
             ``"held-plane, bounded"`` (that step from Stage 0, shortened until it passes) or
             ``"earlier shape"`` (the grasps before the last, located by the last:
-            :mod:`pipeline.estimation.later_grasps`) or ``"without <pad>"`` (fused again
+            :mod:`pipeline.estimation.later_grasps`; ``"earlier shape without <pad>"``
+            when located by the last grasp's other pads) or ``"without <pad>"`` (fused again
             without the one pad Stage 0 alone cannot explain:
             :mod:`pipeline.estimation.outlier_pads`).
         step: the fraction of the hypothesis' step kept (1 when not bounded): from Stage 0,

@@ -35,7 +35,7 @@ def test_grid_is_objects_by_yaws_by_strategies(tmp_path):
     assert {t.params["object"] for t in full if t.params["label"] == "007_thing"} == {str(scan)}
 
 
-def _row(label, strategy, deviations, consistent, yaw=0.0):
+def _row(label, strategy, deviations, consistent, yaw=0.0, selected=None):
     row = {
         "key": f"{label}/{strategy}",
         "params": {"label": label, "strategy": strategy, "yaw_deg": yaw},
@@ -43,8 +43,10 @@ def _row(label, strategy, deviations, consistent, yaw=0.0):
         "status": "converged",
         "grasps_made": len(deviations),
     }
-    for k, (dev, ok) in enumerate(zip(deviations, consistent, strict=True), start=1):
+    chosen = deviations if selected is None else selected
+    for k, (dev, ok, kept) in enumerate(zip(deviations, consistent, chosen, strict=True), start=1):
         row[f"grasp{k}_stage2_deviation_median_mm"] = dev
+        row[f"grasp{k}_selected_deviation_median_mm"] = kept
         row[f"grasp{k}_stage2_consistent"] = ok
         row[f"grasp{k}_stage2_plane_angle_error_deg"] = 1.0
         row[f"grasp{k}_stage2_plane_offset_error_mm"] = 1.0
@@ -56,7 +58,8 @@ def test_report_counts_gains_and_worse_grasps(tmp_path):
         # A hard pose (4 mm after the first grasp); the random trial stopped after grasp 2.
         _row("a", "paper", [4.0, 3.5, 3.0], [True, True, True]),
         _row("a", "random", [4.0, 3.0], [True, False]),
-        _row("a", "information", [4.0, 2.0, 1.0], [True, True, True]),
+        # After its second grasp the information trial reports another stage, at 3.5 mm.
+        _row("a", "information", [4.0, 2.0, 1.0], [True, True, True], selected=[4.0, 3.5, 1.0]),
         # An easy pose: not in the second-grasp table; information worse by the truth once.
         _row("b", "paper", [1.0, 1.0, 1.0], [True, True, True], yaw=1.0),
         _row("b", "random", [1.0, 1.2, 1.1], [True, True, True], yaw=1.0),
@@ -71,7 +74,7 @@ def test_report_counts_gains_and_worse_grasps(tmp_path):
     written = explore.report(rows, tmp_path)
     assert [Path(p).name for p in written] == ["results.csv", "explore.png", "report.md"]
     text = (tmp_path / "report.md").read_text()
-    assert "| information | 1 | 2.00 | 2.00 |" in text
+    assert "| information | 1 | 2.00 | 2.00 | 0.50 / 0.50 |" in text
     assert "Information's mean reduction is 2.00x random's (target >= 1.3x): yes." in text
     assert (
         "1.00 mm more than random's (95 % bootstrap interval 1.00 to 1.00 mm over 1 pose)" in text

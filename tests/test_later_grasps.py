@@ -8,10 +8,10 @@ from functools import partial
 
 import numpy as np
 import pytest
-from estimation_scenes import cylinder_scene, fusion_problem
+from estimation_scenes import RADIUS_M, cylinder_scene, fusion_problem
 from scipy.spatial import cKDTree
 
-from pipeline.estimation.consistency import ConsistencySettings
+from pipeline.estimation.consistency import ConsistencySettings, select_stage
 from pipeline.estimation.covariances import normal_ellipsoids
 from pipeline.estimation.iekf import GraspContacts, IekfSettings, fuse
 from pipeline.estimation.later_grasps import EARLIER_SHAPE, earlier_shape_stages
@@ -142,3 +142,93 @@ def test_the_earlier_shape_is_located_from_the_filters_own_covariance():
     without = locating_problem(problem, replace(earlier, filter_covariance=None))
     expected = reported + problem.regrasp_noise
     np.testing.assert_allclose(without.covariance_init[bias, bias], expected[bias, bias])
+
+
+def _seen_through(stage):
+    """``stage`` as a joint fusion that turned the model into space the camera saw empty
+    leaves it: the taxels fit, the camera does not."""
+    seen = replace(
+        stage.consistency,
+        checks=("taxels", "free_space"),
+        free_space_violations=900,
+        free_space_limit=90,
+        consistent=False,
+        reason="900 model points in space the camera saw empty (limit 90)",
+    )
+    return replace(stage, status="inconsistent", consistency=seen)
+
+
+def test_an_earlier_shape_the_last_grasp_contradicts_is_kept_when_it_is_best_supported():
+    """The second grasp's taxels lie 12 mm outside the earlier shape (as where a later grasp
+    meets a part the mirror image completes wrongly) and the joint fusion contradicts the
+    camera: the earlier shape fails the taxel test, but less than Stage 0 does, so it stands
+    in for the last stage, still flagged, and is the stage selected."""
+    problem, _ = _two_grasps(scale=1.3)
+    stages, refuse, settings, tree = _diagnosed(problem)
+    stages = [stages[0], *(_seen_through(s) for s in stages[1:])]
+    revised = earlier_shape_stages(problem, stages, refuse, None, settings, tree)
+    last = revised[-1]
+    assert last.hypothesis is not None and last.hypothesis.name == EARLIER_SHAPE
+    assert last.status == "inconsistent" and not last.consistency.consistent
+    assert last.consistency.excess < stages[0].consistency.excess
+    assert select_stage(revised)[0] == last.stage
+    # Where Stage 0 explains the taxels better, the earlier shape is not taken.
+    explained = replace(stages[0].consistency, nis=0.5 * last.consistency.nis)
+    stages[0] = replace(stages[0], consistency=explained)
+    kept = earlier_shape_stages(problem, stages, refuse, None, settings, tree)
+    assert all(a is b for a, b in zip(kept, stages, strict=True))
+
+
+def test_a_pad_the_earlier_shape_cannot_explain_does_not_locate_it():
+    """A third pad of the second grasp presses 15 mm outside the cylinder beside the right
+    jaw (on a handle the mirror image does not complete), and the filter locating the
+    earlier shape with all three pads fails: the two jaws locate it, to the object's second
+    pose, and it stays flagged."""
+    problem, second = _two_grasps()
+    grasp = problem.grasps[1]
+    right = grasp.pads == "right"
+    axis = second.axis_world_m
+    heights = np.linspace(0.03, 0.07, 20)
+    handle = np.column_stack(
+        [np.full(20, axis[0] + RADIUS_M + 0.015), np.full(20, axis[1] + 0.03), heights]
+    )
+    normals = np.where(right[:, None], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0])
+    third = _contacts(
+        np.vstack([grasp.positions_m, handle]),
+        np.vstack([normals, np.tile([-1.0, 0.0, 0.0], (20, 1))]),
+        np.concatenate([grasp.pads, np.full(20, "thumb")]),
+    )
+    problem = replace(problem, grasps=(problem.grasps[0], third))
+    stages, refuse, settings, tree = _diagnosed(problem)
+    stages = [stages[0], *(_seen_through(s) for s in stages[1:])]
+    last = earlier_shape_stages(problem, stages, refuse, None, settings, tree)[-1]
+    assert last.hypothesis is not None
+    assert last.hypothesis.name == f"{EARLIER_SHAPE} without thumb"
+    assert last.status == "inconsistent"
+    # Along the jaws' closing direction they pin the cylinder; along their faces they do not.
+    assert last.bias.translation_m[0] == pytest.approx(second.g_true[1], abs=0.001)
+
+
+def test_an_earlier_estimate_at_odds_with_its_own_grasps_is_not_kept_flagged(monkeypatch):
+    """As in the test above, but the estimate of the grasps before the last already
+    contradicted their taxels: located, it could fit the last grasp better than Stage 0 by
+    moving far from the object, so the stages stand."""
+    import pipeline.estimation.problem as problem_module
+
+    real = problem_module.estimate_result
+
+    def at_odds(*args, **kwargs):
+        result = real(*args, **kwargs)
+        chosen = result.selected
+        odd = replace(chosen.consistency, nis=2.0 * chosen.consistency.nis_threshold)
+        odd = replace(odd, consistent=False, reason="taxels off the model")
+        revised = list(result.stages)
+        revised[chosen.stage] = replace(chosen, consistency=odd)
+        return replace(result, stages=tuple(revised))
+
+    problem, _ = _two_grasps(scale=1.3)
+    stages, refuse, settings, tree = _diagnosed(problem)
+    stages = [stages[0], *(_seen_through(s) for s in stages[1:])]
+    monkeypatch.setattr(problem_module, "estimate_result", at_odds)
+    revised = earlier_shape_stages(problem, stages, refuse, None, settings, tree)
+    assert all(a is b for a, b in zip(revised, stages, strict=True))

@@ -22,10 +22,25 @@ the bias is taken at the fraction of the filter's step (:data:`LOCATING_STEPS`, 
 filter's bias, to 0, not moved) whose model the taxels fit best (lowest pad-averaged NIS),
 as the hypotheses of :mod:`.hypotheses` take the best-fitting bounded step.
 
-The alternative replaces an inconsistent last stage only when it passes every test of the
-self-diagnosis on all the grasps and the camera; its covariance carries the plane's
-uncertainty from the earlier estimate (:func:`.hypotheses.unheld_covariance`). Every test is
-on the evidence, never on ground truth.
+A pad on a part the mirror image does not complete (a mug's handle) drags that location
+towards it, or leads the locating filter astray. When the earlier shape fails, and exactly
+one pad of a last grasp of three or more explains the failure (without it, the earlier
+shape where the earlier grasps left it fits the taxels), the other pads locate it
+(``hypothesis.name`` ``"earlier shape without <pad>"``, as :mod:`.outlier_pads` leaves a
+pad out of a single grasp), and it is judged on all the taxels.
+
+The alternative replaces an inconsistent last stage when it passes every test of the
+self-diagnosis on all the grasps and the camera. It also replaces it, keeping the status
+``inconsistent``, when the last grasp's taxels contradict it but the camera accepts it and
+it contradicts the taxels no more than any stage the camera accepts: it is then the stage
+the selection (:func:`.consistency.select_stage`) takes. The flag stands, and the estimate
+kept is the one the evidence supports best. Without it the selection fell back to Stage 0,
+which throws away every earlier grasp as well as the last and contradicts the taxels more.
+This holds only for an earlier estimate consistent with the grasps before: one already at
+odds with them can fit the last grasp better than Stage 0 does by a location far from the
+object. Its covariance carries the plane's uncertainty from the earlier estimate
+(:func:`.hypotheses.unheld_covariance`). Every test is on the evidence, never on ground
+truth.
 
 No motion test (:func:`.hypotheses.moved_free_space`) applies: the object was released and
 grasped again since the camera saw it, so its motion since then is real.
@@ -41,7 +56,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import estimate_failed
-from ..types import DepthObservation, Hypothesis, StageEstimate
+from ..types import Consistency, DepthObservation, Hypothesis, StageEstimate
 from .consistency import ConsistencySettings, assess
 from .hypotheses import (
     HYPOTHESES,
@@ -50,7 +65,8 @@ from .hypotheses import (
     shortened_covariance,
     unheld_covariance,
 )
-from .iekf import FusionProblem
+from .iekf import FusionProblem, StageOutcome
+from .outlier_pads import without_pad
 from .problem import stage_estimate
 
 #: The name the alternative's stages carry (``result.json``'s ``hypothesis``).
@@ -93,9 +109,10 @@ def earlier_shape_stages(
 ) -> list[StageEstimate]:
     """``stages`` (diagnosed, Stage 0 first) with the last stage replaced by the earlier
     shape located by the last grasp (the best-fitting of :data:`LOCATING_STEPS`), when the
-    last stage is inconsistent and the earlier shape passes every test. Runs only with two
-    or more grasps; the earlier estimate is :func:`.problem.estimate_result` of ``refuse``
-    on the grasps before the last."""
+    last stage is inconsistent and the earlier shape passes every test, or is the best
+    supported model though inconsistent (:func:`_best_supported`). Runs only with two or
+    more grasps; the earlier estimate is :func:`.problem.estimate_result` of ``refuse`` on
+    the grasps before the last."""
     from .problem import estimate_result
 
     last = stages[-1]
@@ -106,30 +123,24 @@ def earlier_shape_stages(
     earlier = estimate_result(before, refuse(before), started, view, settings, refuse).selected
     if estimate_failed(earlier.status) or len(earlier.grasp_g) != len(before.grasps):
         return list(stages)
-    problem = locating_problem(fusion, earlier)
-    located = refuse(problem)[0]
-    if estimate_failed(located.status):
+    name, verdict = EARLIER_SHAPE, None
+    if found := _locate(fusion, earlier, refuse, settings, tree):
+        located, step, g = found
+        verdict = _judge(fusion, earlier, g, view, settings, tree)
+    if verdict is None or not verdict.consistent:
+        # A pad the earlier shape cannot explain (a handle) drags the location, or leads
+        # the filter astray: the other pads locate it, and all are judged.
+        pad = _unexplained_pad(fusion, earlier, settings, tree)
+        if pad is not None and (
+            found := _locate(_without(fusion, pad), earlier, refuse, settings, tree)
+        ):
+            located, step, g = found
+            name = f"{EARLIER_SHAPE} without {pad}"
+            verdict = _judge(fusion, earlier, g, view, settings, tree)
+    kept = verdict is not None and (verdict.consistent or _best_supported(verdict, earlier, stages))
+    if not kept:
         return list(stages)
-    start = np.asarray(earlier.grasp_g[-1], dtype=float)
-    steps = []
-    # The steps differ only in the bias, which the free-space test (made before the bias)
-    # does not see: the taxels rank them, and the camera judges the chosen one.
-    for step in LOCATING_STEPS:
-        g = start + step * (located.g - start)
-        grasp_g = (*earlier.grasp_g, g)
-        taxels = assess(
-            earlier.points, g, grasp_g, fusion.pivot_m, fusion.grasps, None, settings, tree
-        )
-        if taxels.consistent:
-            steps.append((taxels.nis, step, g, grasp_g))
-    if not steps:
-        return list(stages)
-    _, step, g, grasp_g = min(steps, key=lambda entry: entry[0])
-    verdict = assess(
-        earlier.points, g, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree
-    )
-    if not verdict.consistent:
-        return list(stages)
+    grasp_g = (*earlier.grasp_g, g)
     prior = np.asarray(earlier.covariance, dtype=float) + fusion.regrasp_noise
     covariance = shortened_covariance(
         prior,
@@ -156,7 +167,118 @@ def earlier_shape_stages(
         own,
     )
     reason = last.consistency.reason if last.consistency is not None else ""
+    status = estimate.status if verdict.consistent else "inconsistent"
     replaced = replace(
-        estimate, consistency=verdict, hypothesis=Hypothesis(EARLIER_SHAPE, step, reason)
+        estimate,
+        status=status,
+        consistency=verdict,
+        hypothesis=Hypothesis(name, step, reason),
     )
     return [*stages[:-1], replaced]
+
+
+def _best_supported(
+    verdict: Consistency, earlier: StageEstimate, stages: Sequence[StageEstimate]
+) -> bool:
+    """Whether an earlier shape with ``verdict`` (inconsistent) is kept as the stage the
+    evidence supports best: the earlier estimate was consistent with the grasps before, the
+    camera accepts it, and it contradicts the taxels no more than every diagnosed stage the
+    camera accepts (the stage :func:`.consistency.select_stage` would select in place of any
+    of them). An earlier estimate already at odds with its own grasps is not relocated on
+    the strength of fitting better than Stage 0: its location can then fit the last grasp
+    only by moving far from the object."""
+    if earlier.consistency is None or not earlier.consistency.consistent:
+        return False
+    if not verdict.passes_free_space:
+        return False
+    accepted = [
+        s.consistency.excess
+        for s in stages
+        if s.consistency is not None and s.consistency.passes_free_space
+    ]
+    return verdict.excess <= min(accepted, default=np.inf)
+
+
+def _locate(
+    fusion: FusionProblem,
+    earlier: StageEstimate,
+    refuse: Refuse,
+    settings: ConsistencySettings,
+    tree: cKDTree,
+) -> tuple[StageOutcome, float, np.ndarray] | None:
+    """The earlier shape located by ``fusion``'s last grasp: the filter's outcome, and the
+    step of :data:`LOCATING_STEPS` whose state fits ``fusion``'s taxels best with that
+    state; None when the filter failed. The steps differ only in the bias, which the
+    free-space test (made before the bias) does not see: the taxels rank them, and the
+    camera judges the chosen one."""
+    located = refuse(locating_problem(fusion, earlier))[0]
+    if estimate_failed(located.status):
+        return None
+    start = np.asarray(earlier.grasp_g[-1], dtype=float)
+    steps = []
+    for step in LOCATING_STEPS:
+        g = start + step * (located.g - start)
+        taxels = assess(
+            earlier.points,
+            g,
+            (*earlier.grasp_g, g),
+            fusion.pivot_m,
+            fusion.grasps,
+            None,
+            settings,
+            tree,
+        )
+        steps.append((taxels.nis, step, g))
+    _, step, g = min(steps, key=lambda entry: entry[0])
+    return located, step, g
+
+
+def _judge(
+    fusion: FusionProblem,
+    earlier: StageEstimate,
+    g: np.ndarray,
+    view: DepthObservation | None,
+    settings: ConsistencySettings,
+    tree: cKDTree,
+) -> Consistency:
+    """Every test of the earlier shape with the last grasp's state ``g``, on all the
+    grasps' taxels and the camera."""
+    grasp_g = (*earlier.grasp_g, g)
+    return assess(earlier.points, g, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree)
+
+
+def _without(fusion: FusionProblem, pad: str) -> FusionProblem:
+    """``fusion`` with the taxels of ``pad`` left out of its last grasp."""
+    last = without_pad(replace(fusion, grasps=fusion.grasps[-1:]), pad).grasps[0]
+    return replace(fusion, grasps=(*fusion.grasps[:-1], last))
+
+
+def _unexplained_pad(
+    fusion: FusionProblem,
+    earlier: StageEstimate,
+    settings: ConsistencySettings,
+    tree: cKDTree,
+) -> str | None:
+    """The one pad of the last grasp (of three or more) without which the earlier shape,
+    standing where the earlier grasps left it, fits the taxels, as
+    :func:`.outlier_pads.outlier_pad` finds it for Stage 0; otherwise None."""
+    pads = np.unique(np.asarray(fusion.grasps[-1].pads, dtype=str))
+    if len(pads) < 3:
+        return None
+    start = np.asarray(earlier.grasp_g[-1], dtype=float)
+    explaining = []
+    for pad in pads:
+        reduced = _without(fusion, str(pad))
+        taxels = assess(
+            earlier.points,
+            start,
+            (*earlier.grasp_g, start),
+            fusion.pivot_m,
+            reduced.grasps,
+            None,
+            settings,
+            tree,
+        )
+        if taxels.consistent:
+            explaining.append(str(pad))
+    return explaining[0] if len(explaining) == 1 else None
