@@ -66,7 +66,7 @@ from .hypotheses import (
     unheld_covariance,
 )
 from .iekf import FusionProblem, StageOutcome
-from .outlier_pads import without_pad
+from .outlier_pads import sole_explaining_pad, without_pad
 from .problem import stage_estimate
 
 #: The name the alternative's stages carry (``result.json``'s ``hypothesis``).
@@ -132,7 +132,7 @@ def earlier_shape_stages(
         # the filter astray: the other pads locate it, and all are judged.
         pad = _unexplained_pad(fusion, earlier, settings, tree)
         if pad is not None and (
-            found := _locate(_without(fusion, pad), earlier, refuse, settings, tree)
+            found := _locate(without_pad(fusion, pad), earlier, refuse, settings, tree)
         ):
             located, step, g = found
             name = f"{EARLIER_SHAPE} without {pad}"
@@ -247,12 +247,6 @@ def _judge(
     return assess(earlier.points, g, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree)
 
 
-def _without(fusion: FusionProblem, pad: str) -> FusionProblem:
-    """``fusion`` with the taxels of ``pad`` left out of its last grasp."""
-    last = without_pad(replace(fusion, grasps=fusion.grasps[-1:]), pad).grasps[0]
-    return replace(fusion, grasps=(*fusion.grasps[:-1], last))
-
-
 def _unexplained_pad(
     fusion: FusionProblem,
     earlier: StageEstimate,
@@ -262,23 +256,14 @@ def _unexplained_pad(
     """The one pad of the last grasp (of three or more) without which the earlier shape,
     standing where the earlier grasps left it, fits the taxels, as
     :func:`.outlier_pads.outlier_pad` finds it for Stage 0; otherwise None."""
-    pads = np.unique(np.asarray(fusion.grasps[-1].pads, dtype=str))
-    if len(pads) < 3:
-        return None
     start = np.asarray(earlier.grasp_g[-1], dtype=float)
-    explaining = []
-    for pad in pads:
-        reduced = _without(fusion, str(pad))
+
+    def explained_without(pad: str) -> bool:
+        reduced = without_pad(fusion, pad).grasps
+        grasp_g = (*earlier.grasp_g, start)
         taxels = assess(
-            earlier.points,
-            start,
-            (*earlier.grasp_g, start),
-            fusion.pivot_m,
-            reduced.grasps,
-            None,
-            settings,
-            tree,
+            earlier.points, start, grasp_g, fusion.pivot_m, reduced, None, settings, tree
         )
-        if taxels.consistent:
-            explaining.append(str(pad))
-    return explaining[0] if len(explaining) == 1 else None
+        return taxels.consistent
+
+    return sole_explaining_pad(fusion.grasps[-1].pads, explained_without)

@@ -25,7 +25,7 @@ test is on the evidence, never on ground truth.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -40,8 +40,8 @@ from .problem import stage_estimate
 
 
 def without_pad(fusion: FusionProblem, pad: str) -> FusionProblem:
-    """``fusion`` (one grasp) with the taxels of ``pad`` left out."""
-    (grasp,) = fusion.grasps
+    """``fusion`` with the taxels of ``pad`` left out of its last grasp."""
+    *earlier, grasp = fusion.grasps
     keep = np.asarray(grasp.pads, dtype=str) != pad
     reduced = GraspContacts(
         positions_m=grasp.positions_m[keep],
@@ -52,7 +52,18 @@ def without_pad(fusion: FusionProblem, pad: str) -> FusionProblem:
         reported_noise=None if grasp.reported_noise is None else grasp.reported_noise[keep],
         pad_errors_m=None if grasp.pad_errors_m is None else grasp.pad_errors_m[keep],
     )
-    return replace(fusion, grasps=(reduced,))
+    return replace(fusion, grasps=(*earlier, reduced))
+
+
+def sole_explaining_pad(pads: np.ndarray, explained_without: Callable[[str], bool]) -> str | None:
+    """The one pad among ``pads`` (a grasp's taxel labels, three or more pads) without which
+    the taxels are explained (``explained_without(pad)``); None with fewer pads, or when no
+    pad or several do. Two pads left are the least that press from opposing sides."""
+    names = [str(pad) for pad in np.unique(np.asarray(pads, dtype=str))]
+    if len(names) < 3:
+        return None
+    explaining = [pad for pad in names if explained_without(pad)]
+    return explaining[0] if len(explaining) == 1 else None
 
 
 def outlier_pad(
@@ -67,15 +78,12 @@ def outlier_pad(
     verdict = initial.consistency
     if len(fusion.grasps) != 1 or verdict is None or not verdict.nis > verdict.nis_threshold:
         return None
-    pads = np.unique(np.asarray(fusion.grasps[0].pads, dtype=str))
-    if len(pads) < 3:
-        return None
-    explaining = []
-    for pad in pads:
-        left = taxels_on_stage_0(without_pad(fusion, str(pad)), initial, settings, tree)
-        if left.nis <= left.nis_threshold:
-            explaining.append(str(pad))
-    return explaining[0] if len(explaining) == 1 else None
+
+    def explained_without(pad: str) -> bool:
+        left = taxels_on_stage_0(without_pad(fusion, pad), initial, settings, tree)
+        return left.nis <= left.nis_threshold
+
+    return sole_explaining_pad(fusion.grasps[0].pads, explained_without)
 
 
 def taxels_on_stage_0(
