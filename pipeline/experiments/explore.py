@@ -56,6 +56,10 @@ HARD_MM = 2.0
 #: A grasp made the estimate worse by the truth when Stage 2's median deviation grew by
 #: more than this (mm): above the run-to-run jitter of the deviation itself.
 WORSE_MM = 0.5
+#: The deviation the second-grasp gains are measured on: Stage 2's, and the selected
+#: stage's (the estimate a trial reports, docs/method.md §9).
+STAGE2_DEVIATION = "stage2_deviation_median_mm"
+SELECTED_DEVIATION = "selected_deviation_median_mm"
 #: Resamples of the bootstrap intervals; they are seeded, so a report is reproducible.
 BOOTSTRAP_RESAMPLES = 10_000
 
@@ -134,8 +138,8 @@ def worse_grasps(row: Mapping[str, Any]) -> tuple[list[bool], list[bool]]:
     by_check, by_truth = [], []
     for k in range(2, int(row.get("grasps_made") or 0) + 1):
         by_check.append((not _flagged(row, k - 1)) and _flagged(row, k))
-        before = value(row, f"grasp{k - 1}_stage2_deviation_median_mm")
-        after = value(row, f"grasp{k}_stage2_deviation_median_mm")
+        before = value(row, f"grasp{k - 1}_{STAGE2_DEVIATION}")
+        after = value(row, f"grasp{k}_{STAGE2_DEVIATION}")
         by_truth.append(bool(after - before > WORSE_MM))
     return by_check, by_truth
 
@@ -157,20 +161,12 @@ def worse_counts(rows: Sequence[Mapping[str, Any]]) -> tuple[int, int, int, int,
 def hard_rows(rows: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
     """Finished trials whose first grasp leaves Stage 2 more than :data:`HARD_MM` off."""
     return [
-        row
-        for row in finished_rows(rows)
-        if value(row, "grasp1_stage2_deviation_median_mm") > HARD_MM
+        row for row in finished_rows(rows) if value(row, f"grasp1_{STAGE2_DEVIATION}") > HARD_MM
     ]
 
 
 def _by_strategy(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str, Any]]]:
     return {s: [row for row in rows if row["params"]["strategy"] == s] for s in STRATEGIES}
-
-
-#: The deviation the second-grasp gains are measured on: Stage 2's, and the selected
-#: stage's (the estimate a trial reports, docs/method.md §9).
-STAGE2_DEVIATION = "stage2_deviation_median_mm"
-SELECTED_DEVIATION = "selected_deviation_median_mm"
 
 
 def _second_grasp_reduction(row: Mapping[str, Any], field: str = STAGE2_DEVIATION) -> float:
@@ -265,13 +261,13 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
         curves = {}
         for strategy, members in _by_strategy(group).items():
             cells = [
-                f"{fmt(_median(members, k, 'stage2_deviation_median_mm'), 2)} / "
+                f"{fmt(_median(members, k, STAGE2_DEVIATION), 2)} / "
                 f"{fmt(_median(members, k, 'stage2_plane_angle_error_deg'))} / "
                 f"{fmt(_median(members, k, 'stage2_plane_offset_error_mm'))}"
                 for k in grasps
             ]
             lines.append(f"| {subset} | {strategy} | {len(members)} | " + " | ".join(cells) + " |")
-            curves[strategy] = [_median(members, k, "stage2_deviation_median_mm") for k in grasps]
+            curves[strategy] = [_median(members, k, STAGE2_DEVIATION) for k in grasps]
         panels.append(
             LinePanel(
                 f"{subset} ({len(group) // len(STRATEGIES)} poses)",
@@ -356,8 +352,8 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
     for label, members in by_object.items():
         cells = []
         for group in _by_strategy(members).values():
-            first = _median(group, 1, "stage2_deviation_median_mm")
-            last = _median(group, GRASPS, "stage2_deviation_median_mm")
+            first = _median(group, 1, STAGE2_DEVIATION)
+            last = _median(group, GRASPS, STAGE2_DEVIATION)
             cells.append(f"{fmt(first, 2)} -> {fmt(last, 2)}")
         lines.append(f"| {label} | {len(members) // len(STRATEGIES)} | " + " | ".join(cells) + " |")
     lines += failures_section(failure_lines(rows))
