@@ -218,17 +218,7 @@ def _locate(
     steps = []
     for step in LOCATING_STEPS:
         g = start + step * (located.g - start)
-        taxels = assess(
-            earlier.points,
-            g,
-            (*earlier.grasp_g, g),
-            fusion.pivot_m,
-            fusion.grasps,
-            None,
-            settings,
-            tree,
-        )
-        steps.append((taxels.nis, step, g))
+        steps.append((_judge(fusion, earlier, g, None, settings, tree).nis, step, g))
     _, step, g = min(steps, key=lambda entry: entry[0])
     return located, step, g
 
@@ -241,8 +231,8 @@ def _judge(
     settings: ConsistencySettings,
     tree: cKDTree,
 ) -> Consistency:
-    """Every test of the earlier shape with the last grasp's state ``g``, on all the
-    grasps' taxels and the camera."""
+    """Every test of the earlier shape with the last grasp's state ``g``: on ``fusion``'s
+    taxels, and on the camera's image ``view`` when given."""
     grasp_g = (*earlier.grasp_g, g)
     return assess(earlier.points, g, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree)
 
@@ -259,11 +249,6 @@ def _unexplained_pad(
     start = np.asarray(earlier.grasp_g[-1], dtype=float)
 
     def explained_without(pad: str) -> bool:
-        reduced = without_pad(fusion, pad).grasps
-        grasp_g = (*earlier.grasp_g, start)
-        taxels = assess(
-            earlier.points, start, grasp_g, fusion.pivot_m, reduced, None, settings, tree
-        )
-        return taxels.consistent
+        return _judge(without_pad(fusion, pad), earlier, start, None, settings, tree).consistent
 
     return sole_explaining_pad(fusion.grasps[-1].pads, explained_without)
