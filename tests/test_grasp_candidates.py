@@ -12,7 +12,12 @@ from test_planners import _true_plane, _view
 
 from pipeline.perception import sdh_candidates
 from pipeline.perception import sdh_geometry as sdh
-from pipeline.perception.candidate import CandidateSettings, height_grid
+from pipeline.perception.candidate import (
+    BEYOND_CENTRE,
+    BLIND_PAD_FACTOR,
+    CandidateSettings,
+    height_grid,
+)
 from pipeline.perception.grasp_geometry import front_to_back
 from pipeline.perception.pad_contact import flat_pad_taxels, pad_coverage, sdh_distal_taxels
 from pipeline.perception.parallel_candidates import ParallelHand, front_jaw_gap, parallel_candidate
@@ -309,6 +314,58 @@ def test_parallel_candidate_closes_around_the_centre(visible_at, hidden_at, reas
     candidate = _jaws_closing_along_y(visible, completed)
     assert candidate.summary.reason == reason
     assert candidate.summary.feasible == (reason == "")
+
+
+def test_a_back_pad_that_would_meet_the_front_from_inside_counts_as_blind():
+    # The completed back covers the jaw's path only beside the pad (x 12-20 mm; the pad's
+    # columns span about +-10 mm): where the pad closes, the model has a hole, and the
+    # nearest surface it would meet is the front wall's inner face, before the centre.
+    front = _wall(-0.021)
+    back = _wall(0.009)
+    whole = _jaws_closing_along_y(front, np.vstack([front, back]))
+    assert whole.summary.feasible and min(whole.summary.contact_coverage) > 0.5
+    holed = _jaws_closing_along_y(front, np.vstack([front, back[back[:, 0] >= 0.012]]))
+    # The jaws stand where they did (the column beside the pad still holds the back); the
+    # back pad's contact is unknown, and the grasp keeps a tenth of the score its front pad
+    # alone gives (here the same as both pads').
+    assert holed.summary.feasible
+    np.testing.assert_allclose(holed.T_robot_hand, whole.T_robot_hand)
+    assert holed.summary.contact_coverage == (whole.summary.contact_coverage[0], 0.0)
+    assert holed.summary.score == pytest.approx(BLIND_PAD_FACTOR * whole.summary.score)
+
+
+def test_sdh_fingers_that_would_meet_the_front_from_inside_are_rejected():
+    # Fingers 1 and 2 close 33 mm either side of the closing line, where this model has no
+    # back (it covers only +-12 mm): they would pass the centre and meet the front wall's
+    # inner face.
+    front = _slab(-0.021, 0.05)
+    centre = np.array([0.0, 0.0, 0.045])
+    for back, feasible in ((_slab(0.015, 0.05), True), (_slab(0.015, 0.012), False)):
+        candidate = sdh_candidates.sdh_candidate(
+            front,
+            np.vstack([front, back]),
+            centre,
+            np.array([0.0, 1.0, 0.0]),
+            0.0,
+            0.06,
+            0.0,
+            DISTAL,
+            0.3,
+            JAW_SETTINGS,
+        )
+        assert candidate.summary.feasible == feasible
+        assert candidate.summary.reason == ("" if feasible else BEYOND_CENTRE)
+
+
+def _slab(along_m: float, half_width_m: float) -> np.ndarray:
+    """A 6 mm thick slab across +y from ``along_m``, ``half_width_m`` either side of x = 0
+    and 0-90 mm high."""
+    x, y, z = np.meshgrid(
+        np.arange(-half_width_m, half_width_m + 1e-9, 0.002),
+        np.arange(along_m, along_m + 0.006 + 1e-9, 0.002),
+        np.arange(0.0, 0.0901, 0.002),
+    )
+    return np.column_stack([x.ravel(), y.ravel(), z.ravel()])
 
 
 @pytest.mark.parametrize(

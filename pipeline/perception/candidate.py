@@ -39,6 +39,15 @@ from .grasp_geometry import front_to_back
 #: for depth noise and mixed pixels at the object's silhouette (about 2 mm apart, a real
 #: overlap of 5 x 5 mm holds more).
 MIN_HITS = 8
+#: Why a grasp is rejected when a pad would stop beyond the object's centre: the completed
+#: model has no surface on that pad's side under it (a hole where the camera saw nothing to
+#: mirror), so what the pad would meet is the far side, from inside.
+BEYOND_CENTRE = "a pad would pass the object's centre: the model has no surface before it"
+#: The share of its score a parallel-jaw grasp keeps when the back pad would pass the
+#: object's centre (:data:`BEYOND_CENTRE`): that pad's contact is unknown, so the grasp is
+#: scored by the front pad's contact alone, below grasps whose pads both meet the model
+#: unless they score ten times less.
+BLIND_PAD_FACTOR = 0.1
 
 
 def covering_plane(

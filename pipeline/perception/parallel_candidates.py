@@ -10,6 +10,8 @@ import numpy as np
 
 from ..types import GraspCandidate, PadLayout
 from .candidate import (
+    BEYOND_CENTRE,
+    BLIND_PAD_FACTOR,
     MIN_HITS,
     Candidate,
     CandidateSettings,
@@ -88,7 +90,10 @@ def parallel_candidate(
     Both jaws descend clear of every point above the fingertips between their paths, the
     front jaw before the visible surface there and the back jaw behind the completed back,
     as far as :func:`front_jaw_gap` puts them; the surface between them must enclose
-    ``centre_m``. The housing must pass above the object's top.
+    ``centre_m``, and the front pad must stop before it. Where the model has no back under
+    the back pad, that pad would pass the centre and meet the front wall from inside: its
+    contact is unknown, reported as 0, and the grasp keeps :data:`BLIND_PAD_FACTOR` of the
+    score the front pad's contact gives. The housing must pass above the object's top.
     """
     s = settings
     lateral = np.array([-direction[1], direction[0], 0.0])
@@ -151,8 +156,20 @@ def parallel_candidate(
                 angle_rad, height_m, 0.0, f"the {side} finger meets the object before its pad"
             )
         contacts.append(contact)
-    coverages = tuple(c.quality for c in contacts)
+    centre = centre_m @ direction
+    if not contacts[0].touch_m < centre:
+        return Candidate.rejected(angle_rad, height_m, 0.0, BEYOND_CENTRE)
     tipping = (height_m - s.table_height_m) / footprint_half_m(completed, direction)
+    if centre < -contacts[1].touch_m:
+        coverages = tuple(c.quality for c in contacts)
+        score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
+    else:
+        # The model has no back under the back pad: where the jaws stand does not depend on
+        # it (the column's extent places them), but what the pad would meet is unknown.
+        coverages = (contacts[0].quality, 0.0)
+        score = BLIND_PAD_FACTOR * candidate_score(
+            coverages[:1], angle_rad, tipping, s.tipping_weight
+        )
     return Candidate(
         GraspCandidate(
             closing_angle_deg=math.degrees(angle_rad),
@@ -161,7 +178,7 @@ def parallel_candidate(
             width_m=width,
             contact_coverage=coverages,
             tipping_ratio=tipping,
-            score=candidate_score(coverages, angle_rad, tipping, s.tipping_weight),
+            score=score,
             feasible=True,
         ),
         T_robot_hand=hand_pose(position, direction),

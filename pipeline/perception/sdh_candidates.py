@@ -12,6 +12,7 @@ import numpy as np
 from ..types import GraspCandidate, PadLayout
 from . import sdh_geometry as sdh
 from .candidate import (
+    BEYOND_CENTRE,
     MIN_HITS,
     Candidate,
     CandidateSettings,
@@ -60,10 +61,11 @@ def sdh_candidate(
 
     Each finger's contact angle is the proximal angle at which its distal pad (distal link
     parallel to the palm axis) touches the ``completed`` cloud (``visible`` and mirrored)
-    (:func:`pad_coverage`); the palm
-    height puts the pads' centres at ``height_m`` at those angles. The pre-shape is the
-    most closed common proximal angle, at least 3 deg before the earliest contact, at which
-    every finger, the knuckles and the palm descend clear of the cloud
+    (:func:`pad_coverage`), before ``centre_m`` on its way (past it, the model has no
+    surface on the finger's side there, and the pad would meet the far side from inside);
+    the palm height puts the pads' centres at ``height_m`` at those angles. The pre-shape is
+    the most closed common proximal angle, at least 3 deg before the earliest contact, at
+    which every finger, the knuckles and the palm descend clear of the cloud
     (:func:`sdh_geometry.finger_profile`); ``opening_m`` is that pre-shape's opening. From
     there to its contact no finger's knuckle or proximal link may meet the cloud
     (:func:`sdh_geometry.closing_hits`).
@@ -95,6 +97,11 @@ def sdh_candidate(
             palm_xy = _contact_centre(contacts, x_hand, y_hand, spread_rad) - (
                 _CENTRES[spread_rad] * x_hand
             )
+    if any(
+        not contact.touch_m < centre_m[:2] @ facing
+        for contact, facing in zip(contacts, facings, strict=True)
+    ):
+        return Candidate.rejected(angle_rad, height_m, spread_rad, BEYOND_CENTRE)
     palm_z = height_m + float(np.mean(sdh.distal_pad_depth_m(np.array(alphas))))
     depth_below_palm = palm_z - completed[:, 2]
     radial = np.hypot(*(completed[:, :2] - palm_xy[:2]).T)
