@@ -286,11 +286,11 @@ def _jaws_closing_along_y(visible: np.ndarray, completed: np.ndarray):
     )
 
 
-def _wall(along_m: float, thickness_m: float = 0.006) -> np.ndarray:
-    """A 40 mm wide vertical wall across +y, from ``along_m`` to ``along_m + thickness_m``
-    along y, 20-90 mm high."""
+def _wall(along_m: float, thickness_m: float = 0.006, half_width_m: float = 0.02) -> np.ndarray:
+    """A vertical wall across +y, ``half_width_m`` either side of x = 0, from ``along_m`` to
+    ``along_m + thickness_m`` along y, 20-90 mm high."""
     x, y, z = np.meshgrid(
-        np.arange(-0.02, 0.0201, 0.002),
+        np.arange(-half_width_m, half_width_m + 1e-9, 0.002),
         np.arange(along_m, along_m + thickness_m + 1e-9, 0.002),
         np.arange(0.02, 0.0901, 0.002),
     )
@@ -338,9 +338,12 @@ def test_sdh_fingers_that_would_meet_the_front_from_inside_are_rejected():
     # Fingers 1 and 2 close 33 mm either side of the closing line, where this model has no
     # back (it covers only +-12 mm): they would pass the centre and meet the front wall's
     # inner face.
-    front = _slab(-0.021, 0.05)
+    front = _wall(-0.021, half_width_m=0.05)
     centre = np.array([0.0, 0.0, 0.045])
-    for back, feasible in ((_slab(0.015, 0.05), True), (_slab(0.015, 0.012), False)):
+    for back, feasible in (
+        (_wall(0.015, half_width_m=0.05), True),
+        (_wall(0.015, half_width_m=0.012), False),
+    ):
         candidate = sdh_candidates.sdh_candidate(
             front,
             np.vstack([front, back]),
@@ -355,17 +358,6 @@ def test_sdh_fingers_that_would_meet_the_front_from_inside_are_rejected():
         )
         assert candidate.summary.feasible == feasible
         assert candidate.summary.reason == ("" if feasible else BEYOND_CENTRE)
-
-
-def _slab(along_m: float, half_width_m: float) -> np.ndarray:
-    """A 6 mm thick slab across +y from ``along_m``, ``half_width_m`` either side of x = 0
-    and 0-90 mm high."""
-    x, y, z = np.meshgrid(
-        np.arange(-half_width_m, half_width_m + 1e-9, 0.002),
-        np.arange(along_m, along_m + 0.006 + 1e-9, 0.002),
-        np.arange(0.0, 0.0901, 0.002),
-    )
-    return np.column_stack([x.ravel(), y.ravel(), z.ravel()])
 
 
 @pytest.mark.parametrize(
