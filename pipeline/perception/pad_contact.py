@@ -40,6 +40,12 @@ class PadContact:
         force partly along itself, and the pad slides off it."""
         return self.coverage * math.cos(self.inclination_rad) ** 2
 
+    def stops_before(self, point_m: np.ndarray, direction: np.ndarray) -> bool:
+        """Whether the pad, moving along ``direction`` (the unit it was predicted with),
+        stops before reaching ``point_m`` (frame R): past the object's centre, the surface
+        it found is the far side, met from inside a hole in the model."""
+        return self.touch_m < float(np.asarray(point_m) @ np.asarray(direction))
+
 
 #: Fewest taxel rows a pad must touch for its contact to be a side of the object.
 _MIN_CONTACT_ROWS = 3

@@ -156,11 +156,10 @@ def parallel_candidate(
                 angle_rad, height_m, 0.0, f"the {side} finger meets the object before its pad"
             )
         contacts.append(contact)
-    centre = centre_m @ direction
-    if not contacts[0].touch_m < centre:
+    if not contacts[0].stops_before(centre_m, direction):
         return Candidate.rejected(angle_rad, height_m, 0.0, BEYOND_CENTRE)
     tipping = (height_m - s.table_height_m) / footprint_half_m(completed, direction)
-    if centre < -contacts[1].touch_m:
+    if contacts[1].stops_before(centre_m, -direction):
         coverages = tuple(c.quality for c in contacts)
         score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
     else:

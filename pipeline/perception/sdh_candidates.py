@@ -97,8 +97,8 @@ def sdh_candidate(
             palm_xy = _contact_centre(contacts, x_hand, y_hand, spread_rad) - (
                 _CENTRES[spread_rad] * x_hand
             )
-    if any(
-        not contact.touch_m < centre_m[:2] @ facing
+    if not all(
+        contact.stops_before(centre_m, np.append(facing, 0.0))
         for contact, facing in zip(contacts, facings, strict=True)
     ):
         return Candidate.rejected(angle_rad, height_m, spread_rad, BEYOND_CENTRE)
