@@ -439,7 +439,9 @@ class Hypothesis:
     contradicted the evidence (:mod:`pipeline.estimation.hypotheses`).
 
     Attributes:
-        name: ``"held-plane"`` (fused again with the initialiser's plane held),
+        name: ``"conditioned on free space"`` (the fused model with the plane nearest
+            it that the camera accepts: :mod:`pipeline.estimation.free_space_conditioning`),
+            ``"held-plane"`` (fused again with the initialiser's plane held),
             ``"held-plane, bounded"`` (that step from Stage 0, shortened until it passes) or
             ``"earlier shape"`` (the grasps before the last, located by the last:
             :mod:`pipeline.estimation.later_grasps`; ``"earlier shape without <pad>"``

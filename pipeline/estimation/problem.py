@@ -138,10 +138,12 @@ def estimate_result(
     With ``consistency`` every stage is diagnosed against the taxels (and ``view``, when
     given), a fused stage whose model contradicts the evidence gets the status
     ``inconsistent`` (unless it already failed), and the best-supported stage is selected.
-    With ``refuse`` (the estimator's fusion, run on another problem) an inconsistent fused
-    stage may first be replaced by an alternative that passes every test: with several
-    grasps the earlier grasps' shape located by the last (:mod:`.later_grasps`), then a
-    hypothesis with part of the plane held (:func:`.hypotheses.revise`).
+    With ``refuse`` (the estimator's fusion, run on another problem) and ``view``, a fused
+    stage that only the free-space test flags is first conditioned on free space
+    (:mod:`.free_space_conditioning`); an inconsistent fused stage may then be replaced by
+    an alternative that passes every test: with several grasps the earlier grasps' shape
+    located by the last (:mod:`.later_grasps`), then a hypothesis with part of the plane
+    held (:func:`.hypotheses.revise`).
     """
     setup_seconds = time.perf_counter() - started_s - sum(o.seconds for o in outcomes)
     initial = stage_estimate(
@@ -181,6 +183,7 @@ def estimate_result(
     from scipy.spatial import cKDTree
 
     from .consistency import assess, select_stage
+    from .free_space_conditioning import condition
 
     tree = cKDTree(fusion.points_m, balanced_tree=False)
     diagnosed = []
@@ -193,6 +196,10 @@ def estimate_result(
         status = stage.status
         if not verdict.consistent and status in ("converged", "max_iterations"):
             status = "inconsistent"
+            if refuse is not None and view is not None and stage.stage > 0:
+                stage = condition(fusion, stage, g, verdict, view, consistency, tree) or stage
+                if stage.hypothesis is not None:
+                    verdict, status = stage.consistency, stage.status
         seconds = stage.seconds + time.perf_counter() - started
         diagnosed.append(replace(stage, consistency=verdict, status=status, seconds=seconds))
     if refuse is not None:
