@@ -212,6 +212,16 @@ def free_space_count(depths_m: np.ndarray, tolerance_m: float) -> int:
     return int(np.count_nonzero(np.asarray(depths_m) > tolerance_m))
 
 
+def model_free_space_count(
+    points_m: np.ndarray, g: np.ndarray, view: DepthObservation, tolerance_m: float
+) -> int:
+    """How many points of the model as the camera saw it (``p`` and ``f_m(p)``, frame R
+    before the bias) lie further than ``tolerance_m`` in front of the measurement."""
+    seen = np.vstack([points_m, mirror(points_m, g)])
+    depths = free_space_depths(seen, view.depth_m, view.intrinsics, view.T_robot_camera)
+    return free_space_count(depths, tolerance_m)
+
+
 def assess(
     points_m: np.ndarray,
     g: np.ndarray,
@@ -257,10 +267,8 @@ def assess(
     violations = limit = None
     if view is not None:
         checks.append("free_space")
-        seen = np.vstack([points_m, mirror(points_m, g)])
-        depths = free_space_depths(seen, view.depth_m, view.intrinsics, view.T_robot_camera)
-        violations = free_space_count(depths, settings.free_space_tolerance_m)
-        limit = int(np.floor(settings.free_space_fraction * len(seen)))
+        violations = model_free_space_count(points_m, g, view, settings.free_space_tolerance_m)
+        limit = int(np.floor(settings.free_space_fraction * 2 * len(points_m)))
         if violations > limit:
             failures.append(
                 f"{violations} model points in space the camera saw empty (limit {limit})"

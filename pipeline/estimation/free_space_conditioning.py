@@ -35,9 +35,8 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..perception.visibility import free_space_depths
 from ..types import Consistency, DepthObservation, Hypothesis, StageEstimate
-from .consistency import ConsistencySettings, assess, free_space_count
+from .consistency import ConsistencySettings, assess, model_free_space_count
 from .geometry import mirror, plane_normal
 from .iekf import FusionProblem
 from .problem import stage_estimate
@@ -157,17 +156,17 @@ def condition(
     limit = verdict.free_space_limit
     mirrored = mirror(points, g)
 
+    def with_plane(plane_step: np.ndarray) -> np.ndarray:
+        state = np.array(g, dtype=float)
+        state[PLANE] += plane_step
+        return state
+
     def passes(plane_step: np.ndarray) -> bool:
-        moved = np.array(g, dtype=float)
-        moved[PLANE] += plane_step
-        seen = np.vstack([points, mirror(points, moved)])
-        depths = free_space_depths(seen, view.depth_m, view.intrinsics, view.T_robot_camera)
-        return free_space_count(depths, settings.free_space_tolerance_m) <= limit
+        tolerance_m = settings.free_space_tolerance_m
+        return model_free_space_count(points, with_plane(plane_step), view, tolerance_m) <= limit
 
     def within_noise(plane_step: np.ndarray) -> bool:
-        moved = np.array(g, dtype=float)
-        moved[PLANE] += plane_step
-        motion = np.linalg.norm(mirror(points, moved) - mirrored, axis=1)
+        motion = np.linalg.norm(mirror(points, with_plane(plane_step)) - mirrored, axis=1)
         return bool(np.max(motion, initial=0.0) <= settings.surface_std_m)
 
     plane_covariance = covariance[np.ix_(PLANE, PLANE)]
@@ -177,14 +176,16 @@ def condition(
     largest = -2.0 * np.log(settings.alpha)
     if plane_step is None or plane_step @ np.linalg.solve(plane_covariance, plane_step) > largest:
         return None
-    moved = conditioned_state(g, covariance, plane_step)
-    grasp_g = [moved + (np.asarray(g_k) - g) for g_k in stage.grasp_g]
-    checked = assess(points, moved, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree)
+    conditioned = conditioned_state(g, covariance, plane_step)
+    grasp_g = [conditioned + (np.asarray(g_k) - g) for g_k in stage.grasp_g]
+    checked = assess(
+        points, conditioned, grasp_g, fusion.pivot_m, fusion.grasps, view, settings, tree
+    )
     if not checked.consistent:
         return None
     estimate = stage_estimate(
         stage.stage,
-        moved,
+        conditioned,
         covariance,
         points,
         fusion.pivot_m,
