@@ -184,6 +184,7 @@ def estimate_result(
 
     from .consistency import assess, select_stage
     from .free_space_conditioning import condition
+    from .hypotheses import holdable
 
     tree = cKDTree(fusion.points_m, balanced_tree=False)
     diagnosed = []
@@ -196,7 +197,14 @@ def estimate_result(
         status = stage.status
         if not verdict.consistent and status in ("converged", "max_iterations"):
             status = "inconsistent"
-            if refuse is not None and view is not None and stage.stage > 0:
+            # Conditioning serves when vision alone is no option: a Stage 0 the taxels
+            # accept is held by the hypotheses of §9, which stay near it.
+            if (
+                refuse is not None
+                and view is not None
+                and stage.stage > 0
+                and not holdable(diagnosed[0], replace(stage, consistency=verdict))
+            ):
                 stage = condition(fusion, stage, g, verdict, view, consistency, tree) or stage
                 if stage.hypothesis is not None:
                     verdict, status = stage.consistency, stage.status
