@@ -24,7 +24,9 @@ allows. Two limits keep this a refinement, not another model:
   freedom): a plane further off contradicts the posterior rather than refining it.
 
 The conditioned model replaces the stage when it passes every test; the stage keeps its
-status, its covariances and its points.
+status, its covariances and its points. :func:`.problem.estimate_result` tries it only
+when Stage 0 cannot be held (:func:`.hypotheses.holdable`): where the taxels accept vision
+alone, the hypotheses that stay near it decide.
 """
 
 from __future__ import annotations
