@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 
 from ..types import Consistency, DepthObservation, Hypothesis, StageEstimate
 from .consistency import ConsistencySettings, assess, model_free_space_count
-from .geometry import mirror, plane_normal
+from .geometry import mirror, plane_normal, plane_tangent
 from .iekf import FusionProblem
 from .problem import stage_estimate
 
@@ -69,7 +69,7 @@ def motion_basis(points_m: np.ndarray, g: np.ndarray, bound_m: float) -> np.ndar
     object through the lever of its distance from that origin.
     """
     n = plane_normal(g[5])
-    along = np.array([-np.sin(g[5]), np.cos(g[5]), 0.0])
+    along = plane_tangent(g[5])
     s = points_m @ along
     h = points_m @ n - g[4]
     centre = 0.5 * (float(np.min(s)) + float(np.max(s)))
@@ -109,22 +109,34 @@ def nearest_feasible(
         ray = basis @ np.array([np.cos(angle), np.sin(angle)])
         furthest = 1.0
         if not allowed(ray):
-            low, high = 0.0, 1.0
-            for _ in range(bisection_steps):
-                middle = 0.5 * (low + high)
-                low, high = (middle, high) if allowed(middle * ray) else (low, middle)
-            furthest = low
+            furthest, _ = _bisect(allowed, ray, False, 0.0, 1.0, bisection_steps)
         if furthest == 0.0 or not feasible(furthest * ray):
             continue
-        low, high = 0.0, furthest
-        for _ in range(bisection_steps):
-            middle = 0.5 * (low + high)
-            low, high = (low, middle) if feasible(middle * ray) else (middle, high)
-        step = high * ray
+        _, start = _bisect(feasible, ray, True, 0.0, furthest, bisection_steps)
+        step = start * ray
         norm = float(step @ precision @ step)
         if best is None or norm < best[0]:
             best = (norm, step)
     return None if best is None else best[1]
+
+
+def _bisect(
+    predicate: Callable[[np.ndarray], bool],
+    ray: np.ndarray,
+    at_high: bool,
+    low: float,
+    high: float,
+    steps: int,
+) -> tuple[float, float]:
+    """``[low, high]`` narrowed ``steps`` times around where ``predicate(rho ray)`` changes,
+    given that it is ``at_high`` at ``high`` and not at ``low``."""
+    for _ in range(steps):
+        middle = 0.5 * (low + high)
+        if predicate(middle * ray) == at_high:
+            high = middle
+        else:
+            low = middle
+    return low, high
 
 
 def conditioned_state(g: np.ndarray, covariance: np.ndarray, plane_step: np.ndarray) -> np.ndarray:

@@ -39,6 +39,11 @@ def plane_normal(m_theta_rad: float) -> np.ndarray:
     return np.array([np.cos(m_theta_rad), np.sin(m_theta_rad), 0.0])
 
 
+def plane_tangent(m_theta_rad: float) -> np.ndarray:
+    """``dn/dm_theta = (-sin m_theta, cos m_theta, 0)``: the plane's horizontal direction."""
+    return np.array([-np.sin(m_theta_rad), np.cos(m_theta_rad), 0.0])
+
+
 def reflection_matrix(m_theta_rad: float) -> np.ndarray:
     """Linear part ``I - 2 n n^T`` of the mirroring, (3, 3)."""
     n = plane_normal(m_theta_rad)
@@ -100,7 +105,7 @@ def mirror_plane_jacobian(points: np.ndarray, g: np.ndarray) -> np.ndarray:
     ``df_m/dm_r = 2 n`` and ``df_m/dm_theta = -2 ((n'.p) n + (n.p - m_r) n')``.
     """
     n = plane_normal(g[5])
-    n_prime = np.array([-np.sin(g[5]), np.cos(g[5]), 0.0])
+    n_prime = plane_tangent(g[5])
     jacobian = np.empty((len(points), 3, 2))
     jacobian[:, :, 0] = 2.0 * n
     jacobian[:, :, 1] = -2.0 * (
