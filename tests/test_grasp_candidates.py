@@ -18,6 +18,7 @@ from pipeline.perception.candidate import (
     CandidateSettings,
     height_grid,
 )
+from pipeline.perception.grasp_candidates import common_reason
 from pipeline.perception.grasp_geometry import front_to_back
 from pipeline.perception.pad_contact import flat_pad_taxels, pad_coverage, sdh_distal_taxels
 from pipeline.perception.parallel_candidates import ParallelHand, front_jaw_gap, parallel_candidate
@@ -207,6 +208,40 @@ def test_parallel_candidates_close_across_the_thin_side_of_a_turned_box():
     ranked = [c.score for c in plan.candidates]
     assert ranked == sorted(ranked, reverse=True)
     assert plan.score == ranked[0] > 0.0
+
+
+def test_common_reason_counts_reasons_that_differ_only_in_their_numbers_together():
+    reasons = [
+        "no surface before the back pad",
+        "82 mm wide between the jaws' paths, aperture 65 mm",
+        "no surface before the back pad",
+        "116 mm wide between the jaws' paths, aperture 65 mm",
+        "59 mm wide between the jaws' paths, aperture 65 mm",
+        "f1 meets no surface",
+        "f2 meets no surface",
+    ]
+    assert common_reason(reasons) == (
+        "59-116 mm wide between the jaws' paths, aperture 65 mm",
+        3,
+    )
+    # A finger's name is not a number; on a tie the kind met first wins.
+    assert common_reason(reasons[5:]) == ("f1 meets no surface", 1)
+    assert common_reason(["pad 2.5 mm off", "pad 12.25 mm off"]) == ("pad 2.5-12.25 mm off", 2)
+
+
+def test_a_box_wider_than_the_jaws_is_refused_with_its_widths():
+    from pipeline.sim.hands import GRIPPERS
+
+    cloud = _view(box_object(thickness_m=0.1, length_m=0.12, height_m=0.1), 0.0)
+    plan = TopParallel().plan(cloud, _true_plane(0.0), GRIPPERS["pg70"])
+    assert plan.status == "refused"
+    too_wide = [c for c in plan.candidates if "wide between the jaws' paths" in c.reason]
+    widths = [float(c.reason.split(" mm")[0]) for c in too_wide]
+    assert len(set(widths)) > 1
+    assert plan.reason == (
+        f"none of {len(plan.candidates)} grasps is feasible ({len(too_wide)} of them: "
+        f"{min(widths):.0f}-{max(widths):.0f} mm wide between the jaws' paths, aperture 65 mm)"
+    )
 
 
 @pytest.mark.parametrize(

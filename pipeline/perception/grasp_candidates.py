@@ -12,8 +12,9 @@ base class (:class:`CandidatePlanner`).
 
 from __future__ import annotations
 
+import re
 from abc import abstractmethod
-from collections import Counter
+from collections import defaultdict
 
 import numpy as np
 
@@ -32,6 +33,31 @@ def closing_angles(step_deg: float) -> np.ndarray:
     return np.radians(angles)
 
 
+#: A number in a reason's text (not part of a name such as ``f1``).
+_NUMBER = re.compile(r"(?<![A-Za-z_\d.])\d+(?:\.\d+)?")
+
+
+def common_reason(reasons: list[str]) -> tuple[str, int]:
+    """The most common kind of reason and how many share it.
+
+    Reasons of one kind differ only in their numbers ("82 mm wide ..." and "114 mm wide
+    ..."), so they are counted together, and each number that differs among them is
+    given as its range ("82-114 mm wide ..."). Ties go to the kind met first.
+    """
+    kinds: dict[str, list[str]] = defaultdict(list)
+    for reason in reasons:
+        kinds[_NUMBER.sub("#", reason)].append(reason)
+    kind, members = max(kinds.items(), key=lambda item: len(item[1]))
+    columns = zip(*(_NUMBER.findall(reason) for reason in members), strict=True)
+    spans = []
+    for column in columns:
+        low, high = min(column, key=float), max(column, key=float)
+        spans.append(low if float(low) == float(high) else f"{low}-{high}")
+    pieces = kind.split("#")
+    text = "".join(piece + span for piece, span in zip(pieces, spans, strict=False))
+    return text + pieces[-1], len(members)
+
+
 def plan_from_candidates(
     gripper: str, candidates: list[Candidate], pregrasp_height_m: float, aperture_m: float
 ) -> GraspPlan:
@@ -41,8 +67,7 @@ def plan_from_candidates(
     summaries = tuple(c.summary for c in ranked)
     best = ranked[0]
     if not best.summary.feasible:
-        reasons = Counter(c.summary.reason for c in ranked)
-        reason, count = reasons.most_common(1)[0]
+        reason, count = common_reason([c.summary.reason for c in ranked])
         return GraspPlan(
             gripper=gripper,
             status="refused",
