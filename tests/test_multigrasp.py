@@ -394,47 +394,49 @@ def test_later_grasps_change_hands_only_in_a_world_that_can_after_an_auto_choice
 
 
 @pytest.fixture(scope="module")
-def spray_head_twice(tmp_path_factory):
-    """The spray bottle seen from 20 deg, two grasps: the PG-70 holds it only at its head,
-    where its second grasp would read the first's surface again; the SDH-2 reaches the
-    body. Fusing them takes the camera's view: the first grasp's fusion is set aside for a
-    hypothesis (§9) and the second's for the earlier shape (§11)."""
+def spray_head_three_times(tmp_path_factory):
+    """The spray bottle seen from 20 deg, three grasps: the PG-70 holds it at its head,
+    where a second grasp of the PG-70 reads much the same surface again; the SDH-2 reaches
+    the body. Fusing them takes the camera's view: the joint fusion is set aside for the
+    earlier shape (§11)."""
     out = tmp_path_factory.mktemp("spray") / "trial"
     code = main(
-        ["trial", "--object", "spray_bottle", "--init", "vc", "--yaw", "20", "--grasps", "2",
+        ["trial", "--object", "spray_bottle", "--init", "vc", "--yaw", "20", "--grasps", "3",
          "--set", "trial.pictures=false", "--out", str(out)]
     )  # fmt: skip
     assert code == 0
     return out
 
 
-def test_a_trial_changes_hands_when_another_reaches_new_surface(spray_head_twice):
-    grasps = json.loads((spray_head_twice / "result.json").read_text())["grasps"]
-    assert [g["gripper"] for g in grasps] == ["pg70", "sdh"]
-    assert set(grasps[1]["chosen_by"]["grippers"]) == {"pg70", "sdh"}
-    assert grasps[1]["planner"] == "top-three-finger"
-    assert grasps[1]["executed"] and grasps[1]["taxels_in_contact"] > 20
-    assert set(grasps[1]["pads_in_contact"]) <= {"f1_distal", "f2_distal", "thumb_distal"}
-    contacts = json.loads((spray_head_twice / "contacts.json").read_text())["grasps"]
-    assert [g["plan"]["gripper"] for g in contacts] == ["pg70", "sdh"]
+def test_a_trial_changes_hands_when_another_reaches_new_surface(spray_head_three_times):
+    grasps = json.loads((spray_head_three_times / "result.json").read_text())["grasps"]
+    hands = [g["gripper"] for g in grasps]
+    assert hands[0] == "pg70" and "sdh" in hands[1:]
+    changed = grasps[hands.index("sdh")]
+    assert set(changed["chosen_by"]["grippers"]) == {"pg70", "sdh"}
+    assert changed["planner"] == "top-three-finger"
+    assert changed["executed"] and changed["taxels_in_contact"] > 20
+    assert set(changed["pads_in_contact"]) <= {"f1_distal", "f2_distal", "thumb_distal"}
+    contacts = json.loads((spray_head_three_times / "contacts.json").read_text())["grasps"]
+    assert [g["plan"]["gripper"] for g in contacts] == hands
 
 
 def test_fuse_with_the_depth_image_reproduces_an_estimate_that_needed_the_camera(
-    spray_head_twice, tmp_path
+    spray_head_three_times, tmp_path
 ):
-    document = json.loads((spray_head_twice / "result.json").read_text())
+    document = json.loads((spray_head_three_times / "result.json").read_text())
     trial = document["stages"]
     assert any(stage.get("hypothesis") for stage in trial)
     init = document["init"]
     plane = ",".join(repr(v) for v in (*init["plane"]["normal"], init["plane"]["offset"]))
     common = [
         "fuse",
-        "--cloud", str(spray_head_twice / "cloud.ply"),
-        "--contacts", str(spray_head_twice / "contacts.json"),
-        "--config", str(spray_head_twice / "config.toml"),
+        "--cloud", str(spray_head_three_times / "cloud.ply"),
+        "--contacts", str(spray_head_three_times / "contacts.json"),
+        "--config", str(spray_head_three_times / "config.toml"),
         "--plane", plane,
     ]  # fmt: skip
-    depth = str(spray_head_twice / "depth.npy")
+    depth = str(spray_head_three_times / "depth.npy")
     assert main([*common, "--depth", depth, "--out", str(tmp_path / "seen")]) == 0
     seen = json.loads((tmp_path / "seen" / "result.json").read_text())
     assert seen["inputs"]["depth"] == depth

@@ -12,6 +12,7 @@ from pipeline.errors import InputError
 from pipeline.sim import collision
 from pipeline.sim import scene as scene_module
 from pipeline.sim.scene import Scene
+from pipeline.sim.world import REST_SPEED_M_S, REST_SPIN_RAD_S, settle
 
 
 @pytest.fixture(autouse=True)
@@ -56,6 +57,35 @@ def test_box_stands_still_at_its_planar_pose(table_height_m):
         pose = scene.object_pose(body)
     np.testing.assert_allclose(pose.position_m, [0.45, -0.12, table_height_m], atol=5e-4)
     assert yaw_of(pose.quaternion_xyzw) == pytest.approx(0.7, abs=1e-3)
+
+
+@pytest.mark.parametrize("yaw_rad", [1.745, 2.79, 3.66])
+def test_a_cylinder_lying_on_its_side_stays_where_it_was_put(yaw_rad):
+    # A 32-sided prism on its side rests on an edge; without rolling resistance it rolled
+    # off, faster and faster (120 mm in 2 s).
+    lying = trimesh.creation.cylinder(radius=0.028, height=0.13)
+    lying.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    with Scene() as scene:
+        body = scene.add_object(standing(lying), 0.2, 0.5, yaw_rad=yaw_rad)
+        start = scene.object_pose(body).position_m
+        scene.step(480)
+        moved_m = np.linalg.norm(scene.object_pose(body).position_m - start)
+    assert moved_m < 1e-3
+
+
+def test_a_world_waits_until_a_toppling_object_is_still():
+    # A box standing on one edge, 30 deg from upright, falls over as soon as it is placed.
+    tilted = box_mesh((0.04, 0.06, 0.12))
+    tilted.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 6, [1, 0, 0]))
+    with Scene() as scene:
+        body = scene.add_object(standing(tilted), 0.3, 0.6)
+        settle(scene, body)
+        linear, angular = pybullet.getBaseVelocity(body, physicsClientId=scene.client)
+        fallen = scene.object_pose(body)
+        scene.step(240)
+        later = scene.object_pose(body)
+    assert np.linalg.norm(linear) < REST_SPEED_M_S and np.linalg.norm(angular) < REST_SPIN_RAD_S
+    assert np.linalg.norm(later.position_m - fallen.position_m) < 1e-3
 
 
 def test_pose_is_the_mesh_frame_even_with_an_offset_centre_of_mass():
