@@ -20,6 +20,7 @@ import functools
 import logging
 import os
 import tomllib
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -241,7 +242,11 @@ def _load_mesh_file(path: Path, *, recentre: bool, units: str = "m") -> Catalogu
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputError(f"{path}: unsupported mesh format (use {', '.join(MESH_SUFFIXES)})")
     try:
-        mesh = trimesh.load(path, force="mesh")
+        with warnings.catch_warnings():
+            # A scan's OBJ may carry NaN normals (the YCB mug's do): trimesh's vertex merge
+            # then warns while casting them, though the vertices are finite (checked below).
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mesh = trimesh.load(path, force="mesh")
     except Exception as exc:  # trimesh raises many types for malformed files
         detail = (str(exc).splitlines() or [""])[0]
         raise InputError(f"{path}: cannot read mesh ({type(exc).__name__}: {detail})") from exc

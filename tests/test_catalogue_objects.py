@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import trimesh
@@ -166,6 +168,20 @@ def test_an_open_scan_is_accepted_and_flagged(tmp_path):
     loaded = load_object(str(path))
     assert not loaded.watertight
     assert len(loaded.mesh.faces) == 10
+
+
+def test_a_scan_with_nan_normals_loads_without_a_warning(tmp_path):
+    # A tetrahedron whose OBJ gives one face a NaN normal, as the YCB mug scan does.
+    path = tmp_path / "nan_normal.obj"
+    path.write_text(
+        "v 0 0 0\nv 0.05 0 0\nv 0 0.05 0\nv 0 0 0.05\n"
+        "vn 0 0 -1\nvn nan nan nan\nvn 1 1 1\nvn 0 -1 0\n"
+        "f 1//1 3//1 2//1\nf 1//4 2//4 4//4\nf 1//2 4//2 3//2\nf 2//3 3//3 4//3\n"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        loaded = load_object(str(path))
+    assert len(loaded.mesh.faces) == 4 and np.isfinite(loaded.mesh.vertices).all()
 
 
 def test_missing_unreadable_or_unsupported_files_name_the_path(tmp_path):
