@@ -109,7 +109,9 @@ def test_calibration_error_moves_the_cloud_by_a_planar_motion_about_the_target(w
     np.testing.assert_array_equal(true.depth_m, wrong.depth_m)
     points_true = back_project(true, true.object_mask)
     points_wrong = back_project(wrong, wrong.object_mask)
-    pivot = np.array([BOX_AT[0], BOX_AT[1], 0.05])  # default target: object + 5 cm up
+    # The default target: 5 cm above the object where it rests, a fraction of a
+    # micrometre from where it was put.
+    pivot = world.object_pose().position_m + np.array([0.0, 0.0, 0.05])
     yaw = np.deg2rad(2.0)
     c, s = np.cos(yaw), np.sin(yaw)
     rotation = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
