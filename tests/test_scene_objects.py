@@ -11,8 +11,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.errors import InputError
 from pipeline.sim import collision
 from pipeline.sim import scene as scene_module
-from pipeline.sim.scene import Scene
-from pipeline.sim.world import REST_SPEED_M_S, REST_SPIN_RAD_S, settle
+from pipeline.sim.scene import REST_SPEED_M_S, REST_SPIN_RAD_S, Scene
 
 
 @pytest.fixture(autouse=True)
@@ -79,7 +78,7 @@ def test_a_world_waits_until_a_toppling_object_is_still():
     tilted.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 6, [1, 0, 0]))
     with Scene() as scene:
         body = scene.add_object(standing(tilted), 0.3, 0.6)
-        settle(scene, body)
+        scene.settle(body)
         linear, angular = pybullet.getBaseVelocity(body, physicsClientId=scene.client)
         fallen = scene.object_pose(body)
         scene.step(240)

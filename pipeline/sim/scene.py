@@ -45,6 +45,15 @@ COLLISION_MARGIN_M = 1e-4
 #: and the solver keeps adding speed: a lying 56 mm cylinder went 120 mm in 2 s.
 ROLLING_FRICTION_M = 1e-4
 
+#: Physics steps (1/240 s each) an object is left to settle after being placed, and how
+#: many more it is given at most while it still moves (a mesh placed where it topples):
+#: the camera looks once it is still.
+SETTLE_STEPS = 24
+MAX_SETTLE_STEPS = 480
+#: Speeds below which an object counts as still (m/s, rad/s).
+REST_SPEED_M_S = 1e-3
+REST_SPIN_RAD_S = 1e-2
+
 
 def _quaternion_yaw(yaw_rad: float) -> list[float]:
     return Rotation.from_euler("z", yaw_rad).as_quat().tolist()
@@ -269,6 +278,20 @@ class Scene:
             body, position, orientation, physicsClientId=self.client
         )
         pybullet.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+
+    def settle(self, body: int) -> None:
+        """Let ``body`` settle on the table: :data:`SETTLE_STEPS`, then more while it still
+        moves faster than :data:`REST_SPEED_M_S` or turns faster than
+        :data:`REST_SPIN_RAD_S`, up to :data:`MAX_SETTLE_STEPS` more."""
+        self.step(SETTLE_STEPS)
+        for _ in range(MAX_SETTLE_STEPS // SETTLE_STEPS):
+            linear, angular = pybullet.getBaseVelocity(body, physicsClientId=self.client)
+            if (
+                np.linalg.norm(linear) < REST_SPEED_M_S
+                and np.linalg.norm(angular) < REST_SPIN_RAD_S
+            ):
+                return
+            self.step(SETTLE_STEPS)
 
     def step(self, steps: int = 1) -> None:
         """Advance the physics by ``steps`` time steps."""

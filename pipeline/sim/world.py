@@ -29,30 +29,10 @@ from pipeline.types import GraspOutcome, GraspPlan, GripperSpec, ObjectPose, Sce
 if TYPE_CHECKING:
     from pipeline.sim.hands import Hand
 
-#: Physics steps (1/240 s each) the object is left to settle after being placed (s * 240),
-#: and how many more it is given at most while it still moves (a mesh placed where it
-#: topples): the camera looks once it is still.
-SETTLE_STEPS = 24
-MAX_SETTLE_STEPS = 480
-#: Speeds below which the object counts as still (m/s, rad/s).
-REST_SPEED_M_S = 1e-3
-REST_SPIN_RAD_S = 1e-2
 #: Environment variable: ``0`` gives every world a new PyBullet client (see the module doc).
 REUSE_VARIABLE = "SYMFUSE_PYBULLET_REUSE"
 #: Connected, empty clients of closed worlds, waiting for the next world of this process.
 _idle_clients: list[int] = []
-
-
-def settle(scene: Scene, body: int) -> None:
-    """Let ``body`` settle on the table: :data:`SETTLE_STEPS`, then more while it still
-    moves faster than :data:`REST_SPEED_M_S` or turns faster than :data:`REST_SPIN_RAD_S`,
-    up to :data:`MAX_SETTLE_STEPS` more."""
-    scene.step(SETTLE_STEPS)
-    for _ in range(MAX_SETTLE_STEPS // SETTLE_STEPS):
-        linear, angular = pybullet.getBaseVelocity(body, physicsClientId=scene.client)
-        if np.linalg.norm(linear) < REST_SPEED_M_S and np.linalg.norm(angular) < REST_SPIN_RAD_S:
-            return
-        scene.step(SETTLE_STEPS)
 
 
 def _reuse_clients() -> bool:
@@ -133,7 +113,8 @@ class PybulletWorld:
 
         With ``urdf_path`` the object's body comes from that URDF (its base frame must be
         the frame ``obj.mesh`` is expressed in); otherwise it is built from ``obj.mesh``,
-        ``obj.mass_kg`` and ``obj.friction``. The object is left to settle (:func:`settle`).
+        ``obj.mass_kg`` and ``obj.friction``. The object is left to settle
+        (:meth:`~pipeline.sim.scene.Scene.settle`).
         """
         client = _empty_client() if _reuse_clients() else None
         if client is None:
@@ -148,7 +129,7 @@ class PybulletWorld:
                 object_id = scene.add_object(obj.mesh, obj.mass_kg, obj.friction, x, y, yaw)
             else:
                 object_id = scene.add_urdf(urdf_path, x, y, yaw)
-            settle(scene, object_id)
+            scene.settle(object_id)
             world = cls(scene, None, object_id, obj.mesh, obj.name, seed)
             if gripper is not None:
                 world.add_hand(gripper)
