@@ -72,7 +72,7 @@ def test_a_cylinder_lying_on_its_side_stays_where_it_was_put(yaw_rad):
     assert moved_m < 1e-3
 
 
-def test_a_world_waits_until_a_toppling_object_is_still():
+def test_settling_waits_until_a_toppling_object_is_still():
     # A box standing on one edge, 30 deg from upright, falls over as soon as it is placed.
     tilted = box_mesh((0.04, 0.06, 0.12))
     tilted.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 6, [1, 0, 0]))
