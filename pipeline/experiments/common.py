@@ -26,10 +26,11 @@ def fmt(value: float | None, digits: int = 1) -> str:
 
 
 def failures_section(failed: Sequence[str]) -> list[str]:
-    """Markdown lines listing runs that raised (empty when none did)."""
+    """Markdown lines listing runs that failed (a stage refused, the row says why) or raised
+    (empty when none did)."""
     if not failed:
         return []
-    lines = ["", f"## Runs that raised ({len(failed)})", ""]
+    lines = ["", f"## Runs that failed or raised ({len(failed)})", ""]
     lines += [f"- `{line}`" for line in failed[:20]]
     if len(failed) > 20:
         lines.append(f"- ... and {len(failed) - 20} more (see results.csv)")
