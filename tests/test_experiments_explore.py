@@ -9,6 +9,7 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.experiments import ExperimentOptions, explore
+from pipeline.experiments.paper_trial import attempt_fields, grasp_fields
 
 
 def test_grid_is_objects_by_yaws_by_strategies(tmp_path):
@@ -84,6 +85,62 @@ def test_report_counts_gains_and_worse_grasps(tmp_path):
     assert "| information | 4 | 0 (0.0 %) | 1 (25.0 %) | 2 | 0 (0.0 %) |" in text
 
 
+def _moved(row, motions, unfused=None):
+    """``row`` with each later grasp's ``(shift mm, turn deg)`` (from grasp 2) and, when
+    given, the grasp it stopped on unfused, and the default re-grasp noise."""
+    row["params"]["estimator_params"] = {"regrasp_b_xy_m": 0.005, "regrasp_b_theta_rad": 0.02}
+    attempts = [(True, motion) for motion in motions] + ([(False, unfused)] if unfused else [])
+    for k, (fused, (shift, turn)) in enumerate(attempts, start=2):
+        row[f"grasp{k}_fused"] = fused
+        row[f"grasp{k}_gripper"] = "pg70"
+        row[f"grasp{k}_object_shift_mm"] = shift
+        row[f"grasp{k}_object_turn_deg"] = turn
+    return row
+
+
+def test_report_counts_what_the_later_grasps_did_to_the_object(tmp_path):
+    # Q's 2 std: 10 mm and 2.29 deg. Random's third grasp pushed the object 12 mm and was
+    # not fused; information's second turned it 4 deg (beyond) and gained 2 mm.
+    rows = [
+        _moved(_row("a", "paper", [4.0, 3.5, 3.0], [True] * 3), [(1.0, 0.1), (2.0, -0.3)]),
+        _moved(_row("a", "random", [4.0, 3.0], [True] * 2), [(1.0, 0.5)], unfused=(12.0, 0.0)),
+        _moved(_row("a", "information", [4.0, 2.0, 1.0], [True] * 3), [(3.0, -4.0), (1.0, 0.0)]),
+    ]
+    # Information's third grasp only located the earlier shape.
+    rows[2]["grasp3_stage2_hypothesis"] = "earlier shape without thumb_distal"
+    rows[2]["grasp2_stage2_hypothesis"] = "held-angle, bounded"
+    assert [explore.located_only(rows[2], k) for k in (2, 3)] == [False, True]
+    assert explore.later_grasps(rows[1]) == [(2, True, 1.0, 0.5), (3, False, 12.0, 0.0)]
+    assert explore.regrasp_bounds(rows[0]) == pytest.approx((10.0, 2.0 * np.degrees(0.02)))
+    explore.report(rows, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "beyond 2 std of Q (10 mm or 2.3 deg)" in text
+    table = {
+        cells[0]: cells[1:]
+        for line in text.splitlines()
+        if line.count("|") == 10 and (cells := [c.strip() for c in line.strip("|").split("|")])
+    }
+    assert table["paper"] == [
+        "2",
+        "0 (0.0 %)",
+        "0 (0.0 %)",
+        "0 (0.0 %)",
+        "1.5 / 1.9",
+        "0.2 / 0.3",
+        "1, 0.50",
+        "0, -",
+    ]
+    assert table["random"][:4] == ["2", "1 (50.0 %)", "0 (0.0 %)", "1 (50.0 %)"]
+    assert table["random"][6:] == ["1, 1.00", "0, -"]
+    assert table["information"][:4] == ["2", "0 (0.0 %)", "1 (50.0 %)", "1 (50.0 %)"]
+    assert table["information"][6:] == ["0, -", "1, 2.00"]
+    # Without re-grasp noise (another estimator) the section is left out.
+    for row in rows:
+        del row["params"]["estimator_params"]
+    explore.report(rows, tmp_path)
+    assert "What the later grasps did" not in (tmp_path / "report.md").read_text()
+
+
 @pytest.mark.parametrize("experiment", ["table1"])
 def test_scans_only_for_experiments_that_read_them(experiment, tmp_path, capsys):
     code = main(["sweep", experiment, "--scans", str(tmp_path), "--out", str(tmp_path / "o")])
@@ -118,3 +175,41 @@ def test_paired_difference_interval_matches_the_normal_theory_for_many_poses():
     half = 1.96 * differences.std(ddof=1) / np.sqrt(400)
     assert low == pytest.approx(mean - half, abs=0.05 * half)
     assert high == pytest.approx(mean + half, abs=0.05 * half)
+
+
+def test_a_grasp_row_records_the_motion_and_the_hypothesis():
+    def stage(k, hypothesis=None):
+        metrics = {"deviation_m": {"median": 0.002}, "plane_angle_error_deg": 1.0}
+        consistency = {"consistent": True}
+        return {
+            "stage": k,
+            "status": "converged",
+            "metrics": metrics,
+            "hypothesis": hypothesis,
+            "consistency": consistency,
+        }
+
+    entry = {
+        "grasp": 2,
+        "gripper": "sdh",
+        "object_shift_mm": 3.0,
+        "object_turn_deg": -1.5,
+        "chosen_by": {"strategy": "information"},
+        "taxels_in_contact": 9,
+        "selected_stage": 0,
+        "uncertainty": {"plane_offset_std_mm": 1.0, "hidden_side_std_mm": 2.0},
+        "stages": [stage(0), stage(1), stage(2, {"name": "earlier shape", "step": 0.5})],
+    }
+    fields = grasp_fields(entry)
+    assert fields["grasp2_fused"] is True
+    assert (fields["grasp2_object_shift_mm"], fields["grasp2_object_turn_deg"]) == (3.0, -1.5)
+    assert fields["grasp2_stage2_hypothesis"] == "earlier shape"
+    assert fields["grasp2_selected_hypothesis"] == ""
+    assert fields["grasp2_stage2_deviation_median_mm"] == pytest.approx(2.0)
+    stopped = {"grasp": 3, "gripper": "pg70", "object_shift_mm": 12.0, "object_turn_deg": 0.2}
+    assert attempt_fields(stopped, fused=False) == {
+        "grasp3_fused": False,
+        "grasp3_gripper": "pg70",
+        "grasp3_object_shift_mm": 12.0,
+        "grasp3_object_turn_deg": 0.2,
+    }

@@ -18,7 +18,10 @@ and how much more with ``information`` than with ``random`` pose by
 pose, with a bootstrap interval (a few dozen poses leave the mean uncertain); and how often
 a grasp made the estimate worse than the grasp before it, by the estimator's own
 consistency check (Stage 2 consistent before, flagged after) and by the truth (Stage 2's
-median deviation up by more than :data:`WORSE_MM`).
+median deviation up by more than :data:`WORSE_MM`); and what the later grasps did to the
+object and how they were fused: how many were not fused, how many only located the earlier
+grasps' shape, how far they moved the object, how many moved it beyond the estimator's
+re-grasp noise, and the hard poses' second-grasp gains within and beyond it.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import numpy as np
 
 from ..catalogue import list_objects
 from ..config import NEXT_GRASP_STRATEGIES
+from ..estimation.later_grasps import EARLIER_SHAPE
 from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask
 from .common import failures_section, fmt, task_seed
@@ -60,6 +64,9 @@ WORSE_MM = 0.5
 #: stage's (the estimate a trial reports, docs/method.md §9).
 STAGE2_DEVIATION = "stage2_deviation_median_mm"
 SELECTED_DEVIATION = "selected_deviation_median_mm"
+#: A later grasp moved the object beyond the re-grasp noise ``Q`` when it shifted or
+#: turned it by more than this many of ``Q``'s stds.
+REGRASP_SIGMAS = 2.0
 #: Resamples of the bootstrap intervals; they are seeded, so a report is reproducible.
 BOOTSTRAP_RESAMPLES = 10_000
 
@@ -224,6 +231,105 @@ def paired_gain_difference(
     return mean, float(interval.low), float(interval.high), int(differences.size)
 
 
+def located_only(row: Mapping[str, Any], k: int) -> bool:
+    """Whether grasp ``k`` of ``row`` only located the earlier grasps' shape: its joint
+    fusion contradicted the evidence and the earlier shape took its place (docs/method.md
+    §11), so its taxels said where the object stands but did not reshape the model."""
+    return str(row.get(f"grasp{k}_stage2_hypothesis") or "").startswith(EARLIER_SHAPE)
+
+
+def later_grasps(row: Mapping[str, Any]) -> list[tuple[int, bool, float, float]]:
+    """``(k, fused, shift (mm), |turn| (deg))`` of every grasp after the first a trial made,
+    including the one it stopped on unfused."""
+    made = []
+    for k in range(2, GRASPS + 1):
+        if f"grasp{k}_fused" in row:
+            made.append(
+                (
+                    k,
+                    bool(row[f"grasp{k}_fused"]),
+                    value(row, f"grasp{k}_object_shift_mm"),
+                    abs(value(row, f"grasp{k}_object_turn_deg")),
+                )
+            )
+    return made
+
+
+def regrasp_bounds(row: Mapping[str, Any]) -> tuple[float, float] | None:
+    """How far the estimator's re-grasp noise ``Q`` lets the object move between grasps:
+    :data:`REGRASP_SIGMAS` of its std in translation (mm) and yaw (deg); None for an
+    estimator without one."""
+    params = row["params"].get("estimator_params") or {}
+    if "regrasp_b_xy_m" not in params or "regrasp_b_theta_rad" not in params:
+        return None
+    return (
+        REGRASP_SIGMAS * 1e3 * float(params["regrasp_b_xy_m"]),
+        REGRASP_SIGMAS * float(np.degrees(params["regrasp_b_theta_rad"])),
+    )
+
+
+def _beyond(row: Mapping[str, Any], shift_mm: float, turn_deg: float) -> bool:
+    """Whether a grasp of ``row`` moved the object beyond :func:`regrasp_bounds` (False
+    without them)."""
+    bounds = regrasp_bounds(row)
+    return bounds is not None and (shift_mm > bounds[0] or turn_deg > bounds[1])
+
+
+def motion_lines(
+    finished: Sequence[Mapping[str, Any]], hard: Sequence[Mapping[str, Any]]
+) -> list[str]:
+    """The report's section on what the later grasps did to the object, per strategy."""
+    bounds = next((b for row in finished if (b := regrasp_bounds(row)) is not None), None)
+    if bounds is None:
+        return []
+    lines = [
+        "",
+        "## What the later grasps did to the object",
+        "",
+        "A grasp moves the object as its pads close. The estimator follows it between "
+        f"grasps within the re-grasp noise Q; beyond {REGRASP_SIGMAS:g} std of Q "
+        f"({bounds[0]:.0f} mm or {bounds[1]:.1f} deg) a later grasp's taxels meet a model "
+        "that stands elsewhere. A grasp not executed, or that touched one side only or "
+        "nothing, is not fused and ends the trial. A fused grasp whose joint fusion with "
+        "the earlier ones contradicted the evidence only locates the earlier shape: its "
+        "taxels say where the object stands, not what it looks like. The last columns: the "
+        "hard poses' second grasps, within and beyond those bounds, and the mean reduction "
+        "of Stage 2's median deviation.",
+        "",
+        "| strategy | later grasps | not fused | located only | moved beyond Q "
+        "| shift: median / 90 % (mm) | turn: median / 90 % (deg) "
+        "| hard, within Q: n, reduction (mm) | hard, beyond Q: n, reduction (mm) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for strategy, members in _by_strategy(finished).items():
+        made = [(row, *grasp) for row in members for grasp in later_grasps(row)]
+        if not made:
+            continue
+        shifts = np.array([shift for _, _, _, shift, _ in made])
+        turns = np.array([turn for _, _, _, _, turn in made])
+        beyond = sum(_beyond(row, shift, turn) for row, _, _, shift, turn in made)
+        unfused = sum(not fused for _, _, fused, _, _ in made)
+        located = sum(fused and located_only(row, k) for row, k, fused, _, _ in made)
+        split: dict[bool, list[float]] = {False: [], True: []}
+        for row in _by_strategy(hard)[strategy]:
+            second = [grasp for grasp in later_grasps(row) if grasp[0] == 2]
+            if second:
+                _, _, shift, turn = second[0]
+                split[_beyond(row, shift, turn)].append(_second_grasp_reduction(row))
+        cells = [
+            f"{len(gains)}, {fmt(float(np.nanmean(gains)), 2) if gains else '-'}"
+            for gains in (split[False], split[True])
+        ]
+        lines.append(
+            f"| {strategy} | {len(made)} | {_share(unfused, len(made))} "
+            f"| {_share(located, len(made))} | {_share(beyond, len(made))} "
+            f"| {fmt(float(np.nanmedian(shifts)))} / {fmt(float(np.nanpercentile(shifts, 90)))} "
+            f"| {fmt(float(np.nanmedian(turns)))} / {fmt(float(np.nanpercentile(turns, 90)))} "
+            f"| {cells[0]} | {cells[1]} |"
+        )
+    return lines
+
+
 def _share(count: int, total: int) -> str:
     return f"{count} ({100.0 * count / total:.1f} %)" if total else str(count)
 
@@ -337,6 +443,7 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             f"| {strategy} | {total} | {_share(by_check, total)} | {_share(by_truth, total)} "
             f"| {trials} | {_share(bad_trials, trials)} |"
         )
+    lines += motion_lines(finished, hard)
     lines += [
         "",
         "## Per object (Stage 2 median deviation, mm: after grasp 1 -> after grasp 3)",

@@ -98,15 +98,32 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
         row["grasps_made"] = len(document["grasps"])
         for entry in document["grasps"]:
             row.update(grasp_fields(entry))
+        if unfused := document.get("unfused_grasp"):
+            row.update(attempt_fields(unfused, fused=False))
     return row
 
 
+def attempt_fields(entry: Mapping[str, Any], fused: bool) -> dict[str, Any]:
+    """The row fields of any grasp a multi-grasp trial made (``grasp{k}_...``), fused or
+    not (the later grasp it stopped on): its hand, and how far it moved the object (mm,
+    deg)."""
+    prefix = f"grasp{entry['grasp']}"
+    return {
+        f"{prefix}_fused": fused,
+        f"{prefix}_gripper": entry["gripper"],
+        f"{prefix}_object_shift_mm": entry.get("object_shift_mm"),
+        f"{prefix}_object_turn_deg": entry.get("object_turn_deg"),
+    }
+
+
 def grasp_fields(entry: Mapping[str, Any]) -> dict[str, Any]:
-    """The row fields of one grasp of a multi-grasp trial (``grasp{k}_...``): how it was
-    chosen, its taxels, and Stage 2's and the selected stage's deviation, plane errors,
-    status and consistency after fusing it, with the stop rule's two stds (mm)."""
+    """The row fields of one fused grasp of a multi-grasp trial (``grasp{k}_...``): those of
+    :func:`attempt_fields`, how it was chosen, its taxels, and Stage 2's and the selected
+    stage's deviation, plane errors, status and consistency after fusing it, with the stop
+    rule's two stds (mm), and the alternative hypothesis each stage's model comes from."""
     prefix = f"grasp{entry['grasp']}"
     fields: dict[str, Any] = {
+        **attempt_fields(entry, fused=True),
         f"{prefix}_strategy": entry["chosen_by"]["strategy"],
         f"{prefix}_taxels": entry["taxels_in_contact"],
         f"{prefix}_selected_stage": entry["selected_stage"],
@@ -126,6 +143,7 @@ def grasp_fields(entry: Mapping[str, Any]) -> dict[str, Any]:
                 f"{prefix}_{label}_deviation_median_mm": 1e3 * metrics["deviation_m"]["median"],
                 f"{prefix}_{label}_plane_angle_error_deg": metrics.get("plane_angle_error_deg"),
                 f"{prefix}_{label}_plane_offset_error_mm": metrics.get("plane_offset_error_mm"),
+                **hypothesis_field(f"{prefix}_{label}", stage.get("hypothesis")),
             }
         )
     return fields
