@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -238,21 +238,28 @@ def located_only(row: Mapping[str, Any], k: int) -> bool:
     return str(row.get(f"grasp{k}_stage2_hypothesis") or "").startswith(EARLIER_SHAPE)
 
 
-def later_grasps(row: Mapping[str, Any]) -> list[tuple[int, bool, float, float]]:
-    """``(k, fused, shift (mm), |turn| (deg))`` of every grasp after the first a trial made,
-    including the one it stopped on unfused."""
-    made = []
-    for k in range(2, GRASPS + 1):
-        if f"grasp{k}_fused" in row:
-            made.append(
-                (
-                    k,
-                    bool(row[f"grasp{k}_fused"]),
-                    value(row, f"grasp{k}_object_shift_mm"),
-                    abs(value(row, f"grasp{k}_object_turn_deg")),
-                )
-            )
-    return made
+class LaterGrasp(NamedTuple):
+    """A grasp after the first: its number, whether it was fused, and how far it moved the
+    object's centre (mm) and turned it (absolute, deg)."""
+
+    k: int
+    fused: bool
+    shift_mm: float
+    turn_deg: float
+
+
+def later_grasps(row: Mapping[str, Any]) -> list[LaterGrasp]:
+    """Every grasp after the first a trial made, including the one it stopped on unfused."""
+    return [
+        LaterGrasp(
+            k,
+            bool(row[f"grasp{k}_fused"]),
+            value(row, f"grasp{k}_object_shift_mm"),
+            abs(value(row, f"grasp{k}_object_turn_deg")),
+        )
+        for k in range(2, GRASPS + 1)
+        if f"grasp{k}_fused" in row
+    ]
 
 
 def regrasp_bounds(row: Mapping[str, Any]) -> tuple[float, float] | None:
@@ -268,11 +275,11 @@ def regrasp_bounds(row: Mapping[str, Any]) -> tuple[float, float] | None:
     )
 
 
-def _beyond(row: Mapping[str, Any], shift_mm: float, turn_deg: float) -> bool:
-    """Whether a grasp of ``row`` moved the object beyond :func:`regrasp_bounds` (False
+def _beyond(row: Mapping[str, Any], grasp: LaterGrasp) -> bool:
+    """Whether ``grasp`` of ``row`` moved the object beyond :func:`regrasp_bounds` (False
     without them)."""
     bounds = regrasp_bounds(row)
-    return bounds is not None and (shift_mm > bounds[0] or turn_deg > bounds[1])
+    return bounds is not None and (grasp.shift_mm > bounds[0] or grasp.turn_deg > bounds[1])
 
 
 def motion_lines(
@@ -302,20 +309,19 @@ def motion_lines(
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for strategy, members in _by_strategy(finished).items():
-        made = [(row, *grasp) for row in members for grasp in later_grasps(row)]
+        made = [(row, grasp) for row in members for grasp in later_grasps(row)]
         if not made:
             continue
-        shifts = np.array([shift for _, _, _, shift, _ in made])
-        turns = np.array([turn for _, _, _, _, turn in made])
-        beyond = sum(_beyond(row, shift, turn) for row, _, _, shift, turn in made)
-        unfused = sum(not fused for _, _, fused, _, _ in made)
-        located = sum(fused and located_only(row, k) for row, k, fused, _, _ in made)
+        shifts = np.array([grasp.shift_mm for _, grasp in made])
+        turns = np.array([grasp.turn_deg for _, grasp in made])
+        beyond = sum(_beyond(row, grasp) for row, grasp in made)
+        unfused = sum(not grasp.fused for _, grasp in made)
+        located = sum(grasp.fused and located_only(row, grasp.k) for row, grasp in made)
         split: dict[bool, list[float]] = {False: [], True: []}
         for row in _by_strategy(hard)[strategy]:
-            second = [grasp for grasp in later_grasps(row) if grasp[0] == 2]
-            if second:
-                _, _, shift, turn = second[0]
-                split[_beyond(row, shift, turn)].append(_second_grasp_reduction(row))
+            for grasp in later_grasps(row):
+                if grasp.k == 2:
+                    split[_beyond(row, grasp)].append(_second_grasp_reduction(row))
         cells = [
             f"{len(gains)}, {fmt(float(np.nanmean(gains)), 2) if gains else '-'}"
             for gains in (split[False], split[True])
