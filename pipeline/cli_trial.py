@@ -143,7 +143,8 @@ def trial_summary(record) -> str:
 def grasps_summary(document: dict) -> str:
     """One row per grasp of a multi-grasp trial: how it was chosen, where it touched, the
     selected stage after fusing it with its deviation and consistency, and the two
-    uncertainties of the stop rule; then why the trial stopped."""
+    uncertainties of the stop rule; the grasp it stopped on unfused, if any; then why the
+    trial stopped."""
     rows = []
     for entry in document["grasps"]:
         stage = entry["stages"][entry["selected_stage"]]
@@ -164,6 +165,19 @@ def grasps_summary(document: dict) -> str:
                 "yes" if consistency.get("consistent") else "NO",
                 f"{entry['uncertainty']['plane_offset_std_mm']:.2f}",
                 f"{entry['uncertainty']['hidden_side_std_mm']:.2f}",
+            ]
+        )
+    if unfused := document.get("unfused_grasp"):
+        rows.append(
+            [
+                unfused["grasp"],
+                unfused["chosen_by"]["strategy"],
+                unfused["gripper"],
+                " ".join(unfused.get("pads_in_contact", [])) or "-",
+                unfused.get("taxels_in_contact", 0),
+                "-",
+                "not fused",
+                *["-"] * 6,
             ]
         )
     header = [
@@ -219,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
         f"{grasp['object_shift_mm']:.1f} mm, turned {grasp['object_turn_deg']:.1f} deg and "
         f"tilted {grasp['object_tilt_deg']:.1f} deg"
     )
-    if len(record.document["grasps"]) > 1 or settings.until_std_mm > 0:
+    if settings.grasps > 1 or settings.until_std_mm > 0:
         print(grasps_summary(record.document))
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())
     print(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s")

@@ -95,6 +95,27 @@ def test_fuse_on_a_multi_grasp_contacts_file_reproduces_the_final_estimate(two_g
         assert np.allclose(a["covariance"], b["covariance"], atol=1e-12)
 
 
+def test_a_trial_that_stops_early_says_so_with_the_grasp_it_stopped_on(
+    tmp_path, monkeypatch, capsys
+):
+    import pipeline.trial
+
+    def second_grasp_slipped(k, contacts, shift_m, tilt_rad):
+        return "grasp 2 touched one side only (test); not fused" if k == 1 else ""
+
+    monkeypatch.setattr(pipeline.trial, "unfused_reason", second_grasp_slipped)
+    out = tmp_path / "early"
+    code = main(["trial", "--grasps", "3", "--set", "trial.pictures=false", "--out", str(out)])
+    assert code == 0
+    document = json.loads((out / "result.json").read_text())
+    assert len(document["grasps"]) == 1 and document["unfused_grasp"]["grasp"] == 2
+    printed = capsys.readouterr().out
+    rows = printed[printed.index("grasp  chosen by") :].splitlines()
+    assert rows[2].split()[:2] == ["1", "first"]
+    assert rows[3].split()[0] == "2" and "not fused" in rows[3]
+    assert rows[4] == "stopped: grasp 2 touched one side only (test); not fused"
+
+
 def test_until_std_stops_once_the_model_is_known_well_enough(tmp_path):
     out = tmp_path / "stop"
     code = main(
