@@ -299,7 +299,8 @@ def contacts_to_json(
 
 
 def plan_to_json(plan: GraspPlan) -> dict[str, Any]:
-    """A grasp plan as JSON (frame R, metres, radians)."""
+    """A grasp plan as JSON (frame R, metres, radians); ``score`` is null when the planner
+    gives none."""
     return {
         "gripper": plan.gripper,
         "status": plan.status,
@@ -309,6 +310,7 @@ def plan_to_json(plan: GraspPlan) -> dict[str, Any]:
         "closing_direction": [float(v) for v in plan.closing_direction],
         "predicted_contacts": np.asarray(plan.predicted_contacts).reshape(-1, 3).tolist(),
         "spread_rad": float(plan.spread_rad),
+        "score": None if math.isnan(plan.score) else float(plan.score),
         "reason": plan.reason,
     }
 
@@ -326,6 +328,7 @@ def plan_from_json(document: Any, where: str, path: Path) -> GraspPlan:
             float(document["opening_m"]),
             float(document.get("spread_rad", 0.0)),
         ]
+        score = document.get("score")
         plan = GraspPlan(
             gripper=str(document["gripper"]),
             status=str(document.get("status", "ok")),
@@ -336,6 +339,7 @@ def plan_from_json(document: Any, where: str, path: Path) -> GraspPlan:
             predicted_contacts=predicted.reshape(-1, 3),
             spread_rad=lengths[2],
             reason=str(document.get("reason", "")),
+            score=math.nan if score is None else float(score),
         )
     except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise InputError(f"{path}: {where} is not a valid grasp plan: {exc!r}") from None

@@ -85,14 +85,17 @@ def test_report_counts_gains_and_worse_grasps(tmp_path):
     assert "| information | 4 | 0 (0.0 %) | 1 (25.0 %) | 2 | 0 (0.0 %) |" in text
 
 
-def _moved(row, motions, unfused=None):
+def _moved(row, motions, unfused=None, scores=None):
     """``row`` with each later grasp's ``(shift mm, turn deg)`` (from grasp 2) and, when
-    given, the grasp it stopped on unfused, and the default re-grasp noise."""
+    given, the grasp it stopped on unfused, the planner's scores of their plans (0.5 when
+    not given), and the default re-grasp noise."""
     row["params"]["estimator_params"] = {"regrasp_b_xy_m": 0.005, "regrasp_b_theta_rad": 0.02}
     attempts = [(True, motion) for motion in motions] + ([(False, unfused)] if unfused else [])
-    for k, (fused, (shift, turn)) in enumerate(attempts, start=2):
+    scores = scores or [0.5] * len(attempts)
+    for k, ((fused, (shift, turn)), score) in enumerate(zip(attempts, scores, strict=True), 2):
         row[f"grasp{k}_fused"] = fused
         row[f"grasp{k}_gripper"] = "pg70"
+        row[f"grasp{k}_planner_score"] = score
         row[f"grasp{k}_object_shift_mm"] = shift
         row[f"grasp{k}_object_turn_deg"] = turn
     return row
@@ -110,7 +113,7 @@ def test_report_counts_what_the_later_grasps_did_to_the_object(tmp_path):
     rows[2]["grasp3_stage2_hypothesis"] = "earlier shape without thumb_distal"
     rows[2]["grasp2_stage2_hypothesis"] = "held-angle, bounded"
     assert [explore.located_only(rows[2], k) for k in (2, 3)] == [False, True]
-    assert explore.later_grasps(rows[1]) == [(2, True, 1.0, 0.5), (3, False, 12.0, 0.0)]
+    assert explore.later_grasps(rows[1]) == [(2, True, 1.0, 0.5, 0.5), (3, False, 12.0, 0.0, 0.5)]
     assert explore.regrasp_bounds(rows[0]) == pytest.approx((10.0, 2.0 * np.degrees(0.02)))
     explore.report(rows, tmp_path)
     text = (tmp_path / "report.md").read_text()
@@ -139,6 +142,41 @@ def test_report_counts_what_the_later_grasps_did_to_the_object(tmp_path):
         del row["params"]["estimator_params"]
     explore.report(rows, tmp_path)
     assert "What the later grasps did" not in (tmp_path / "report.md").read_text()
+
+
+def test_report_counts_failed_later_grasps_by_planner_score(tmp_path):
+    # Six later grasps scored 0.01-0.6: thirds below 0.04 and from 0.37. The two lowest
+    # failed (one pushed the object 15 mm, one was not fused); so did information's 0.05,
+    # which turned the object 3 deg.
+    rows = [
+        _moved(
+            _row("a", "random", [4.0, 3.0, 3.0], [True] * 3),
+            [(15.0, 0.0), (1.0, 0.0)],
+            scores=[0.01, 0.3],
+        ),
+        _moved(
+            _row("a", "information", [4.0, 2.0], [True] * 2),
+            [(1.0, 3.0)],
+            unfused=(1.0, 0.0),
+            scores=[0.05, 0.02],
+        ),
+        _moved(_row("a", "paper", [4.0, 3.5, 3.0], [True] * 3), [(1.0, 0.1), (2.0, -0.3)]),
+    ]
+    rows[2]["grasp3_planner_score"] = 0.6
+    explore.report(rows, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    low, high = (
+        f"{edge:.3f}" for edge in np.quantile([0.01, 0.3, 0.05, 0.02, 0.5, 0.6], [1 / 3, 2 / 3])
+    )
+    assert f"| score below {low} | score {low} to {high} | score {high} and above |" in text
+    table = {
+        cells[0]: cells[1:]
+        for line in text.splitlines()
+        if line.count("|") == 5 and (cells := [c.strip() for c in line.strip("|").split("|")])
+    }
+    assert table["random"] == ["1: 1 (100.0 %)", "1: 0 (0.0 %)", "-"]
+    assert table["information"] == ["1: 1 (100.0 %)", "1: 1 (100.0 %)", "-"]
+    assert table["paper"] == ["-", "-", "2: 0 (0.0 %)"]
 
 
 @pytest.mark.parametrize("experiment", ["table1"])
@@ -206,10 +244,13 @@ def test_a_grasp_row_records_the_motion_and_the_hypothesis():
     assert fields["grasp2_stage2_hypothesis"] == "earlier shape"
     assert fields["grasp2_selected_hypothesis"] == ""
     assert fields["grasp2_stage2_deviation_median_mm"] == pytest.approx(2.0)
+    assert fields["grasp2_planner_score"] is None  # a plan the planner did not score
     stopped = {"grasp": 3, "gripper": "pg70", "object_shift_mm": 12.0, "object_turn_deg": 0.2}
+    stopped["plan"] = {"gripper": "pg70", "score": 0.25}
     assert attempt_fields(stopped, fused=False) == {
         "grasp3_fused": False,
         "grasp3_gripper": "pg70",
+        "grasp3_planner_score": 0.25,
         "grasp3_object_shift_mm": 12.0,
         "grasp3_object_turn_deg": 0.2,
     }

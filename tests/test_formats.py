@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -104,6 +105,10 @@ def test_contacts_round_trip_with_plan(tmp_path):
     np.testing.assert_allclose(got.normals, np.tile([0.0, 1.0, 0.0], (3, 1)))  # normalised
     assert list(got.pads) == ["left"] * 3
     assert plan_to_json(recorded.plans[0]) == plan_to_json(plan())
+    assert plan_to_json(plan())["score"] is None  # the planner gave none
+    scored = dataclasses.replace(plan(), score=0.25)
+    path = write_json(tmp_path / "scored.json", contacts_to_json([contacts()], [scored]))
+    assert read_contacts(path).plans[0].score == 0.25
 
 
 def test_unit_normals_are_read_bit_for_bit(tmp_path):

@@ -21,7 +21,8 @@ consistency check (Stage 2 consistent before, flagged after) and by the truth (S
 median deviation up by more than :data:`WORSE_MM`); and what the later grasps did to the
 object and how they were fused: how many were not fused, how many only located the earlier
 grasps' shape, how far they moved the object, how many moved it beyond the estimator's
-re-grasp noise, and the hard poses' second-grasp gains within and beyond it.
+re-grasp noise, and the hard poses' second-grasp gains within and beyond it; and how often
+the later grasps failed to deliver, by the planner's score of their plans.
 """
 
 from __future__ import annotations
@@ -239,13 +240,15 @@ def located_only(row: Mapping[str, Any], k: int) -> bool:
 
 
 class LaterGrasp(NamedTuple):
-    """A grasp after the first: its number, whether it was fused, and how far it moved the
-    object's centre (mm) and turned it (absolute, deg)."""
+    """A grasp after the first: its number, whether it was fused, how far it moved the
+    object's centre (mm) and turned it (absolute, deg), and the planner's score of its plan
+    (in [0, 1]; NaN when the planner gives none)."""
 
     k: int
     fused: bool
     shift_mm: float
     turn_deg: float
+    planner_score: float
 
 
 def later_grasps(row: Mapping[str, Any]) -> list[LaterGrasp]:
@@ -256,6 +259,7 @@ def later_grasps(row: Mapping[str, Any]) -> list[LaterGrasp]:
             bool(row[f"grasp{k}_fused"]),
             value(row, f"grasp{k}_object_shift_mm"),
             abs(value(row, f"grasp{k}_object_turn_deg")),
+            value(row, f"grasp{k}_planner_score"),
         )
         for k in range(2, GRASPS + 1)
         if f"grasp{k}_fused" in row
@@ -333,6 +337,51 @@ def motion_lines(
             f"| {fmt(float(np.nanmedian(turns)))} / {fmt(float(np.nanpercentile(turns, 90)))} "
             f"| {cells[0]} | {cells[1]} |"
         )
+    return lines
+
+
+def _missed(row: Mapping[str, Any], grasp: LaterGrasp) -> bool:
+    """Whether ``grasp`` of ``row`` failed to deliver: it was not fused, or it moved the
+    object beyond what the estimator follows (:func:`regrasp_bounds`)."""
+    return not grasp.fused or _beyond(row, grasp)
+
+
+def score_lines(finished: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The report's section on how often the later grasps failed to deliver, by the
+    planner's score of their plans: in thirds of all strategies' scored later grasps, so
+    that the bands follow the planners' scale rather than a threshold of the report's."""
+    if next((b for row in finished if (b := regrasp_bounds(row)) is not None), None) is None:
+        return []
+    made = [(row, grasp) for row in finished for grasp in later_grasps(row)]
+    scores = np.array([grasp.planner_score for _, grasp in made])
+    scored = scores[np.isfinite(scores)]
+    if scored.size < 3:
+        return []
+    low, high = (float(edge) for edge in np.quantile(scored, [1 / 3, 2 / 3]))
+    bands = (
+        (f"below {low:.3f}", lambda s: s < low),
+        (f"{low:.3f} to {high:.3f}", lambda s: low <= s < high),
+        (f"{high:.3f} and above", lambda s: s >= high),
+    )
+    lines = [
+        "",
+        "## Later grasps by the planner's score",
+        "",
+        "The planner scores each grasp in [0, 1] by how squarely its pads meet the sides and "
+        "how far it is from tipping the object. Per band of that score (thirds of all "
+        "strategies' later grasps), the later grasps made and the share that failed to "
+        "deliver (not fused, or moved the object beyond Q): made: failed (share).",
+        "",
+        "| strategy | " + " | ".join(f"score {name}" for name, _ in bands) + " |",
+        "|---|" + "---|" * len(bands),
+    ]
+    for strategy, members in _by_strategy(finished).items():
+        cells = []
+        for _, inside in bands:
+            band = [(r, g) for r in members for g in later_grasps(r) if inside(g.planner_score)]
+            missed = sum(_missed(r, g) for r, g in band)
+            cells.append(f"{len(band)}: {_share(missed, len(band))}" if band else "-")
+        lines.append(f"| {strategy} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -450,6 +499,7 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             f"| {trials} | {_share(bad_trials, trials)} |"
         )
     lines += motion_lines(finished, hard)
+    lines += score_lines(finished)
     lines += [
         "",
         "## Per object (Stage 2 median deviation, mm: after grasp 1 -> after grasp 3)",

@@ -105,12 +105,13 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
 
 def attempt_fields(entry: Mapping[str, Any], fused: bool) -> dict[str, Any]:
     """The row fields of any grasp a multi-grasp trial made (``grasp{k}_...``), fused or
-    not (the later grasp it stopped on): its hand, and how far it moved the object (mm,
-    deg)."""
+    not (the later grasp it stopped on): its hand, the planner's score of its plan (in
+    [0, 1]; None when the planner gives none), and how far it moved the object (mm, deg)."""
     prefix = f"grasp{entry['grasp']}"
     return {
         f"{prefix}_fused": fused,
         f"{prefix}_gripper": entry["gripper"],
+        f"{prefix}_planner_score": entry.get("plan", {}).get("score"),
         f"{prefix}_object_shift_mm": entry.get("object_shift_mm"),
         f"{prefix}_object_turn_deg": entry.get("object_turn_deg"),
     }
