@@ -417,11 +417,13 @@ def _grasp_and_fuse(
     the hand releases the object and withdraws (:meth:`World.release`) before each new
     grasp, which is planned on the current
     model (:mod:`pipeline.next_grasp`). The stop rule ends it earlier, and so does a later
-    grasp the planner cannot find, the hand cannot execute or that touches nothing (it is
-    not fused). ``contacts.json`` and ``document["grasps"]`` grow by one grasp each time.
+    grasp the planner cannot find, the hand cannot execute or that touches nothing or one
+    side only (it is not fused). ``contacts.json`` and ``document["grasps"]`` grow by one
+    grasp each time.
 
     Raises:
-        StageFailure: the first grasp was not executed or the initialiser rejected it.
+        StageFailure: the first grasp was not executed, touched nothing or one side only,
+            or the initialiser rejected it.
     """
     settings = config.trial
     until_m = 1e-3 * settings.until_std_mm if settings.until_std_mm > 0 else None
@@ -489,6 +491,11 @@ def _grasp_and_fuse(
         stop = unfused_reason(k, contacts, shift_m, tilt_rad)
         if stop:
             document["unfused_grasp"] = attempt_to_json(k, plan, chosen_by, executed, contacts)
+            if k == 0:
+                if len(contacts):  # the taxels are kept for `symfuse fuse`, as read
+                    with timer.phase("write"):
+                        write_json(out_dir / "contacts.json", contacts_to_json([contacts], [plan]))
+                raise StageFailure(stop)
             break
         grasps.append(contacts)
         plans.append(plan)
@@ -558,7 +565,7 @@ def attempt_to_json(
 ) -> dict[str, Any]:
     """A grasp as planned, chosen and executed (and what it touched, when read): the part
     of a ``grasps`` entry before the estimate, and ``result.json``'s ``unfused_grasp``, the
-    later grasp a trial stopped on (not executed, or touching too little to fuse)."""
+    grasp a trial stopped on (not executed, or touching too little to fuse)."""
     touched = {}
     if contacts is not None:
         touched = {
@@ -576,13 +583,15 @@ def attempt_to_json(
 
 
 def unfused_reason(k: int, contacts: Contacts, shift_m: float, tilt_rad: float) -> str:
-    """Why grasp ``k`` (from 0) is not fused, or ``""``: a later grasp that touched nothing
-    or one side only (no two pads pressing from opposing sides,
+    """Why grasp ``k`` (from 0) is not fused, or ``""``: a grasp that touched nothing or one
+    side only (no two pads pressing from opposing sides,
     :func:`~pipeline.evaluation.opposing_contacts`). Nothing held the object against the
-    pads that touched: they pushed it by an amount no taxel measures, so the contacts
-    cannot locate it, and the estimate stays the last one, scored against the object as it
-    was then. ``shift_m`` and ``tilt_rad``: how the grasp moved the object."""
-    if k == 0 or opposing_contacts(contacts):
+    pads that touched: they pushed it by an amount no taxel measures, and taxels on one
+    side cannot tell that push from the object's width, so the contacts cannot locate it.
+    A later grasp's estimate stays the last one, scored against the object as it was then;
+    a first grasp leaves no estimate to fuse into (docs/method.md §10). ``shift_m`` and
+    ``tilt_rad``: how the grasp moved the object."""
+    if opposing_contacts(contacts):
         return ""
     touched = "nothing" if len(contacts) == 0 else "one side only"
     return (

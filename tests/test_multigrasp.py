@@ -129,7 +129,29 @@ def test_until_std_stops_once_the_model_is_known_well_enough(tmp_path):
     assert "after 1 grasp(s)" in document["stop_reason"]
 
 
-def test_a_later_grasp_on_one_side_only_is_not_fused():
+def test_a_first_grasp_on_one_side_only_ends_the_trial_with_its_taxels_kept(
+    tmp_path, monkeypatch, capsys
+):
+    import pipeline.trial
+
+    # The default trial's jaws press on both faces; read as one side only, nothing is fused.
+    monkeypatch.setattr(pipeline.trial, "opposing_contacts", lambda contacts: False)
+    out = tmp_path / "one-sided"
+    code = main(["trial", "--set", "trial.pictures=false", "--out", str(out)])
+    assert code == 3
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("symfuse: error: grasp 1 touched one side only (the object moved ")
+    assert error.endswith("; not fused")
+    document = json.loads((out / "result.json").read_text())
+    assert document["status"] == "failed" and "stages" not in document
+    assert document["unfused_grasp"]["grasp"] == 1
+    kept = json.loads((out / "contacts.json").read_text())["grasps"]
+    assert (
+        len(kept) == 1 and len(kept[0]["taxels"]) == document["unfused_grasp"]["taxels_in_contact"]
+    )
+
+
+def test_a_grasp_on_one_side_only_is_not_fused():
     def contacts(*pads):
         normals = {"left": [1.0, 0.0, 0.0], "right": [-1.0, 0.0, 0.0], "top": [0.0, 0.0, -1.0]}
         return Contacts(
@@ -140,7 +162,10 @@ def test_a_later_grasp_on_one_side_only_is_not_fused():
         )
 
     both, one = contacts("left", "right", "right"), contacts("left", "left")
-    assert unfused_reason(0, one, 0.04, 0.0) == ""  # the first grasp is the paper's
+    assert unfused_reason(0, both, 0.004, 0.0) == ""
+    assert unfused_reason(0, one, 0.04, 0.0) == (
+        "grasp 1 touched one side only (the object moved 40.0 mm and tilted 0.0 deg); not fused"
+    )
     assert unfused_reason(1, both, 0.004, 0.0) == ""
     assert unfused_reason(1, one, 0.0432, 0.0) == (
         "grasp 2 touched one side only (the object moved 43.2 mm and tilted 0.0 deg); not fused"
