@@ -13,9 +13,10 @@ Prints one row per trial: the hand, the final status, the median deviation of th
 completed model from the scan's surface at Stage 0 and Stage 2 and for the stage the
 estimator selected (mm, docs/method.md §9), and whether each meets the target: no more
 than 0.2 mm worse than Stage 0 (vision alone) and at most 5 mm (the paper's deviation
-"when the method's conditions hold"). Trials whose grasp touched nothing are counted apart:
-there is nothing to fuse. The scans are not exactly mirror-symmetric and their printed
-shapes are not always convex, so misses say as much about the objects as about the method.
+"when the method's conditions hold"). Trials whose grasp touched nothing or one side only
+are counted apart: there is nothing to fuse (the trial fails, docs/method.md §11). The scans
+are not exactly mirror-symmetric and their printed shapes are not always convex, so misses
+say as much about the objects as about the method.
 """
 
 from __future__ import annotations
@@ -134,8 +135,8 @@ def main() -> int:
     ]
     print(format_table(header, table))
     print(
-        f"\n{fused}/{len(rows)} trials touched the object; of those, Stage 2 meets the target "
-        f"in {met_stage2}, the selected stage in {met_selected}"
+        f"\n{fused}/{len(rows)} trials fused their grasp (pads on opposing sides); of those, "
+        f"Stage 2 meets the target in {met_stage2}, the selected stage in {met_selected}"
     )
     return 0
 

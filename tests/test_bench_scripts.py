@@ -107,7 +107,7 @@ def test_the_scan_benchmark_runs_a_trial_on_a_folder_of_scans(tmp_path):
     )
     assert done.returncode == 0, done.stderr[-3000:]
     assert "jar/yaw00" in done.stdout
-    assert "1/1 trials touched the object" in done.stdout
+    assert "1/1 trials fused their grasp (pads on opposing sides)" in done.stdout
 
 
 def test_the_scan_target_by_hand():
