@@ -352,17 +352,16 @@ def score_lines(finished: Sequence[Mapping[str, Any]]) -> list[str]:
     that the bands follow the planners' scale rather than a threshold of the report's."""
     if next((b for row in finished if (b := regrasp_bounds(row)) is not None), None) is None:
         return []
-    made = [(row, grasp) for row in finished for grasp in later_grasps(row)]
-    scores = np.array([grasp.planner_score for _, grasp in made])
-    scored = scores[np.isfinite(scores)]
-    if scored.size < 3:
+    made = [
+        (row["params"]["strategy"], grasp.planner_score, _missed(row, grasp))
+        for row in finished
+        for grasp in later_grasps(row)
+        if np.isfinite(grasp.planner_score)
+    ]
+    if len(made) < 3:
         return []
-    low, high = (float(edge) for edge in np.quantile(scored, [1 / 3, 2 / 3]))
-    bands = (
-        (f"below {low:.3f}", lambda s: s < low),
-        (f"{low:.3f} to {high:.3f}", lambda s: low <= s < high),
-        (f"{high:.3f} and above", lambda s: s >= high),
-    )
+    low, high = np.quantile([score for _, score, _ in made], [1 / 3, 2 / 3])
+    names = (f"below {low:.3f}", f"{low:.3f} to {high:.3f}", f"{high:.3f} and above")
     lines = [
         "",
         "## Later grasps by the planner's score",
@@ -372,15 +371,18 @@ def score_lines(finished: Sequence[Mapping[str, Any]]) -> list[str]:
         "strategies' later grasps), the later grasps made and the share that failed to "
         "deliver (not fused, or moved the object beyond Q): made: failed (share).",
         "",
-        "| strategy | " + " | ".join(f"score {name}" for name, _ in bands) + " |",
-        "|---|" + "---|" * len(bands),
+        "| strategy | " + " | ".join(f"score {name}" for name in names) + " |",
+        "|---|" + "---|" * len(names),
     ]
-    for strategy, members in _by_strategy(finished).items():
+    for strategy in _by_strategy(finished):
         cells = []
-        for _, inside in bands:
-            band = [(r, g) for r in members for g in later_grasps(r) if inside(g.planner_score)]
-            missed = sum(_missed(r, g) for r, g in band)
-            cells.append(f"{len(band)}: {_share(missed, len(band))}" if band else "-")
+        for band in range(len(names)):
+            missed = [
+                miss
+                for name, score, miss in made
+                if name == strategy and int(np.searchsorted([low, high], score, "right")) == band
+            ]
+            cells.append(f"{len(missed)}: {_share(sum(missed), len(missed))}" if missed else "-")
         lines.append(f"| {strategy} | " + " | ".join(cells) + " |")
     return lines
 
