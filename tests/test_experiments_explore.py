@@ -83,6 +83,13 @@ def test_report_counts_gains_and_worse_grasps(tmp_path):
     assert "1.50 mm more than paper's (95 % bootstrap interval 1.50 to 1.50 mm over 1 pose)" in text
     assert "| random | 3 | 1 (33.3 %) | 0 (0.0 %) | 2 | 1 (50.0 %) |" in text
     assert "| information | 4 | 0 (0.0 %) | 1 (25.0 %) | 2 | 0 (0.0 %) |" in text
+    # When random's second grasp made the hard pose worse, the target is no ratio.
+    rows[1]["grasp2_stage2_deviation_median_mm"] = 4.5
+    explore.report(rows, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "x random's (target" not in text
+    assert "Random's mean reduction is -0.50 mm, not a reduction" in text
+    assert "information's is 2.00 mm." in text
 
 
 def _moved(row, motions, unfused=None, scores=None):

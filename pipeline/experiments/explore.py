@@ -472,6 +472,14 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             f"Information's mean reduction is {informed / drawn:.2f}x random's "
             f"(target >= 1.3x): {verdict}.",
         ]
+    elif np.isfinite(informed) and np.isfinite(drawn):
+        lines += [
+            "",
+            f"Random's mean reduction is {drawn:.2f} mm, not a reduction, so the target "
+            f"(information's at least 1.3x random's) is no ratio here; information's is "
+            f"{informed:.2f} mm. The paired difference below says whether the two are told "
+            "apart.",
+        ]
     for other in ("random", "paper"):
         difference, low, high, poses = paired_gain_difference(hard, "information", other)
         if poses:
