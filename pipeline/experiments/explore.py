@@ -279,6 +279,12 @@ def regrasp_bounds(row: Mapping[str, Any]) -> tuple[float, float] | None:
     )
 
 
+def _sweep_bounds(rows: Sequence[Mapping[str, Any]]) -> tuple[float, float] | None:
+    """:func:`regrasp_bounds` of the first of ``rows`` that has them (one estimator per
+    sweep), or None."""
+    return next((b for row in rows if (b := regrasp_bounds(row)) is not None), None)
+
+
 def _beyond(row: Mapping[str, Any], grasp: LaterGrasp) -> bool:
     """Whether ``grasp`` of ``row`` moved the object beyond :func:`regrasp_bounds` (False
     without them)."""
@@ -290,7 +296,7 @@ def motion_lines(
     finished: Sequence[Mapping[str, Any]], hard: Sequence[Mapping[str, Any]]
 ) -> list[str]:
     """The report's section on what the later grasps did to the object, per strategy."""
-    bounds = next((b for row in finished if (b := regrasp_bounds(row)) is not None), None)
+    bounds = _sweep_bounds(finished)
     if bounds is None:
         return []
     lines = [
@@ -350,7 +356,7 @@ def score_lines(finished: Sequence[Mapping[str, Any]]) -> list[str]:
     """The report's section on how often the later grasps failed to deliver, by the
     planner's score of their plans: in thirds of all strategies' scored later grasps, so
     that the bands follow the planners' scale rather than a threshold of the report's."""
-    if next((b for row in finished if (b := regrasp_bounds(row)) is not None), None) is None:
+    if _sweep_bounds(finished) is None:
         return []
     made = [
         (row["params"]["strategy"], grasp.planner_score, _missed(row, grasp))
@@ -379,8 +385,8 @@ def score_lines(finished: Sequence[Mapping[str, Any]]) -> list[str]:
         for band in range(len(names)):
             missed = [
                 miss
-                for name, score, miss in made
-                if name == strategy and int(np.searchsorted([low, high], score, "right")) == band
+                for made_by, score, miss in made
+                if made_by == strategy and int(np.searchsorted([low, high], score, "right")) == band
             ]
             cells.append(f"{len(missed)}: {_share(sum(missed), len(missed))}" if missed else "-")
         lines.append(f"| {strategy} | " + " | ".join(cells) + " |")
