@@ -81,8 +81,10 @@ def overrides(args: argparse.Namespace) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     """Complete the capture's objects, write the results, print a table."""
     from .cli import _load
+    from .cli_summary import one_sided_line
     from .completion import complete_scene
     from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, FAILED_STATUSES
+    from .evaluation import one_sided_grasps
     from .formats import read_contacts
     from .outdir import staged_output
 
@@ -106,6 +108,8 @@ def run(args: argparse.Namespace) -> int:
         }
         write_outputs(staging, scene, config, sources, time.perf_counter() - started)
     print(scene_table(scene))
+    if recorded and (note := one_sided_line(one_sided_grasps(recorded.contacts))):
+        print(note)
     print(f"wrote {args.out}/ (objects.json, object_K/, scene.png, config.toml)")
     record_if_asked(args, args.out)
     problems = failed(scene.objects, FAILED_STATUSES)

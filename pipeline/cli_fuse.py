@@ -12,7 +12,7 @@ import numpy as np
 
 from . import __version__
 from .cli import _add_config_options, _add_output_options, _add_units_option, _load
-from .cli_summary import selection_line, stage_summary
+from .cli_summary import one_sided_line, selection_line, stage_summary
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
 from .errors import (
     EXIT_ESTIMATE_FAILED,
@@ -152,6 +152,7 @@ def _fuse_into(
 
     A :class:`StageFailure` is recorded in ``result.json`` (status ``failed``) and re-raised.
     """
+    from .evaluation import one_sided_grasps
     from .formats import (
         bias_to_json,
         estimate_to_json,
@@ -174,6 +175,7 @@ def _fuse_into(
         },
         "points": len(cloud),
         "grasps": [len(c) for c in recorded.contacts],
+        "one_sided_grasps": one_sided_grasps(recorded.contacts),
         "config": config.to_dict(),
     }
     try:
@@ -197,4 +199,6 @@ def _fuse_into(
     write_json(out / "result.json", document)
     print(stage_summary(run.result))
     print(selection_line(run.result))
+    if note := one_sided_line(document["one_sided_grasps"]):
+        print(note)
     return run.result.final.status

@@ -31,6 +31,19 @@ def selection_line(result) -> str:
     return f"selected: Stage {result.selected.stage} ({result.selection_reason})"
 
 
+def one_sided_line(numbers: list[int]) -> str:
+    """A note on the grasps that touched one side only or nothing (numbers from 1), or
+    ``""`` when there are none."""
+    if not numbers:
+        return ""
+    which = ", ".join(str(k) for k in numbers)
+    return (
+        f"note: grasp{'s' * (len(numbers) > 1)} {which} touched one side only or nothing: "
+        "their taxels cannot tell how far the pads pushed the object from how wide it is, and "
+        "a trial does not fuse such a grasp (docs/method.md §11)"
+    )
+
+
 def stage_summary(result) -> str:
     """A small table of Stage 0/1/2: status, plane, bias, iterations, time, self-diagnosis."""
     rows = []

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -241,3 +242,11 @@ def opposing_contacts(contacts: Contacts, tolerance_deg: float = 30.0) -> bool:
     ordered = np.sort(bearings)
     gaps = np.diff(np.append(ordered, ordered[0] + 2.0 * np.pi))
     return bool(np.degrees(gaps.max()) <= 180.0 + tolerance_deg)
+
+
+def one_sided_grasps(grasps: Sequence[Contacts]) -> list[int]:
+    """The numbers (from 1) of the grasps whose taxels do not press from opposing sides
+    (:func:`opposing_contacts`): they touched one side only, or nothing. Their pads may have
+    pushed the object by an amount no taxel measures, which a trial does not fuse
+    (docs/method.md §11)."""
+    return [k for k, contacts in enumerate(grasps, start=1) if not opposing_contacts(contacts)]

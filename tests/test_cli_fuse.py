@@ -54,6 +54,22 @@ def test_fuse_writes_results_and_improves_the_diameter(recording, tmp_path, run)
     assert final["consistent"] and final["taxel_rms_mm"] < 2.0
     assert document["selected_stage"] == 2 and document["selection_reason"]
     assert "taxel rms mm" in out and "selected: Stage 2" in out
+    assert document["one_sided_grasps"] == [] and "note:" not in out
+
+
+def test_fuse_names_a_grasp_whose_taxels_touch_one_side_only(recording, tmp_path, run):
+    folder, case, plane = recording
+    contacts = case.contacts
+    one_pad = contacts.select(contacts.pads == contacts.pads[0])
+    path = write_json(tmp_path / "one-sided.json", contacts_to_json([contacts, one_pad]))
+    out_dir = tmp_path / "out"
+    code, out, err = run(
+        "fuse", "--cloud", folder / "cloud.ply", "--contacts", path, f"--plane={plane}",
+        "--out", out_dir,
+    )  # fmt: skip
+    assert code in (0, 3), err
+    assert json.loads((out_dir / "result.json").read_text())["one_sided_grasps"] == [2]
+    assert "note: grasp 2 touched one side only or nothing: " in out
 
 
 def test_npy_cloud_gives_the_same_estimate(recording, tmp_path, run):

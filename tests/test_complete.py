@@ -168,7 +168,7 @@ def test_a_trial_recording_completes_to_the_trials_stage_0(vc_trial, tmp_path):
     )
 
 
-def test_a_trial_recording_with_its_contacts_fuses_as_the_trial(tmp_path):
+def test_a_trial_recording_with_its_contacts_fuses_as_the_trial(tmp_path, capsys):
     trial = tmp_path / "trial"
     argv = ["trial", "--init", "ps", "--set", "trial.pictures=false", "--out", str(trial)]
     assert main(argv) == 0
@@ -187,6 +187,17 @@ def test_a_trial_recording_with_its_contacts_fuses_as_the_trial(tmp_path):
             read_cloud(trial / f"completed_stage{stage}.ply").points,
             atol=1e-12,
         )
+    assert "note:" not in capsys.readouterr().out
+    # The same grasp with one jaw's taxels only: fused as given, and named.
+    document = json.loads((trial / "contacts.json").read_text())
+    taxels = document["grasps"][0]["taxels"]
+    document["grasps"][0]["taxels"] = [t for t in taxels if t["pad"] == taxels[0]["pad"]]
+    (tmp_path / "one-sided.json").write_text(json.dumps(document))
+    argv = ["complete", trial / "depth.npy", "--contacts", tmp_path / "one-sided.json"]
+    main([str(a) for a in [*argv, "--init", "ps", "--out", tmp_path / "one-sided"]])
+    assert "note: grasp 1 touched one side only or nothing: " in capsys.readouterr().out
+    fused = json.loads((tmp_path / "one-sided" / "object_0" / "result.json").read_text())
+    assert [s["stage"] for s in fused["stages"]] == [0, 1, 2]
 
 
 def bad(run, tmp_path, scan, *extra):
