@@ -37,10 +37,12 @@ def one_sided_line(numbers: list[int]) -> str:
     if not numbers:
         return ""
     which = ", ".join(str(k) for k in numbers)
+    several = len(numbers) > 1
     return (
-        f"note: grasp{'s' * (len(numbers) > 1)} {which} touched one side only or nothing: "
-        "their taxels cannot tell how far the pads pushed the object from how wide it is, and "
-        "a trial does not fuse such a grasp (docs/method.md §11)"
+        f"note: grasp{'s' * several} {which} touched one side only or nothing: "
+        f"{'their' if several else 'its'} taxels cannot tell how far the pads pushed the "
+        "object from how wide it is, and a trial does not fuse such a grasp "
+        "(docs/method.md §11)"
     )
 
 
