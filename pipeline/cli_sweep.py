@@ -29,6 +29,7 @@ def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
 def run(args: argparse.Namespace) -> int:
     from .config import changed_settings, load_config
     from .experiments import EXPERIMENTS, ExperimentOptions
+    from .stages import STAGES
     from .sweep import prepare_sweep_folder, run_sweep, settings_section
 
     if args.scheduler and args.executor != "dask":
@@ -45,6 +46,11 @@ def run(args: argparse.Namespace) -> int:
             f"sweep {args.experiment}: its trials read only [{'], ['.join(sections)}] of the "
             f"config, not [{'], ['.join(unread)}]; remove those from --config/--set"
         )
+    # A stage checks how its parameters go together as it is built: a bad pair fails here,
+    # once, rather than in every trial.
+    for stage in STAGES:
+        if stage in sections:
+            config.create(registry, stage)
     # The default folder is fixed, not fresh: typing the command again resumes the sweep.
     out = args.out or Path("runs") / f"sweep-{args.experiment}-{estimator}"
     options = ExperimentOptions(

@@ -27,6 +27,18 @@ def test_a_synthetic_sweep_refuses_settings_its_trials_do_not_read(tmp_path, run
     assert not out.exists()
 
 
+def test_parameters_a_stage_refuses_together_stop_the_sweep_before_any_trial(tmp_path, run):
+    out = tmp_path / "sweep"
+    threshold = "tactile.pybullet-taxels.contact_threshold_m=0.01"
+    code, _, err = run("sweep", "table2", "--workers", "1", "--set", threshold, "--out", out)
+    assert code == EXIT_BAD_INPUT
+    assert err.strip() == (
+        "symfuse: error: config key 'tactile.pybullet-taxels.ray_length_m' (0.005) must be "
+        ">= contact_threshold_m (0.01)"
+    )
+    assert not out.exists()
+
+
 def test_rows_are_reused_only_when_made_with_the_same_config(tmp_path, run):
     out = tmp_path / "sweep"
     code, _, err = run(*QUICK, "--out", out)
