@@ -48,7 +48,9 @@ def run(args: argparse.Namespace) -> int:
     if args.export is not None:
         from .outdir import staged_output
 
-        with staged_output(args.export, overwrite=args.overwrite) as staging:
+        with staged_output(
+            args.export, overwrite=args.overwrite, replaceable=holds_export
+        ) as staging:
             written = export_meshes(staging, tuple(args.format or EXPORT_FORMATS))
         for path in written:
             print(args.export / path.name)
@@ -72,6 +74,15 @@ def catalogue_table() -> str:
         watertight = "yes" if mesh.is_watertight else "no"
         rows.append((info.name, info.kind, size_mm, info.symmetry, watertight, info.description))
     return format_table(header, rows)
+
+
+def holds_export(folder: Path) -> bool:
+    """Whether ``folder`` holds only meshes an export writes (``<catalogue name>.<format>``),
+    the only folder ``--overwrite`` may replace."""
+    from .catalogue import list_objects
+
+    names = {f"{info.name}.{suffix}" for info in list_objects() for suffix in EXPORT_FORMATS}
+    return all(path.is_file() and path.name in names for path in Path(folder).iterdir())
 
 
 def export_meshes(directory: Path, formats: tuple[str, ...] = EXPORT_FORMATS) -> list[Path]:

@@ -29,6 +29,7 @@ def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
 def run(args: argparse.Namespace) -> int:
     from .config import changed_settings, load_config
     from .experiments import EXPERIMENTS, ExperimentOptions
+    from .outdir import SWEEP_ROWS_FILE
     from .stages import STAGES
     from .sweep import prepare_sweep_folder, run_sweep, settings_section
 
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
             rows = run_sweep(
                 tasks,
                 experiment.run_one,
-                out / "results.jsonl",
+                out / SWEEP_ROWS_FILE,
                 workers=args.workers,
                 executor=args.executor,
                 scheduler=args.scheduler,

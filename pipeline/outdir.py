@@ -4,8 +4,10 @@
   same parent, so the final move is a rename on one file system) and the staging folder
   is moved into place when the run ends.
 * An explicit target that exists and is not empty is refused before anything runs, unless
-  ``overwrite`` is given; then it is replaced whole when the run ends, never mixed with
-  the new files. A target that is a file is always refused.
+  ``overwrite`` is given and it holds an earlier run (:func:`holds_earlier_run`: what a
+  symfuse command wrote); then it is replaced whole when the run ends, never mixed with
+  the new files. A folder of anything else (a project, a user's data) is never replaced,
+  whatever the options. A target that is a file is always refused.
 * Without an explicit target each run gets a fresh default folder (:func:`fresh_folder`),
   so the same command can be typed twice.
 * A run that fails before it wrote any result (no ``result.json`` in the staging folder:
@@ -17,16 +19,42 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 from .errors import ConfigError
 
 #: The file whose presence marks a staging folder as holding a result worth keeping.
 RESULT_FILE = "result.json"
+
+#: The journal a sweep appends its rows to.
+SWEEP_ROWS_FILE = "results.jsonl"
+
+#: The documents at the top of a run's folder that name the ``symfuse`` version that wrote
+#: them: a trial's or ``fuse``'s result, ``complete``'s list of the objects of a scene.
+RUN_DOCUMENTS = (RESULT_FILE, "objects.json")
+
+
+def holds_earlier_run(folder: Path) -> bool:
+    """Whether ``folder`` holds what a symfuse command wrote: one of :data:`RUN_DOCUMENTS`
+    or a sweep's ``results.jsonl``, whose rows are objects with a ``key``."""
+    folder = Path(folder)
+    try:
+        for name in RUN_DOCUMENTS:
+            if (folder / name).is_file():
+                data = json.loads((folder / name).read_text(encoding="utf-8"))
+                return isinstance(data, dict) and "symfuse" in data
+        if (folder / SWEEP_ROWS_FILE).is_file():
+            with (folder / SWEEP_ROWS_FILE).open(encoding="utf-8") as rows:
+                first = json.loads(rows.readline() or "null")
+            return isinstance(first, dict) and "key" in first
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return False
 
 
 def fresh_folder(base: Path) -> Path:
@@ -39,18 +67,26 @@ def fresh_folder(base: Path) -> Path:
     return candidate
 
 
-def check_target(target: Path, *, overwrite: bool, inputs: Sequence[Path] = ()) -> None:
+def check_target(
+    target: Path,
+    *,
+    overwrite: bool,
+    inputs: Sequence[Path] = (),
+    replaceable: Callable[[Path], bool] = holds_earlier_run,
+) -> None:
     """Refuse ``target`` unless it is absent, an empty folder, or ``overwrite`` is given and
-    it holds none of the run's ``inputs`` (replacing it would delete them).
+    it is ``replaceable`` (by default: it holds an earlier run) and holds none of the run's
+    ``inputs`` (replacing it would delete them).
 
     Raises:
-        ConfigError: ``target`` is a file, a non-empty folder without ``overwrite``, or
-            holds an input.
+        ConfigError: ``target`` is a file, a non-empty folder without ``overwrite``, a
+            folder of something else, or holds an input.
     """
     target = Path(target)
     if target.is_symlink() or (target.exists() and not target.is_dir()):
         raise ConfigError(f"--out {target}: exists and is not a folder")
-    if target.is_dir() and any(target.iterdir()) and not overwrite:
+    occupied = target.is_dir() and any(target.iterdir())
+    if occupied and not overwrite:
         raise ConfigError(
             f"--out {target}: the folder exists and is not empty; pass --overwrite to replace "
             "it, or choose another --out"
@@ -64,6 +100,11 @@ def check_target(target: Path, *, overwrite: bool, inputs: Sequence[Path] = ()) 
                 f"--out {target}: holds the input {inside[0]}, which replacing it would "
                 "delete; choose another --out"
             )
+    if occupied and not replaceable(target):
+        raise ConfigError(
+            f"--out {target}: the folder holds no earlier symfuse run, and --overwrite "
+            "replaces only those; choose another --out"
+        )
 
 
 def has_result(folder: Path) -> bool:
@@ -108,12 +149,15 @@ def _umask() -> int:
     return mask
 
 
-def _move_into_place(staging: Path, target: Path, *, overwrite: bool) -> None:
+def _move_into_place(
+    staging: Path, target: Path, *, overwrite: bool, replaceable: Callable[[Path], bool]
+) -> None:
     """Rename ``staging`` to ``target``; an existing ``target`` (allowed by ``overwrite``,
     or empty) is set aside first and deleted only once the new folder is in place."""
     old = None
     if target.exists():
-        check_target(target, overwrite=overwrite)  # anything new since the run started?
+        # Anything new since the run started?
+        check_target(target, overwrite=overwrite, replaceable=replaceable)
         old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
         os.replace(target, old / target.name)
     os.replace(staging, target)
@@ -123,12 +167,16 @@ def _move_into_place(staging: Path, target: Path, *, overwrite: bool) -> None:
 
 @contextlib.contextmanager
 def staged_output(
-    target: Path, *, overwrite: bool = False, inputs: Sequence[Path] = ()
+    target: Path,
+    *,
+    overwrite: bool = False,
+    inputs: Sequence[Path] = (),
+    replaceable: Callable[[Path], bool] = holds_earlier_run,
 ) -> Iterator[Path]:
     """Stage a run's files beside ``target`` and move them into place when the run ends.
 
-    Checks ``target`` first (:func:`check_target`, with the run's ``inputs``), so a refused
-    target costs nothing.
+    Checks ``target`` first (:func:`check_target`, with the run's ``inputs`` and what
+    ``overwrite`` may replace), so a refused target costs nothing.
     Yields the staging folder to write into. On normal exit it becomes ``target``; on an
     exception it becomes ``target`` only when it holds ``result.json`` (the run recorded
     how far it got), else it is deleted; the exception propagates either way.
@@ -137,14 +185,14 @@ def staged_output(
         ConfigError: ``target`` is refused, or its parent cannot be written.
     """
     target = Path(target)
-    check_target(target, overwrite=overwrite, inputs=inputs)
+    check_target(target, overwrite=overwrite, inputs=inputs, replaceable=replaceable)
     staging = _staging_folder(target)
     try:
         yield staging
     except BaseException:
         if has_result(staging):
-            _move_into_place(staging, target, overwrite=overwrite)
+            _move_into_place(staging, target, overwrite=overwrite, replaceable=replaceable)
         else:
             shutil.rmtree(staging, ignore_errors=True)
         raise
-    _move_into_place(staging, target, overwrite=overwrite)
+    _move_into_place(staging, target, overwrite=overwrite, replaceable=replaceable)

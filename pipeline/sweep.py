@@ -41,7 +41,7 @@ from tqdm import tqdm
 
 from .errors import ConfigError, InputError
 from .experiments import LOCATION_PARAMS, SweepTask
-from .outdir import check_target, create_folder
+from .outdir import SWEEP_ROWS_FILE, check_target, create_folder
 
 _log = logging.getLogger(__name__)
 
@@ -169,7 +169,7 @@ def prepare_sweep_folder(
             created.
     """
     out = Path(out)
-    results = out / "results.jsonl"
+    results = out / SWEEP_ROWS_FILE
     fresh = not out.exists()
     check_target(out, overwrite=True, inputs=inputs)
     if out.is_dir() and any(out.iterdir()):

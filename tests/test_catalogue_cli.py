@@ -43,3 +43,17 @@ def test_export_writes_meshes_that_reload_as_the_same_solids(tmp_path, capsys):
 def test_export_of_one_format_only(tmp_path):
     cli_objects.run(parse(["objects", "--export", str(tmp_path), "--format", "stl"]))
     assert {path.suffix for path in tmp_path.iterdir()} == {".stl"}
+
+
+def test_overwrite_replaces_an_export_and_nothing_else(tmp_path):
+    from pipeline.errors import ConfigError
+
+    out = tmp_path / "meshes"
+    export = ["objects", "--export", str(out), "--format"]
+    assert cli_objects.run(parse([*export, "stl"])) == 0
+    assert cli_objects.run(parse([*export, "obj", "--overwrite"])) == 0
+    assert {path.suffix for path in out.iterdir()} == {".obj"}
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(ConfigError, match="holds no earlier symfuse run"):
+        cli_objects.run(parse([*export, "obj", "--overwrite"]))
+    assert (out / "notes.txt").read_text() == "mine"

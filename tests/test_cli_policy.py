@@ -158,6 +158,7 @@ def test_overwrite_replaces_the_folder_whole(recording, tmp_path, run):
     """A PS run into a folder that held a VC run keeps no vc_scores.png."""
     out = tmp_path / "run"
     out.mkdir()
+    (out / "result.json").write_text('{"symfuse": "0.1.0", "status": "converged"}')
     (out / "vc_scores.png").write_bytes(b"old")
     code, _, err = run(*fuse_args(recording, out, "--overwrite"))
     assert code == 0, err
@@ -183,6 +184,33 @@ def test_overwrite_never_deletes_the_runs_own_inputs(recording, tmp_path, run):
         "replacing it would delete; choose another --out"
     )
     assert {p.name for p in run_dir.iterdir()} == {"cloud.ply", "contacts.json"}
+
+
+@pytest.mark.parametrize("verb", ["fuse", "trial", "sweep"])
+@pytest.mark.parametrize(
+    "result",
+    [None, "not json", '{"status": "converged"}'],
+    ids=["no-result", "unreadable-result", "result-of-another-tool"],
+)
+def test_overwrite_never_replaces_a_folder_symfuse_did_not_write(
+    recording, tmp_path, run, verb, result
+):
+    """A project folder given as --out by mistake keeps every file, --overwrite or not."""
+    out = tmp_path / "project"
+    (out / ".git").mkdir(parents=True)
+    (out / "README.md").write_text("mine")
+    if result is not None:
+        (out / "result.json").write_text(result)
+    before = sorted(p.name for p in out.iterdir())
+    code, _, err = run(*writing(verb, recording, out)[:-2], "--overwrite", "--out", out)
+    assert code == EXIT_BAD_INPUT
+    assert one_error_line(err) == (
+        f"symfuse: error: --out {out}: the folder holds no earlier symfuse run, and "
+        "--overwrite replaces only those; choose another --out"
+    )
+    assert sorted(p.name for p in out.iterdir()) == before
+    assert (out / "README.md").read_text() == "mine"
+    assert leftovers(tmp_path) == []
 
 
 @pytest.mark.parametrize("verb", ["fuse", "trial", "sweep"])

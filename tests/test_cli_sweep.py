@@ -70,17 +70,25 @@ def test_rows_are_reused_only_when_made_with_the_same_config(tmp_path, run):
     assert "The trials read only [estimator]." in report
 
 
-def test_a_folder_of_something_else_is_refused_or_replaced_whole(tmp_path, run):
+def test_a_folder_of_something_else_is_refused_and_an_earlier_run_replaced(tmp_path, run):
     out = tmp_path / "sweep"
     out.mkdir()
     (out / "notes.txt").write_text("mine")
+    for extra in ([], ["--overwrite"]):
+        code, _, err = run(*QUICK, *extra, "--out", out)
+        assert code == EXIT_BAD_INPUT
+        assert err.strip() == (
+            f"symfuse: error: --out {out}: the folder holds no earlier symfuse run, and "
+            "--overwrite replaces only those; choose another --out"
+        )
+        assert (out / "notes.txt").read_text() == "mine"
+    (out / "result.json").write_text('{"symfuse": "0.1.0"}')  # an earlier trial's folder
     code, _, err = run(*QUICK, "--out", out)
     assert code == EXIT_BAD_INPUT
     assert err.strip() == (
         f"symfuse: error: --out {out}: exists, is not empty and holds no sweep "
         "(results.jsonl); pass --overwrite to replace it"
     )
-    assert (out / "notes.txt").read_text() == "mine"
     code, _, err = run(*QUICK, "--overwrite", "--out", out)
     assert code == 0, err
     assert not (out / "notes.txt").exists()

@@ -231,7 +231,7 @@ def test_bad_captures_are_one_line_exit_2(tmp_path, run):
 
 def test_complete_keeps_an_earlier_run_unless_told_to_overwrite(tmp_path, run):
     out = tmp_path / "out"
-    out.mkdir()
+    assert main(["complete", str(KINECT), "--out", str(out)]) == 0
     (out / "earlier.txt").write_text("keep me")
     code, _, err = run("complete", KINECT, "--out", out)
     assert code == 2
