@@ -65,6 +65,14 @@ def run(args: argparse.Namespace) -> int:
         scans=_scans_folder(args, experiment),
     )
     tasks = experiment.tasks(options)
+    if "use" in user.get("planner", {}):
+        from .experiments.paper_tasks import trial_config
+        from .hand_choice import check_planner_is_read
+
+        # The trials of one hand read planner.use alike: the first of each stands for all.
+        by_hand = {task.params["gripper"]: task for task in tasks if "gripper" in task.params}
+        for task in by_hand.values():
+            check_planner_is_read(trial_config(task.params), registry)
     read = {section: resolved[section] for section in sections}
     fingerprint = json.dumps(read, sort_keys=True)
     keys = [task.key for task in tasks]

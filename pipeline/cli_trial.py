@@ -35,9 +35,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument(
         "--gripper",
         metavar="NAME",
-        help="hand, one the world offers (pybullet: pg70, sdh); also selects the first "
-        "installed planner that plans for it; auto (the default): the hand with the best "
-        "feasible grasp",
+        help="hand, one the world offers (pybullet: pg70, sdh), planned by planner.use when "
+        "it plans for that hand, else by the best-scored installed planner that does; auto "
+        "(the default): the hand with the best feasible grasp of any installed planner",
     )
     parser.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
     parser.add_argument("--seed", type=counting_number(0), help="random seed of the trial")
@@ -66,20 +66,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
-def trial_overrides(args: argparse.Namespace, registry) -> list[str]:
-    """The ``--set`` overrides the trial's shortcut options stand for; a named
-    ``--gripper`` also selects the first installed planner that plans for that hand
-    (:attr:`pipeline.stages.GraspPlanner.grippers`)."""
-    from .hand_choice import AUTO, planner_for
-
+def trial_overrides(args: argparse.Namespace) -> list[str]:
+    """The ``--set`` overrides the trial's shortcut options stand for."""
     overrides = []
     if args.object or args.mesh:
         overrides.append(f"trial.object={json.dumps(str(args.object or args.mesh))}")
     if args.gripper:
         overrides.append(f"trial.gripper={args.gripper}")
-        planner = planner_for(registry, args.gripper) if args.gripper != AUTO else None
-        if planner is not None:
-            overrides.append(f"planner.use={planner}")
     if args.init:
         overrides.append(f"initialiser.use={args.init}")
     if args.seed is not None:
@@ -203,15 +196,17 @@ def _progress(message: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .hand_choice import check_planner_is_read
     from .registry import load_registry
     from .trial import run_trial
 
     check_rerun(args)
     registry = load_registry()
-    overrides = trial_overrides(args, registry)
+    overrides = trial_overrides(args)
     if args.units:
         overrides.append(f"trial.units={args.units}")
     registry, config = _load(args, overrides, registry=registry)
+    check_planner_is_read(config, registry)
     settings = config.trial
     out = args.out or fresh_folder(
         Path("runs") / f"trial-{Path(settings.object).stem}-seed{settings.seed}"

@@ -1,12 +1,14 @@
 """Which hand grasps the object, and with which plan (``trial.gripper``).
 
 Each planner declares the hands it plans for (:attr:`pipeline.stages.GraspPlanner.grippers`).
-With a named gripper the configured planner plans for it. With ``"auto"`` every installed
-planner that names an available hand plans on the cloud (before any hand is in the
-scene), and the feasible plan with the highest score wins; planners score on one scale
-(:attr:`pipeline.types.GraspPlan.score`), so a hand wins by the quality of the grasp it can
-make on this object, not by its name. When no planner finds a feasible grasp, the
-refusal names the object's measured size and every hand's aperture.
+With a named gripper the configured planner (``planner.use``) plans for it when it plans for
+that hand; otherwise every installed planner that does competes, as below, for that hand
+alone. With ``"auto"`` every installed planner that names an available hand plans on the
+cloud (before any hand is in the scene), and the feasible plan with the highest score wins;
+planners score on one scale (:attr:`pipeline.types.GraspPlan.score`), so a hand wins by the
+quality of the grasp it can make on this object, not by its name (nor a planner by its
+name, or by when it was installed). When no planner finds a feasible grasp, the refusal
+names the object's measured size and every hand's aperture.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from .config import Config
+from .config import Config, load_config
+from .errors import ConfigError
 from .params import to_toml
 from .perception.grasp_geometry import narrowest_width
 from .registry import StageRegistry
@@ -29,17 +32,39 @@ from .types import GraspCandidate, GraspPlan, GripperSpec, PointCloud, SymmetryI
 AUTO = "auto"
 
 
-def planner_for(registry: StageRegistry, gripper: str) -> str | None:
-    """The first installed planner (by name) that plans for the hand ``gripper``; None
-    when none does."""
-    return next(
-        (
-            name
-            for name in registry.names("planner")
-            if gripper in registry.get("planner", name).cls.grippers
-        ),
-        None,
-    )
+def planners_for(registry: StageRegistry, gripper: str) -> list[str]:
+    """The installed planners that plan for the hand ``gripper``, by name."""
+    return [
+        name
+        for name in registry.names("planner")
+        if gripper in registry.get("planner", name).cls.grippers
+    ]
+
+
+def check_planner_is_read(config: Config, registry: StageRegistry) -> None:
+    """Refuse a ``planner.use`` the user chose (in a ``--config`` file or ``--set``) that
+    would not plan: with ``trial.gripper = "auto"`` every installed planner competes, and a
+    named hand is planned by ``planner.use`` only when it plans for that hand.
+
+    Raises:
+        ConfigError: naming ``planner.use``, the hands it plans for and what to do.
+    """
+    chosen = config.choices["planner"]
+    if chosen == load_config(registry).choices["planner"]:
+        return
+    gripper = config.trial.gripper
+    hands = ", ".join(registry.get("planner", chosen).cls.grippers) or "none"
+    if gripper == AUTO:
+        raise ConfigError(
+            f"config key 'planner.use' ({chosen}) is not read with trial.gripper = 'auto', "
+            f"where every installed planner competes for the grasp; name the hand with "
+            f"--gripper (planner '{chosen}' plans for: {hands})"
+        )
+    if chosen not in planners_for(registry, gripper):
+        raise ConfigError(
+            f"config key 'planner.use': planner '{chosen}' does not plan for the hand "
+            f"'{gripper}' (it plans for: {hands})"
+        )
 
 
 @dataclass(frozen=True)
@@ -85,16 +110,16 @@ def choose_grasp(
         table_height_m: z of the table top (for the size quoted in a refusal), m.
     """
     wanted = config.trial.gripper
-    if wanted != AUTO:
-        name = config.choices["planner"]
+    configured = config.choices["planner"]
+    if wanted != AUTO and configured in planners_for(registry, wanted):
         plan = config.create(registry, "planner").plan(cloud, proposal, grippers[wanted])
-        answer = PlannerAnswer(wanted, name, plan)
+        answer = PlannerAnswer(wanted, configured, plan)
         return HandChoice(answer, f"trial.gripper = '{wanted}'", (answer,))
 
     answers = []
     for name in registry.names("planner"):
         for gripper in registry.get("planner", name).cls.grippers:
-            if gripper in grippers:
+            if gripper in grippers and wanted in (AUTO, gripper):
                 planner = create_planner(config, registry, name)
                 plan = planner.plan(cloud, proposal, grippers[gripper])
                 answers.append(PlannerAnswer(gripper, name, plan))

@@ -13,10 +13,14 @@ import trimesh
 
 from pipeline.cli import main
 from pipeline.config import load_config
+from pipeline.errors import ConfigError
 from pipeline.evaluation import object_motion, opposing_contacts
-from pipeline.hand_choice import choose_grasp
+from pipeline.hand_choice import check_planner_is_read, choose_grasp
 from pipeline.registry import load_registry
 from pipeline.sim.hands import GRIPPERS
+from pipeline.stages import GraspPlanner
+from pipeline.testing import estimation_problem, registry_with
+from pipeline.types import Bias, GraspPlan, SymmetryInit
 from plugins.pybullet_world import Pybullet
 
 
@@ -34,8 +38,6 @@ def _cylinder(name: str, diameter: float, height: float, mass: float) -> SimpleN
 def _auto_grasp(registry, obj, yaw_deg: float, seed: int = 0, hand: str = "auto"):
     """Sense, choose the hand (``trial.gripper = hand``), grasp, read the taxels."""
     overrides = [f"trial.gripper={hand}", f"trial.seed={seed}"]
-    if hand == "sdh":
-        overrides.append("planner.use=top-three-finger")
     config = load_config(registry, overrides=overrides)
     stages = {s: config.create(registry, s) for s in ("sensor", "segmenter", "initialiser")}
     with Pybullet.create(obj, None, yaw=np.radians(yaw_deg), seed=seed) as world:
@@ -143,3 +145,48 @@ def test_the_sdh_holds_a_jar_too_narrow_for_fingers_facing_the_thumb(registry, y
     assert {"f1_distal", "f2_distal", "thumb_distal"} <= set(contacts.pads)
     assert opposing_contacts(contacts)
     assert tilt < 5.0 and shift < 0.005
+
+
+class _AaaPinch(GraspPlanner):
+    """A planner for the PG-70 whose name sorts before the built-in ones, scored low."""
+
+    name = "aaa-pinch"
+    grippers = ("pg70",)
+
+    def plan(self, cloud, proposal, gripper):
+        return GraspPlan(gripper.name, "ok", np.eye(4), 0.1, 0.06, np.array([1.0, 0, 0]),
+                         score=0.01)  # fmt: skip
+
+
+def _choice(registry, *overrides):
+    problem, plane = estimation_problem()
+    config = load_config(registry, overrides=list(overrides))
+    proposal = SymmetryInit(plane, Bias())
+    return choose_grasp(config, registry, problem.cloud, proposal, GRIPPERS, 0.0)
+
+
+def test_a_named_hand_is_planned_by_planner_use_whatever_else_is_installed():
+    registry = registry_with(_AaaPinch)
+    assert _choice(registry, "trial.gripper=pg70").answer.planner == "top-parallel"
+    chosen = _choice(registry, "trial.gripper=pg70", "planner.use=aaa-pinch").answer
+    assert (chosen.planner, chosen.plan.score) == ("aaa-pinch", 0.01)
+
+
+def test_a_named_hand_planner_use_does_not_plan_for_goes_to_the_best_planner_that_does():
+    registry = registry_with(_AaaPinch)
+    choice = _choice(registry, "trial.gripper=sdh")  # planner.use stays top-parallel
+    assert (choice.answer.gripper, choice.answer.planner) == ("sdh", "top-three-finger")
+    assert [a.gripper for a in choice.answers] == ["sdh"]
+
+
+def test_a_chosen_planner_that_would_not_plan_is_refused_in_one_line():
+    registry = registry_with(_AaaPinch)
+    for overrides, message in [
+        (["planner.use=aaa-pinch"], "is not read with trial.gripper = 'auto'"),
+        (["planner.use=aaa-pinch", "trial.gripper=sdh"], "does not plan for the hand 'sdh'"),
+    ]:
+        config = load_config(registry, overrides=overrides)
+        with pytest.raises(ConfigError, match=message):
+            check_planner_is_read(config, registry)
+    for overrides in (["trial.gripper=sdh"], ["planner.use=aaa-pinch", "trial.gripper=pg70"]):
+        check_planner_is_read(load_config(registry, overrides=overrides), registry)
