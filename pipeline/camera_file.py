@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .formats import check_keys, read_json, require_file
+from .formats import check_keys, read_json, require_file, rigid_transform
 from .types import CameraIntrinsics, DepthObservation
 from .units import UNITS_IN_METRES, check_distance
 
@@ -53,25 +53,6 @@ def _positive(value: Any, where: str, path: Path) -> float:
     if not isinstance(value, int | float) or isinstance(value, bool) or not 0 < value < math.inf:
         raise InputError(f"{path}: {where} must be a positive finite number, got {value!r}")
     return float(value)
-
-
-def _rigid_transform(value: Any, where: str, path: Path) -> np.ndarray:
-    """A JSON 4x4 matrix as a rigid transform: a rotation (orthonormal, determinant +1,
-    not a reflection), a finite translation and the bottom row 0 0 0 1."""
-    try:
-        transform = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        transform = np.zeros(0)
-    if transform.shape != (4, 4) or not np.isfinite(transform).all():
-        raise InputError(f"{path}: {where} must be a finite 4x4 matrix")
-    rotation = transform[:3, :3]
-    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
-        raise InputError(f"{path}: {where}'s rotation is not orthonormal")
-    if np.linalg.det(rotation) < 0.0:
-        raise InputError(f"{path}: {where}'s rotation is a reflection (determinant -1)")
-    if not np.allclose(transform[3], [0.0, 0.0, 0.0, 1.0]):
-        raise InputError(f"{path}: {where}'s bottom row must be 0 0 0 1")
-    return transform
 
 
 #: The keys of a ``camera.json`` (:func:`camera_to_json`) and of its ``intrinsics``.
@@ -112,7 +93,7 @@ def read_camera(path: Path) -> CameraFile:
     intrinsics = CameraIntrinsics(*size, *focal, *centre)
     transform = document.get("T_robot_camera")
     if transform is not None:
-        transform = _rigid_transform(transform, "T_robot_camera", path)
+        transform = rigid_transform(transform, "T_robot_camera", path)
         check_distance(transform[:3, 3], f"{path}: T_robot_camera's translation", UNITS_IN_METRES)
     height = document.get("table_height_m")
     if height is not None and (

@@ -17,7 +17,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from . import __version__
 from .errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, ConfigError, SymfuseError
@@ -197,6 +197,13 @@ class _Parser(argparse.ArgumentParser):
         if self._describe is not None:
             self.description = self._describe()
         return super().format_help()
+
+    def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
+        # An empty value (`--init ""`, `--plane=`) reads as "not given" wherever the verb
+        # tests the option's truth, so the user's choice would be dropped without a word.
+        if action.option_strings and "" in arg_strings:
+            self.error(f"argument {'/'.join(action.option_strings)}: the value is empty")
+        return super()._get_values(action, arg_strings)
 
     def error(self, message: str) -> NoReturn:
         """A command-line mistake as every other error: one line, exit code 2 (argparse

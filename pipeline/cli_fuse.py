@@ -68,7 +68,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="FILE",
         help="camera.json of --depth (default: beside it)",
     )
-    _add_units_option(parser, "the cloud and the contacts (overrides the contacts' own)")
+    _add_units_option(parser, "the cloud (the contacts file states its own, which must agree)")
     _add_config_options(parser)
     _add_output_options(parser, default=None)
     add_rerun_option(parser)
@@ -78,6 +78,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 def parse_plane(text: str):
     """``NX,NY,D`` as a :class:`~pipeline.types.SymmetryPlane` (``NX x + NY y = D``)."""
     from .types import SymmetryPlane
+    from .units import FARTHEST_M
 
     fields = [field.strip() for field in text.split(",")]
     if len(fields) != 3:
@@ -90,7 +91,13 @@ def parse_plane(text: str):
         raise ConfigError(f"--plane '{text}': NX, NY and D must be finite")
     if nx == 0.0 and ny == 0.0:
         raise ConfigError(f"--plane '{text}': the normal (NX, NY) must be non-zero")
-    return SymmetryPlane.from_normal(np.array([nx, ny]), d)
+    plane = SymmetryPlane.from_normal(np.array([nx, ny]), d)
+    if abs(plane.offset_m) > FARTHEST_M:
+        raise ConfigError(
+            f"--plane '{text}': the plane passes {abs(plane.offset_m):.3g} m from the robot "
+            f"base, beyond any tabletop object (D is in metres, over the normal's length)"
+        )
+    return plane
 
 
 #: The config sections ``fuse`` reads.

@@ -45,7 +45,13 @@ from .types import (
     StageEstimate,
     SymmetryPlane,
 )
-from .units import check_distance, check_not_metres, scale_of
+from .units import (
+    MILLIMETRES_HINT,
+    STATED_UNITS_HINT,
+    check_distance,
+    check_not_metres,
+    scale_of,
+)
 
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy")
 
@@ -88,6 +94,8 @@ def read_cloud(path: Path, units: str = "m") -> PointCloud:
         points = np.asarray(cloud.points)
     if len(points) == 0:
         raise InputError(f"{path}: the cloud has no points (empty or unreadable file)")
+    if len(points) == 1:
+        raise InputError(f"{path}: the cloud has a single point; a view of an object needs more")
     points = np.asarray(points, dtype=np.float64)
     bad = ~np.isfinite(points).all(axis=1)
     if bad.any():
@@ -96,7 +104,7 @@ def read_cloud(path: Path, units: str = "m") -> PointCloud:
             f"(first at row {int(np.flatnonzero(bad)[0])})"
         )
     points = points * scale
-    check_distance(points, str(path))
+    check_distance(points, str(path), MILLIMETRES_HINT if units == "m" else None)
     check_not_metres(np.ptp(points, axis=0), units, str(path))
     return PointCloud(points=points, frame="robot")
 
@@ -175,18 +183,26 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
     """Validate a parsed contacts document (see the module docstring), in metres.
 
     Args:
-        units: the units of the positions and plan lengths; None: the document's ``units``.
+        units: the units the user said the data are in (``--units``), or None. The
+            document states its own, and one that contradicts them is refused: read in
+            the other unit, the taxels would lie 1000 times too near or too far.
     """
     if not isinstance(document, dict):
         raise InputError(f"{path}: the top level must be a JSON object")
     check_keys(document, ("frame", "units", "grasps"), "", path)
-    if document.get("frame", "robot") != "robot":
-        raise InputError(f'{path}: frame must be "robot", got {document.get("frame")!r}')
-    if document.get("units") not in ("m", "mm"):
+    for key in ("frame", "units"):
+        if key not in document:
+            raise InputError(f"{path}: no '{key}' key (see the README's contacts format)")
+    if document["frame"] != "robot":
+        raise InputError(f'{path}: frame must be "robot", got {document["frame"]!r}')
+    if document["units"] not in ("m", "mm"):
+        raise InputError(f'{path}: units must be "m" (metres) or "mm", got {document["units"]!r}')
+    if units is not None and units != document["units"]:
         raise InputError(
-            f'{path}: units must be "m" (metres) or "mm", got {document.get("units")!r}'
+            f'{path}: the file says units "{document["units"]}", --units says {units}: '
+            "drop --units or correct the file"
         )
-    scale = scale_of(units or document["units"], str(path))
+    scale = scale_of(document["units"], str(path))
     grasps = document.get("grasps")
     if not isinstance(grasps, list) or not grasps:
         raise InputError(f"{path}: 'grasps' must be a non-empty list (one entry per grasp)")
@@ -219,7 +235,11 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
                 raise InputError(f"{path}: {where}.index must be a non-negative integer")
             indices.append(index)
         positions_m = scale * np.array(positions)
-        check_distance(positions_m, f"{path}: grasps[{g}].taxels")
+        check_distance(
+            positions_m,
+            f"{path}: grasps[{g}].taxels",
+            STATED_UNITS_HINT if document["units"] == "m" else None,
+        )
         contacts.append(Contacts(positions_m, np.array(normals), pads, indices))
         plan = grasp.get("plan")
         if plan is not None:
@@ -232,13 +252,28 @@ def read_json(path: Path) -> Any:
     """A parsed JSON file; :class:`InputError` naming it when missing or not JSON."""
     path = require_file(path)
     try:
-        return json.loads(path.read_text())
+        return json.loads(path.read_text(), object_pairs_hook=_unique_keys)
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read: {_first_line(exc)}") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON: {exc}") from None
+    except _DuplicateKey as exc:
+        raise InputError(f"{path}: the key '{exc}' appears twice in one object") from None
     except RecursionError:
         raise InputError(f"{path}: not valid JSON: nested too deeply") from None
+
+
+class _DuplicateKey(Exception):
+    """A JSON object names a key twice (the parser would keep the last without a word)."""
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    document: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in document:
+            raise _DuplicateKey(key)
+        document[key] = value
+    return document
 
 
 def _scaled_plan(plan: GraspPlan, scale: float) -> GraspPlan:
@@ -260,7 +295,8 @@ def read_contacts(path: Path, units: str | None = None) -> RecordedGrasps:
     """Read a contacts JSON file (one entry per grasp, in order), in metres.
 
     Args:
-        units: ``m`` or ``mm``, overriding the file's ``units`` (None: the file's).
+        units: ``m`` or ``mm`` when the user gave ``--units``: the file's own ``units``
+            must agree (None: no check).
     """
     path = require_file(path)
     return contacts_from_json(read_json(path), path, units)
@@ -298,6 +334,25 @@ def contacts_to_json(
     }
 
 
+def rigid_transform(value: Any, where: str, path: Path) -> np.ndarray:
+    """A JSON 4x4 matrix as a rigid transform: a rotation (orthonormal, determinant +1,
+    not a reflection), a finite translation and the bottom row 0 0 0 1."""
+    try:
+        transform = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        transform = np.zeros(0)
+    if transform.shape != (4, 4) or not np.isfinite(transform).all():
+        raise InputError(f"{path}: {where} must be a finite 4x4 matrix")
+    rotation = transform[:3, :3]
+    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
+        raise InputError(f"{path}: {where}'s rotation is not orthonormal")
+    if np.linalg.det(rotation) < 0.0:
+        raise InputError(f"{path}: {where}'s rotation is a reflection (determinant -1)")
+    if not np.allclose(transform[3], [0.0, 0.0, 0.0, 1.0]):
+        raise InputError(f"{path}: {where}'s bottom row must be 0 0 0 1")
+    return transform
+
+
 def plan_to_json(plan: GraspPlan) -> dict[str, Any]:
     """A grasp plan as JSON (frame R, metres, radians); ``score`` is null when the planner
     gives none."""
@@ -315,41 +370,82 @@ def plan_to_json(plan: GraspPlan) -> dict[str, Any]:
     }
 
 
+#: The keys of a grasp plan in JSON (:func:`plan_to_json`).
+PLAN_KEYS = (
+    "gripper",
+    "status",
+    "T_robot_hand",
+    "pregrasp_height_m",
+    "opening_m",
+    "closing_direction",
+    "predicted_contacts",
+    "spread_rad",
+    "score",
+    "reason",
+)
+
+
 def plan_from_json(document: Any, where: str, path: Path) -> GraspPlan:
-    """Read what :func:`plan_to_json` wrote; errors name ``where`` in ``path``."""
+    """Read what :func:`plan_to_json` wrote; errors name the key (``where.KEY``) in
+    ``path``. ``status``, ``predicted_contacts``, ``spread_rad``, ``score`` and ``reason``
+    are optional."""
     if not isinstance(document, dict):
         raise InputError(f"{path}: {where} must be an object")
-    try:
-        transform = np.array(document["T_robot_hand"], dtype=np.float64)
-        predicted = np.array(document.get("predicted_contacts", []), dtype=np.float64)
-        closing = np.array(document["closing_direction"], dtype=np.float64)
-        lengths = [
-            float(document["pregrasp_height_m"]),
-            float(document["opening_m"]),
-            float(document.get("spread_rad", 0.0)),
-        ]
-        score = document.get("score")
-        plan = GraspPlan(
-            gripper=str(document["gripper"]),
-            status=str(document.get("status", "ok")),
-            T_robot_hand=transform,
-            pregrasp_height_m=lengths[0],
-            opening_m=lengths[1],
-            closing_direction=closing,
-            predicted_contacts=predicted.reshape(-1, 3),
-            spread_rad=lengths[2],
-            reason=str(document.get("reason", "")),
-            score=math.nan if score is None else float(score),
-        )
-    except (KeyError, TypeError, ValueError, OverflowError) as exc:
-        raise InputError(f"{path}: {where} is not a valid grasp plan: {exc!r}") from None
-    if transform.shape != (4, 4) or not np.isfinite(transform).all():
-        raise InputError(f"{path}: {where}.T_robot_hand must be a finite 4x4 matrix")
-    if closing.shape != (3,) or not np.isfinite(closing).all():
-        raise InputError(f"{path}: {where}.closing_direction must be a list of 3 numbers")
-    if not (np.isfinite(predicted).all() and np.isfinite(lengths).all()):
-        raise InputError(f"{path}: {where} has a NaN or infinite value")
-    return plan
+    check_keys(document, PLAN_KEYS, f"{where}.", path)
+    gripper = document.get("gripper")
+    if not isinstance(gripper, str) or not gripper:
+        raise InputError(f"{path}: {where}.gripper must be a non-empty string (the hand)")
+    status = document.get("status", "ok")
+    if status not in ("ok", "refused"):
+        raise InputError(f'{path}: {where}.status must be "ok" or "refused", got {status!r}')
+    closing = _vector(document.get("closing_direction"), f"{where}.closing_direction", path)
+    if abs(float(np.linalg.norm(closing)) - 1.0) > 1e-6:
+        raise InputError(f"{path}: {where}.closing_direction must be a unit vector")
+    predicted = document.get("predicted_contacts", [])
+    if not isinstance(predicted, list):
+        raise InputError(f"{path}: {where}.predicted_contacts must be a list of points")
+    score = document.get("score")
+    if score is not None and not (_number(score) and 0.0 <= score <= 1.0):
+        raise InputError(f"{path}: {where}.score must be a number in [0, 1] or null")
+    reason = document.get("reason", "")
+    if not isinstance(reason, str):
+        raise InputError(f"{path}: {where}.reason must be a string")
+    return GraspPlan(
+        gripper=gripper,
+        status=status,
+        T_robot_hand=rigid_transform(document.get("T_robot_hand"), f"{where}.T_robot_hand", path),
+        pregrasp_height_m=_length(document, "pregrasp_height_m", where, path),
+        opening_m=_length(document, "opening_m", where, path),
+        closing_direction=closing,
+        predicted_contacts=np.array(
+            [
+                _vector(point, f"{where}.predicted_contacts[{k}]", path)
+                for k, point in enumerate(predicted)
+            ]
+        ).reshape(-1, 3),
+        spread_rad=_finite(document.get("spread_rad", 0.0), f"{where}.spread_rad", path),
+        reason=reason,
+        score=math.nan if score is None else float(score),
+    )
+
+
+def _number(value: Any) -> bool:
+    """Whether a parsed JSON value is a finite number (not a bool)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _finite(value: Any, where: str, path: Path) -> float:
+    if not _number(value):
+        raise InputError(f"{path}: {where} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _length(document: dict, key: str, where: str, path: Path) -> float:
+    """A plan's length ``key``: a finite number, not negative."""
+    value = _finite(document.get(key), f"{where}.{key}", path)
+    if value < 0.0:
+        raise InputError(f"{path}: {where}.{key} must not be negative, got {value!r}")
+    return value
 
 
 def write_json(path: Path, document: Any) -> Path:

@@ -32,6 +32,8 @@ SMALLEST_OBJECT_M = 0.005
 MILLIMETRES_HINT = "looks like millimetres: pass --units mm"
 #: The hint for a file whose format fixes metres (camera.json): no option converts it.
 UNITS_IN_METRES = "looks like millimetres: the file must be in metres"
+#: The hint for a file that states its own units (a contacts file).
+STATED_UNITS_HINT = 'looks like millimetres: set the file\'s "units" to "mm"'
 
 
 def scale_of(units: str, source: str) -> float:
@@ -45,11 +47,13 @@ def scale_of(units: str, source: str) -> float:
     return UNIT_SCALE[units]
 
 
-def check_distance(points_m: np.ndarray, source: str, hint: str = MILLIMETRES_HINT) -> None:
+def check_distance(points_m: np.ndarray, source: str, hint: str | None = MILLIMETRES_HINT) -> None:
     """Refuse points (frame R, metres) farther than :data:`FARTHEST_M` from the robot base.
 
     Args:
-        hint: what to do about it (``--units mm`` where the command has it).
+        hint: what to do about millimetres (``--units mm`` where the command has it); None
+            when the data were read as millimetres already. It is given only when the
+            points, read as millimetres, would be near enough.
 
     Raises:
         InputError: ``"<source>: a point lies 512 m from the robot base: looks like
@@ -58,8 +62,13 @@ def check_distance(points_m: np.ndarray, source: str, hint: str = MILLIMETRES_HI
     points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     if len(points_m) == 0:
         return
-    farthest = float(np.max(np.linalg.norm(points_m, axis=1)))
+    # Coordinates near the float limit overflow when squared: that is "too far", not a
+    # warning to print.
+    with np.errstate(over="ignore"):
+        farthest = float(np.max(np.linalg.norm(points_m, axis=1)))
     if farthest > FARTHEST_M:
+        if hint is None or farthest * UNIT_SCALE["mm"] > FARTHEST_M:
+            hint = "no tabletop object lies that far, in metres or millimetres"
         raise InputError(f"{source}: a point lies {farthest:.3g} m from the robot base: {hint}")
 
 

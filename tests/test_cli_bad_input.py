@@ -345,3 +345,38 @@ def test_a_misspelt_contacts_key_is_refused(tmp_path, change, names):
     (tmp_path / "contacts.json").write_text(json.dumps(document))
     with pytest.raises(InputError, match=names):
         read_contacts(tmp_path / "contacts.json")
+
+
+@pytest.mark.parametrize(
+    ("argv", "option"),
+    [
+        (["trial", "--init", ""], "--init"),
+        (["trial", "--object="], "--object"),
+        (["fuse", "--cloud", "c.ply", "--contacts", "c.json", "--plane=", "--out", "o"],
+         "--plane"),
+        (["complete", "scan.pcd", "--topic", "", "--out", "o"], "--topic"),
+    ],
+)  # fmt: skip
+def test_an_empty_option_value_is_refused_not_dropped(capsys, argv, option):
+    with pytest.raises(SystemExit) as exited:
+        main(argv)
+    assert exited.value.code == EXIT_BAD_INPUT
+    assert one_error_line(capsys.readouterr().err).endswith(
+        f"argument {option}: the value is empty (see symfuse {argv[0]} --help)"
+    )
+
+
+def test_a_point_too_far_for_any_unit_gets_no_unit_hint_and_no_warning(tmp_path, capsys):
+    from pipeline.units import check_distance
+
+    with pytest.raises(InputError) as raised:
+        check_distance(np.array([[1e308, 0.0, 0.0], [0.0, 1e308, 1e308]]), "c.json")
+    assert str(raised.value) == (
+        "c.json: a point lies inf m from the robot base: no tabletop object lies that far, "
+        "in metres or millimetres"
+    )
+    assert capsys.readouterr().err == ""
+    with pytest.raises(InputError, match="512 m from the robot base: looks like millimetres"):
+        check_distance(np.array([[512.0, 0.0, 0.0]]), "c.json")
+    with pytest.raises(InputError, match="512 m from the robot base: no tabletop object"):
+        check_distance(np.array([[512.0, 0.0, 0.0]]), "c.json", hint=None)

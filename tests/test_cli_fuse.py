@@ -167,6 +167,7 @@ def test_initialiser_by_name_and_one_that_needs_a_depth_image(recording, tmp_pat
     [
         (lambda d: d / "missing.ply", r"missing\.ply: no such file"),
         (lambda d: (np.save(d / "e.npy", np.zeros((0, 3))), d / "e.npy")[1], "has no points"),
+        (lambda d: (np.save(d / "1.npy", np.ones((1, 3))), d / "1.npy")[1], "a single point"),
         (
             lambda d: (np.save(d / "n.npy", np.full((3, 3), np.inf)), d / "n.npy")[1],
             "NaN or infinite",
@@ -198,6 +199,7 @@ def test_bad_cloud_is_one_line_exit_2(recording, tmp_path, run, make, message):
         ({"frame": "robot", "units": "m", "grasps": []}, "'grasps' must be a non-empty list"),
         (
             {
+                "frame": "robot",
                 "units": "m",
                 "grasps": [
                     {"taxels": [{"position": [0, 0, 0], "normal": [0, 0, 0], "pad": "left"}]}
@@ -242,6 +244,8 @@ def test_bad_plane_and_bad_override(recording, tmp_path, run):
         ("1,0,0,4", "expected three numbers NX,NY,D, got 4"),
         ("1,x,0", "expected three numbers NX,NY,D"),
         ("nan,0,0", "NX, NY and D must be finite"),
+        ("1,0,1e300", "the plane passes 1e+300 m from the robot base, beyond any tabletop"),
+        ("0.001,0,0.05", "the plane passes 50 m from the robot base"),
     ]:
         code, _, err = run(*base, "--plane", plane)
         assert code == 2

@@ -358,12 +358,22 @@ def test_a_cloud_in_millimetres_is_refused_with_a_hint_and_converted_with_units(
     assert line.startswith(f"symfuse: error: {tmp_path / 'cloud_mm.npy'}: a point lies ")
     assert line.endswith("m from the robot base: looks like millimetres: pass --units mm")
     assert not (tmp_path / "a").exists()
-    # --units mm on the cloud in mm and the contacts declared in "m": override both
+    # --units mm on the cloud in mm; contacts in mm must say so themselves
     contacts = json.loads((folder / "contacts.json").read_text())
     for taxel in contacts["grasps"][0]["taxels"]:
         taxel["position"] = [1000.0 * v for v in taxel["position"]]
     (tmp_path / "contacts_mm.json").write_text(json.dumps(contacts))
     nx, ny, d = (float(v) for v in plane.split(","))
+    code, _, err = run("fuse", "--cloud", tmp_path / "cloud_mm.npy", "--contacts",
+                       tmp_path / "contacts_mm.json", f"--plane={nx},{ny},{d}", "--units", "mm",
+                       "--out", tmp_path / "mm")  # fmt: skip
+    assert code == EXIT_BAD_INPUT
+    assert one_error_line(err) == (
+        f'symfuse: error: {tmp_path / "contacts_mm.json"}: the file says units "m", --units '
+        "says mm: drop --units or correct the file"
+    )
+    contacts["units"] = "mm"
+    (tmp_path / "contacts_mm.json").write_text(json.dumps(contacts))
     code, _, err = run("fuse", "--cloud", tmp_path / "cloud_mm.npy", "--contacts",
                        tmp_path / "contacts_mm.json", f"--plane={nx},{ny},{d}", "--units", "mm",
                        "--out", tmp_path / "mm")  # fmt: skip
@@ -388,7 +398,7 @@ def test_taxels_in_millimetres_are_refused_or_read_by_their_declared_units(
             f"--plane={plane}"]  # fmt: skip
     code, _, err = run(*argv, "--out", tmp_path / "a")
     assert code == EXIT_BAD_INPUT
-    assert one_error_line(err).endswith("looks like millimetres: pass --units mm")
+    assert one_error_line(err).endswith('looks like millimetres: set the file\'s "units" to "mm"')
     assert "grasps[0].taxels" in err
     contacts["units"] = "mm"  # declared: converted without --units
     (tmp_path / "c.json").write_text(json.dumps(contacts))

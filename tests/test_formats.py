@@ -111,6 +111,38 @@ def test_contacts_round_trip_with_plan(tmp_path):
     assert read_contacts(path).plans[0].score == 0.25
 
 
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"extra": 1}, r"unknown key 'grasps\[0\]\.plan\.extra'"),
+        ({"score": 5}, r"grasps\[0\]\.plan\.score must be a number in \[0, 1\] or null"),
+        ({"score": "high"}, r"plan\.score must be a number in \[0, 1\]"),
+        ({"predicted_contacts": [[1, 2]]}, r"plan\.predicted_contacts\[0\] must be a list of 3"),
+        ({"predicted_contacts": "x"}, r"plan\.predicted_contacts must be a list of points"),
+        ({"T_robot_hand": (2 * np.eye(4)).tolist()}, r"T_robot_hand's rotation is not orthonormal"),
+        ({"closing_direction": [0, 0, 0]}, r"plan\.closing_direction must be a unit vector"),
+        ({"opening_m": -0.05}, r"plan\.opening_m must not be negative"),
+        ({"pregrasp_height_m": None}, r"plan\.pregrasp_height_m must be a finite number"),
+        ({"gripper": ""}, r"plan\.gripper must be a non-empty string"),
+        ({"status": "maybe"}, r"plan\.status must be \"ok\" or \"refused\""),
+    ],
+)
+def test_a_recorded_plan_is_checked_key_by_key(tmp_path, change, message):
+    document = contacts_to_json([contacts()], [plan()])
+    document["grasps"][0]["plan"].update(change)
+    path = write_json(tmp_path / "contacts.json", document)
+    with pytest.raises(InputError, match=message):
+        read_contacts(path)
+
+
+def test_a_key_given_twice_is_refused(tmp_path):
+    text = json.dumps(contacts_to_json([contacts()], [None]))
+    path = tmp_path / "contacts.json"
+    path.write_text(text[:-1] + ', "units": "mm"}')
+    with pytest.raises(InputError, match="the key 'units' appears twice in one object"):
+        read_contacts(path)
+
+
 def test_unit_normals_are_read_bit_for_bit(tmp_path):
     # Normals a simulated pad gives: unit up to rounding, so that dividing by their length
     # again moves some in the last bits (and a replay would fuse differently).
@@ -143,6 +175,7 @@ def test_minimal_contacts_document(tmp_path):
         ({"frame": "robot", "units": "m", "grasps": [{"taxels": []}]}, r"grasps\[0\]\.taxels"),
         (
             {
+                "frame": "robot",
                 "units": "m",
                 "grasps": [{"taxels": [{"position": [0, 0, 0], "normal": [0, 0, 0], "pad": "l"}]}],
             },
@@ -150,6 +183,7 @@ def test_minimal_contacts_document(tmp_path):
         ),
         (
             {
+                "frame": "robot",
                 "units": "m",
                 "grasps": [{"taxels": [{"position": [0, 0], "normal": [0, 0, 1], "pad": "l"}]}],
             },
