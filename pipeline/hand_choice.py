@@ -1,14 +1,15 @@
 """Which hand grasps the object, and with which plan (``trial.gripper``).
 
 Each planner declares the hands it plans for (:attr:`pipeline.stages.GraspPlanner.grippers`).
-With a named gripper the configured planner (``planner.use``) plans for it when it plans for
+With a named gripper the configured planner (``planner.use``) plans for it when it names
 that hand; otherwise every installed planner that does competes, as below, for that hand
-alone. With ``"auto"`` every installed planner that names an available hand plans on the
-cloud (before any hand is in the scene), and the feasible plan with the highest score wins;
-planners score on one scale (:attr:`pipeline.types.GraspPlan.score`), so a hand wins by the
-quality of the grasp it can make on this object, not by its name (nor a planner by its
-name, or by when it was installed). When no planner finds a feasible grasp, the refusal
-names the object's measured size and every hand's aperture.
+alone (:func:`named_hand_planners`). With ``"auto"`` every installed planner that names an
+available hand plans on the cloud (before any hand is in the scene), and the feasible plan
+with the highest score wins; planners score on one scale
+(:attr:`pipeline.types.GraspPlan.score`), so a hand wins by the quality of the grasp it can
+make on this object, not by its name (nor a planner by its name, or by when it was
+installed). When no planner finds a feasible grasp, the refusal names the object's measured
+size and every hand's aperture.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ AUTO = "auto"
 
 
 def planners_for(registry: StageRegistry, gripper: str) -> list[str]:
-    """The installed planners that plan for the hand ``gripper``, by name."""
+    """The installed planners that name the hand ``gripper``, by name."""
     return [
         name
         for name in registry.names("planner")
@@ -41,10 +42,21 @@ def planners_for(registry: StageRegistry, gripper: str) -> list[str]:
     ]
 
 
+def named_hand_planners(config: Config, registry: StageRegistry) -> list[str]:
+    """The planners that plan for the named hand ``config.trial.gripper``: ``planner.use``
+    when it names the hand; else every installed planner that does, to compete; else (no
+    planner names it: a world's own hand) ``planner.use``, which may plan for any hand of
+    its kind."""
+    configured = config.choices["planner"]
+    naming = planners_for(registry, config.trial.gripper)
+    return [configured] if configured in naming or not naming else naming
+
+
 def check_planner_is_read(config: Config, registry: StageRegistry) -> None:
     """Refuse a ``planner.use`` the user chose (in a ``--config`` file or ``--set``) that
     would not plan: with ``trial.gripper = "auto"`` every installed planner competes, and a
-    named hand is planned by ``planner.use`` only when it plans for that hand.
+    named hand is planned by ``planner.use`` only when it names that hand or no planner
+    does (:func:`named_hand_planners`).
 
     Raises:
         ConfigError: naming ``planner.use``, the hands it plans for and what to do.
@@ -60,7 +72,7 @@ def check_planner_is_read(config: Config, registry: StageRegistry) -> None:
             f"where every installed planner competes for the grasp; name the hand with "
             f"--gripper (planner '{chosen}' plans for: {hands})"
         )
-    if chosen not in planners_for(registry, gripper):
+    if chosen not in named_hand_planners(config, registry):
         raise ConfigError(
             f"config key 'planner.use': planner '{chosen}' does not plan for the hand "
             f"'{gripper}' (it plans for: {hands})"
@@ -110,10 +122,9 @@ def choose_grasp(
         table_height_m: z of the table top (for the size quoted in a refusal), m.
     """
     wanted = config.trial.gripper
-    configured = config.choices["planner"]
-    if wanted != AUTO and configured in planners_for(registry, wanted):
+    if wanted != AUTO and named_hand_planners(config, registry) == [config.choices["planner"]]:
         plan = config.create(registry, "planner").plan(cloud, proposal, grippers[wanted])
-        answer = PlannerAnswer(wanted, configured, plan)
+        answer = PlannerAnswer(wanted, config.choices["planner"], plan)
         return HandChoice(answer, f"trial.gripper = '{wanted}'", (answer,))
 
     answers = []
