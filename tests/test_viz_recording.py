@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import sys
 
@@ -152,3 +153,30 @@ def test_without_the_extra_rerun_is_one_line_naming_it(tmp_path, monkeypatch, ca
 def test_view_of_a_folder_without_a_run_is_an_error(tmp_path, capsys):
     assert main(["view", str(tmp_path), "--no-open"]) == 2
     assert "no result.json" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "message"),
+    [
+        ("camera.json", '{"x": 1}', "'intrinsics' must be an object"),
+        ("camera.json", '{"intrinsics": {"width": 640}}', "intrinsics.height must be a positive"),
+        ("depth.npy", b"junk", "cannot read as .npy"),
+        ("depth.npy", np.zeros((3, 3, 3)), r"expected an \(H, W\) float depth image"),
+    ],
+)
+def test_a_damaged_camera_or_depth_is_one_line_and_leaves_the_recording(
+    trial, tmp_path, capsys, name, content, message
+):
+    run = tmp_path / "run"
+    shutil.copytree(trial, run)
+    before = (run / "recording.rrd").read_bytes()
+    if isinstance(content, np.ndarray):
+        np.save(run / name, content)
+    else:
+        (run / name).write_bytes(content.encode() if isinstance(content, str) else content)
+    assert main(["view", str(run), "--no-open"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"symfuse: error: {run / name}: ")
+    assert re.search(message, err)
+    assert (run / "recording.rrd").read_bytes() == before
+    assert not list(run.glob(".*partial*"))

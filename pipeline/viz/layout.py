@@ -3,8 +3,6 @@ the IEKF state plots and the step log."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 #: How far the 3-D view's eye starts from the objects (m), its angle (rad) beside the
@@ -35,17 +33,18 @@ def eye_position(target: np.ndarray, toward: np.ndarray) -> np.ndarray:
     return np.asarray(target, dtype=float) + EYE_DISTANCE_M * np.array(direction)
 
 
-def blueprint(runs, camera: dict[str, Any] | None, plots: list[str]):
-    """The viewer layout: the 3-D scene (eye on the objects, from beside the camera), the
-    camera images, the IEKF state per iteration (plane, bias, gates) and the step log."""
+def blueprint(runs, camera_position_m: np.ndarray | None, plots: list[str]):
+    """The viewer layout: the 3-D scene (eye on the objects, from beside the camera at
+    ``camera_position_m`` in R, when known), the camera images, the IEKF state per
+    iteration (plane, bias, gates) and the step log."""
     import rerun.blueprint as rrb
 
     references = [files.reference for files, _ in runs if files.reference is not None]
     eye = None
     if references:
         target = np.vstack(references).mean(axis=0)
-        if camera is not None:
-            toward = np.asarray(camera["T_robot_camera"], dtype=float)[:3, 3] - target
+        if camera_position_m is not None:
+            toward = np.asarray(camera_position_m, dtype=float) - target
         else:
             toward = np.array([-1.0, -1.0, 1.0])
         position = eye_position(target, toward)

@@ -48,6 +48,7 @@ timeline.
 from __future__ import annotations
 
 import importlib
+import os
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,6 +57,8 @@ from typing import Any
 
 import numpy as np
 
+from ..camera_file import CameraFile, read_camera
+from ..captures import Capture, read_depth_image
 from ..errors import InputError, MissingExtraError
 from ..formats import read_cloud, read_contacts, read_json
 from ..metrics import nearest_distances, plane_after_bias, point_to_mesh_distances
@@ -121,21 +124,28 @@ def write_recording(run_dir: Path, out_path: Path | None = None) -> Path:
     rr = rerun_module()
     run_dir = Path(run_dir)
     runs = [(_RunFiles.load(folder), entity) for folder, entity in run_folders(run_dir)]
-    camera_path = run_dir / "camera.json"
-    camera = read_run_json(camera_path) if camera_path.is_file() else None
+    camera = _RunCamera.load(run_dir)
     out_path = Path(out_path) if out_path is not None else run_dir / RECORDING_NAME
+    # Written beside its place and moved there at the end: a recording that fails half-way
+    # leaves no half file (nor replaces a good one).
+    partial = out_path.with_name(f".{out_path.name}.partial")
     recording = rr.RecordingStream("symfuse", recording_id=str(uuid.uuid4()))
     plots = {entity: plots_path(entity) for _, entity in runs}
-    recording.save(out_path, default_blueprint=blueprint(runs, camera, list(plots.values())))
-    timeline = _Timeline(rr, recording)
-    recording.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    if camera is not None:
-        timeline.next("camera: depth and colour image, intrinsics and pose")
-        _log_camera(rr, recording, run_dir, camera)
-    for files, entity in runs:
-        _RunRecorder(rr, recording, timeline, files, entity, plots[entity]).log()
-    recording.flush()
-    recording.disconnect()
+    position = None if camera is None else camera.position_m
+    try:
+        recording.save(partial, default_blueprint=blueprint(runs, position, list(plots.values())))
+        timeline = _Timeline(rr, recording)
+        recording.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        if camera is not None:
+            timeline.next("camera: depth and colour image, intrinsics and pose")
+            camera.log(rr, recording)
+        for files, entity in runs:
+            _RunRecorder(rr, recording, timeline, files, entity, plots[entity]).log()
+        recording.flush()
+        recording.disconnect()
+        os.replace(partial, out_path)
+    finally:
+        partial.unlink(missing_ok=True)
     return out_path
 
 
@@ -159,24 +169,49 @@ class _Timeline:
         self.recording.log("log", self.rr.TextLog(text))
 
 
-def _log_camera(rr: ModuleType, recording, run_dir: Path, camera: dict[str, Any]) -> None:
-    k = camera["intrinsics"]
-    T = np.asarray(camera["T_robot_camera"], dtype=np.float64)
-    recording.log("world/camera", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]))
-    recording.log(
-        "world/camera/image",
-        rr.Pinhole(
-            image_from_camera=[[k["fx"], 0, k["cx"]], [0, k["fy"], k["cy"]], [0, 0, 1]],
-            width=k["width"],
-            height=k["height"],
-            camera_xyz=rr.ViewCoordinates.RDF,
-            image_plane_distance=0.1,
-        ),
-    )
-    if (run_dir / "rgb.png").is_file():
-        recording.log("world/camera/image/rgb", rr.EncodedImage(path=run_dir / "rgb.png"))
-    if (run_dir / "depth.npy").is_file():
-        depth_m = np.load(run_dir / "depth.npy", allow_pickle=False)
+@dataclass(frozen=True)
+class _RunCamera:
+    """A run's ``camera.json``, with its ``depth.npy`` and ``rgb.png`` when there, read and
+    checked as ``symfuse fuse`` reads them."""
+
+    camera: CameraFile
+    capture: Capture | None
+
+    @classmethod
+    def load(cls, run_dir: Path) -> _RunCamera | None:
+        camera_path = run_dir / "camera.json"
+        if not camera_path.is_file():
+            return None
+        depth_path = run_dir / "depth.npy"
+        capture = read_depth_image(depth_path, camera_path, None) if depth_path.is_file() else None
+        return cls(read_camera(camera_path), capture)
+
+    @property
+    def position_m(self) -> np.ndarray | None:
+        """The camera's optical centre in R, None when the run has no robot frame."""
+        T = self.camera.T_robot_camera
+        return None if T is None else T[:3, 3]
+
+    def log(self, rr: ModuleType, recording) -> None:
+        k = self.camera.intrinsics
+        T = self.camera.T_robot_camera
+        if T is not None:
+            recording.log("world/camera", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]))
+        recording.log(
+            "world/camera/image",
+            rr.Pinhole(
+                image_from_camera=[[k.fx, 0, k.cx], [0, k.fy, k.cy], [0, 0, 1]],
+                width=k.width,
+                height=k.height,
+                camera_xyz=rr.ViewCoordinates.RDF,
+                image_plane_distance=0.1,
+            ),
+        )
+        if self.capture is None:
+            return
+        if self.capture.rgb is not None:
+            recording.log("world/camera/image/rgb", rr.Image(self.capture.rgb))
+        depth_m = self.capture.depth_m
         depth_mm = np.where(np.isfinite(depth_m), np.round(depth_m * 1e3), 0.0)
         recording.log(
             "world/camera/image/depth", rr.DepthImage(depth_mm.astype(np.uint16), meter=1000.0)
