@@ -16,12 +16,13 @@ The generators of each ``kind`` and their ``dimensions_m`` keys are in
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import os
 import tomllib
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -227,13 +228,24 @@ def load_object(
 def _checked_mesh(
     mesh: Any, path: Path, what: str, hint: str = MILLIMETRES_HINT
 ) -> trimesh.Trimesh:
-    """``mesh`` if it has triangles, finite vertices and a graspable size."""
+    """``mesh`` if it has triangles, finite vertices, a volume and a graspable size."""
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(f"{path}: {what}")
     if not np.isfinite(mesh.vertices).all():
         raise InputError(f"{path}: the mesh has NaN or infinite vertices")
     check_extent(mesh.extents, str(path), hint)
+    # The spread of the vertices along their thinnest direction, against their widest: a
+    # flat mesh has no inside to grasp, and the simulator's convex decomposition of one
+    # never ends.
+    spread = np.linalg.svd(mesh.vertices - mesh.vertices.mean(axis=0), compute_uv=False)
+    if spread[-1] <= FLAT_RATIO * spread[0]:
+        raise InputError(f"{path}: the mesh is flat (all its vertices lie in one plane): no solid")
     return mesh
+
+
+#: Below this ratio of the vertices' spread along their thinnest direction to their widest
+#: a mesh is flat: the float rounding of a plane's points, not a thickness.
+FLAT_RATIO = 1e-9
 
 
 def _load_mesh_file(path: Path, *, recentre: bool, units: str = "m") -> CatalogueObject:
@@ -247,9 +259,15 @@ def _load_mesh_file(path: Path, *, recentre: bool, units: str = "m") -> Catalogu
             # then warns while casting them, though the vertices are finite (checked below).
             warnings.simplefilter("ignore", RuntimeWarning)
             mesh = trimesh.load(path, force="mesh")
+            # trimesh drops a NaN vertex, and the faces that use it, without a word: the
+            # file as written must be finite, not just what is left of it.
+            raw = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for malformed files
         detail = (str(exc).splitlines() or [""])[0]
         raise InputError(f"{path}: cannot read mesh ({type(exc).__name__}: {detail})") from exc
+    if isinstance(raw, trimesh.Trimesh) and not np.isfinite(raw.vertices).all():
+        row = int(np.flatnonzero(~np.isfinite(raw.vertices).all(axis=1))[0])
+        raise InputError(f"{path}: vertex {row + 1} has NaN or infinite coordinates")
     scale = scale_of(units, str(path))
     if isinstance(mesh, trimesh.Trimesh) and scale != 1.0:
         mesh.apply_scale(scale)
@@ -283,16 +301,18 @@ def _load_urdf(path: Path) -> CatalogueObject:
 
     if not path.is_file():
         raise InputError(f"{path}: no such URDF file")
-    try:
-        urdf = yourdfpy.URDF.load(str(path), load_meshes=True)
-        mesh = urdf.scene.to_geometry()
-    except Exception as exc:  # yourdfpy/lxml/trimesh raise many types for malformed files
-        detail = (str(exc).splitlines() or [""])[0]
-        raise InputError(f"{path}: cannot read URDF ({type(exc).__name__}: {detail})") from exc
+    with _logged("yourdfpy") as said:  # it logs what it could not read, then goes on
+        try:
+            urdf = yourdfpy.URDF.load(str(path), load_meshes=True)
+            mesh = urdf.scene.to_geometry()
+        except Exception as exc:  # yourdfpy/lxml/trimesh raise many types for malformed files
+            detail = (said or str(exc).splitlines() or [""])[0]
+            raise InputError(f"{path}: cannot read URDF ({type(exc).__name__}: {detail})") from exc
+    no_mesh = f"the URDF has no visual mesh ({said[-1]})" if said else "the URDF has no visual mesh"
     mesh = _checked_mesh(
         mesh,
         path,
-        "the URDF has no visual mesh",
+        no_mesh,
         hint='looks like millimetres: give its meshes scale="0.001 0.001 0.001"',
     )
     inertial = urdf.link_map[urdf.base_link].inertial
@@ -335,3 +355,24 @@ def place_on_table(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     placed = mesh.copy()
     placed.apply_translation(offset)
     return placed
+
+
+@contextlib.contextmanager
+def _logged(name: str) -> Iterator[list[str]]:
+    """Collect what the logger ``name`` says (its records' messages, in order) instead of
+    printing it: a library's own lines must not come before the one-line error."""
+    said: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            said.append(record.getMessage())
+
+    logger = logging.getLogger(name)
+    handler, propagate = Collect(), logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        yield said
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate

@@ -176,6 +176,39 @@ def test_units_mm_on_a_metre_mesh_is_refused(tmp_path):
         load_object(tmp_path / "box.stl", units="mm")
 
 
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("v 0 0 0\nv 0.05 0 0\nv 0 0.05 0\nf 1 2 3\n", "the mesh is flat"),
+        ("v 0 0 0\nv .1 0 0\nv .1 .1 0\nv 0 .1 0\nf 1 2 3\nf 1 3 4\n", "the mesh is flat"),
+        (
+            "v 0 0 0\nv .05 0 0\nv 0 .05 0\nv nan 0 .05\nf 1 2 3\nf 1 2 4\nf 2 3 4\nf 1 3 4\n",
+            "vertex 4 has NaN or infinite coordinates",
+        ),
+    ],
+    ids=["triangle", "square", "nan-vertex"],
+)
+def test_a_mesh_without_a_solid_is_refused(tmp_path, text, message):
+    """A flat mesh hung the simulator's convex decomposition; trimesh dropped a NaN vertex
+    and its faces without a word."""
+    (tmp_path / "m.obj").write_text(text)
+    with pytest.raises(InputError, match=message):
+        load_object(tmp_path / "m.obj")
+
+
+def test_a_urdf_whose_mesh_is_missing_says_which_in_one_line(run, tmp_path):
+    (tmp_path / "r.urdf").write_text(
+        '<robot name="r"><link name="base"><visual><geometry><mesh filename="nosuch.obj"/>'
+        "</geometry></visual></link></robot>"
+    )
+    code, _, err = run("trial", "--mesh", tmp_path / "r.urdf", "--out", tmp_path / "o")
+    assert code == EXIT_BAD_INPUT
+    assert one_error_line(err) == (
+        f"symfuse: error: {tmp_path / 'r.urdf'}: the URDF has no visual mesh "
+        "(Can't find nosuch.obj)"
+    )
+
+
 def test_units_do_not_apply_to_a_catalogue_object(run, tmp_path):
     code, _, err = run("trial", "--object", "cd_drive", "--units", "mm", "--out", tmp_path / "o")
     assert code == EXIT_BAD_INPUT

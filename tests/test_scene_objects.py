@@ -9,6 +9,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import InputError
+from pipeline.metrics import point_to_mesh_distances
 from pipeline.sim import collision
 from pipeline.sim import scene as scene_module
 from pipeline.sim.scene import REST_SPEED_M_S, REST_SPIN_RAD_S, Scene
@@ -252,3 +253,24 @@ def test_convex_parts_round_trip_through_obj_and_load_as_one_child_each(tmp_path
         assert len(children) == 3
     finally:
         pybullet.disconnect(client)
+
+
+def test_a_mesh_over_the_simulators_limits_is_simplified_for_it_alone(monkeypatch):
+    """Over PyBullet's array limits createCollisionShape/createVisualShape fail; the mesh is
+    decimated for them (here with the limits lowered, the path a 300k-face scan takes)."""
+    sphere = standing(trimesh.creation.icosphere(subdivisions=4, radius=0.04))  # 5120 faces
+    with Scene() as scene:
+        body = scene.add_object(sphere, mass_kg=0.1, friction=0.5)
+        whole = pybullet.getAABB(body, physicsClientId=scene.client)
+    monkeypatch.setattr(scene_module, "MAX_CONVEX_VERTICES", 1000)
+    monkeypatch.setattr(scene_module, "MAX_VISUAL_FACES", 2000)
+    simple = scene_module.within_faces(sphere, 2000)
+    assert len(simple.faces) <= 2000 and scene_module.within_faces(simple, 2000) is simple
+    off = point_to_mesh_distances(simple.vertices, sphere.vertices, sphere.faces)
+    assert off.max() < 5e-4  # the decimated surface stays on the sphere
+    with Scene() as scene:
+        body = scene.add_object(sphere, mass_kg=0.1, friction=0.5)
+        shape = pybullet.getVisualShapeData(body, physicsClientId=scene.client)
+        assert len(shape) == 1
+        aabb = pybullet.getAABB(body, physicsClientId=scene.client)
+        assert np.array(aabb) == pytest.approx(np.array(whole), abs=5e-4)

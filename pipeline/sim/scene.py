@@ -51,6 +51,12 @@ ROLLING_FRICTION_M = 1e-4
 SETTLE_STEPS = 24
 MAX_SETTLE_STEPS = 480
 #: Speeds below which an object counts as still (m/s, rad/s).
+#: PyBullet's limits on a mesh handed over as arrays: the vertices of a convex collision
+#: shape, and the triangles of a visual shape (524,288 indices). A mesh over them is
+#: simplified for the simulator (:func:`within_faces`); the ground truth keeps every face.
+MAX_CONVEX_VERTICES = 131_072
+MAX_VISUAL_FACES = 174_762
+
 REST_SPEED_M_S = 1e-3
 REST_SPIN_RAD_S = 1e-2
 
@@ -145,9 +151,13 @@ class Scene:
 
     def _collision_shape(self, mesh: trimesh.Trimesh) -> int:
         if mesh.is_convex:
+            vertices = mesh.vertices
+            if len(vertices) > MAX_CONVEX_VERTICES:
+                # A closed mesh has about half as many vertices as triangles.
+                vertices = within_faces(mesh.convex_hull, MAX_CONVEX_VERTICES).vertices
             return pybullet.createCollisionShape(
                 pybullet.GEOM_MESH,
-                vertices=np.asarray(mesh.vertices).tolist(),
+                vertices=np.asarray(vertices).tolist(),
                 physicsClientId=self.client,
             )
         parts = convex_decomposition(mesh, self.vhacd_resolution)
@@ -178,10 +188,11 @@ class Scene:
         if len(mesh.faces) == 0:
             raise InputError("object mesh has no faces")
         collision = self._collision_shape(mesh)
+        seen = within_faces(mesh, MAX_VISUAL_FACES)
         visual = pybullet.createVisualShape(
             pybullet.GEOM_MESH,
-            vertices=np.asarray(mesh.vertices).tolist(),
-            indices=np.asarray(mesh.faces).reshape(-1).tolist(),
+            vertices=np.asarray(seen.vertices).tolist(),
+            indices=np.asarray(seen.faces).reshape(-1).tolist(),
             rgbaColor=rgba,
             physicsClientId=self.client,
         )
@@ -297,3 +308,20 @@ class Scene:
         """Advance the physics by ``steps`` time steps."""
         for _ in range(steps):
             pybullet.stepSimulation(physicsClientId=self.client)
+
+
+def within_faces(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
+    """``mesh`` itself when it has at most ``max_faces`` triangles, else its quadric
+    decimation to that many (open3d): on a scan or a finely tessellated solid that moves
+    the surface by far less than the depth sensor's noise."""
+    if len(mesh.faces) <= max_faces:
+        return mesh
+    from pipeline.open3d_loader import open3d
+
+    o3d = open3d()
+    dense = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(np.asarray(mesh.vertices, dtype=np.float64)),
+        o3d.utility.Vector3iVector(np.asarray(mesh.faces, dtype=np.int32)),
+    )
+    simple = dense.simplify_quadric_decimation(target_number_of_triangles=max_faces)
+    return trimesh.Trimesh(np.asarray(simple.vertices), np.asarray(simple.triangles))
