@@ -250,7 +250,8 @@ FLAT_RATIO = 1e-9
 
 def _load_mesh_file(path: Path, *, recentre: bool, units: str = "m") -> CatalogueObject:
     if not path.is_file():
-        raise InputError(f"{path}: no such mesh file")
+        what = "a folder, not a mesh file" if path.is_dir() else "no such mesh file"
+        raise InputError(f"{path}: {what}")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputError(f"{path}: unsupported mesh format (use {', '.join(MESH_SUFFIXES)})")
     try:

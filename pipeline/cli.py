@@ -103,7 +103,27 @@ def _load(
     registry = registry or load_registry()
     config = load_config(registry, args.config, [*args.overrides, *extra_overrides])
     check_overrides(args.verb, args.overrides, extra_overrides, reads)
+    if args.config and reads is not None:
+        note_unread_sections(args.verb, args.config, registry, reads)
     return registry, config
+
+
+def note_unread_sections(verb: str, files: Sequence[Path], registry, reads: Sequence[str]) -> None:
+    """Say which sections of the ``--config`` files ``verb`` does not read, where they
+    differ from the defaults. A note, not an error (a ``--set`` there is one): a config
+    written by another command, a trial's ``config.toml`` say, is a whole resolved config
+    and is meant to be reusable."""
+    from .config import changed_settings, load_config
+
+    changed = changed_settings(
+        load_config(registry, files).to_dict(), load_config(registry).to_dict()
+    )
+    unread = sorted(set(changed) - set(reads))
+    if unread:
+        print(
+            f"note: symfuse {verb} does not read [{'], ['.join(unread)}], which "
+            f"{', '.join(str(f) for f in files)} changes: those settings have no effect"
+        )
 
 
 def check_overrides(

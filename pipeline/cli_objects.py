@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         from .outdir import staged_output
 
         with staged_output(
-            args.export, overwrite=args.overwrite, replaceable=holds_export
+            args.export, overwrite=args.overwrite, replaceable=holds_export, option="--export"
         ) as staging:
             written = export_meshes(staging, tuple(args.format or EXPORT_FORMATS))
         for path in written:

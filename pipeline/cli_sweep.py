@@ -12,17 +12,27 @@ from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError
 
 
 def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
-    """``--scans DIR`` for an experiment that reads scans.
+    """``--scans DIR`` for an experiment that reads scans, each scan read once here: a bad
+    one stops the sweep before its first trial rather than failing in each of its own.
 
     Raises:
-        ConfigError: the experiment reads none, or DIR holds no ``*/textured.obj``.
+        ConfigError: the experiment reads none, DIR is no folder or holds no
+            ``*/textured.obj``.
+        InputError: a scan cannot be read as an object (named).
     """
+    from .catalogue import load_object
+
     if args.scans is None:
         return None
     if not experiment.reads_scans:
         raise ConfigError(f"--scans: experiment '{args.experiment}' grasps no scans (explore does)")
-    if not any(Path(args.scans).glob("*/textured.obj")):
+    if not Path(args.scans).is_dir():
+        raise ConfigError(f"--scans {args.scans}: no such folder")
+    scans = sorted(Path(args.scans).glob("*/textured.obj"))
+    if not scans:
         raise ConfigError(f"--scans {args.scans}: no */textured.obj in that folder")
+    for scan in scans:
+        load_object(scan)
     return Path(args.scans).resolve()
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from .cli import _add_config_options, _add_output_options, _add_units_option, _load, counting_number
 from .cli_summary import CONSISTENCY_HEADER, consistency_cells, selection_line
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
-from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, estimate_failed
+from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError, estimate_failed
 from .outdir import fresh_folder, staged_output
 from .tables import format_table
 
@@ -86,6 +86,26 @@ def trial_overrides(args: argparse.Namespace) -> list[str]:
     if args.until_std is not None:
         overrides.append(f"trial.until_std_mm={args.until_std}")
     return overrides
+
+
+def check_several_grasps_options(settings, config, registry) -> None:
+    """Refuse the next-grasp strategy or the stop rule set for a trial of one grasp: they
+    choose and stop later grasps, so neither would act.
+
+    Raises:
+        ConfigError: naming the option (and its config key) and ``--grasps``.
+    """
+    from .config import changed_settings, load_config
+
+    if settings.grasps > 1:
+        return
+    changed = changed_settings(config.to_dict(), load_config(registry).to_dict()).get("trial", {})
+    for key, option in (("next_grasp", "--next-grasp"), ("until_std_mm", "--until-std")):
+        if key in changed:
+            raise ConfigError(
+                f"{option} (trial.{key}) applies to a trial of several grasps; give --grasps N "
+                "with N > 1"
+            )
 
 
 def trial_summary(record) -> str:
@@ -208,6 +228,7 @@ def run(args: argparse.Namespace) -> int:
     registry, config = _load(args, overrides, registry=registry)
     check_planner_is_read(config, registry)
     settings = config.trial
+    check_several_grasps_options(settings, config, registry)
     out = args.out or fresh_folder(
         Path("runs") / f"trial-{Path(settings.object).stem}-seed{settings.seed}"
     )

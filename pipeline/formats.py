@@ -116,9 +116,16 @@ def read_npy(path: Path) -> np.ndarray:
         InputError: the file is empty, truncated, not ``.npy`` or holds Python objects.
     """
     try:
+        with open(path, "rb") as stream:
+            if stream.read(len(NPY_MAGIC)) != NPY_MAGIC:
+                raise InputError(f"{path}: not a .npy file (it does not start as one)")
         return np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError, UnicodeError) as exc:
         raise InputError(f"{path}: cannot read as .npy: {_first_line(exc)}") from None
+
+
+#: The first bytes of every ``.npy`` file (NumPy's format magic).
+NPY_MAGIC = b"\x93NUMPY"
 
 
 def check_keys(document: dict, known: Sequence[str], where: str, path: Path) -> None:

@@ -73,10 +73,11 @@ def check_target(
     overwrite: bool,
     inputs: Sequence[Path] = (),
     replaceable: Callable[[Path], bool] = holds_earlier_run,
+    option: str = "--out",
 ) -> None:
-    """Refuse ``target`` unless it is absent, an empty folder, or ``overwrite`` is given and
-    it is ``replaceable`` (by default: it holds an earlier run) and holds none of the run's
-    ``inputs`` (replacing it would delete them).
+    """Refuse ``target`` (given as ``option``) unless it is absent, an empty folder, or
+    ``overwrite`` is given and it is ``replaceable`` (by default: it holds an earlier run)
+    and holds none of the run's ``inputs`` (replacing it would delete them).
 
     Raises:
         ConfigError: ``target`` is a file, a non-empty folder without ``overwrite``, a
@@ -84,26 +85,28 @@ def check_target(
     """
     target = Path(target)
     if target.is_symlink() or (target.exists() and not target.is_dir()):
-        raise ConfigError(f"--out {target}: exists and is not a folder")
+        raise ConfigError(f"{option} {target}: exists and is not a folder")
     occupied = target.is_dir() and any(target.iterdir())
     if occupied and not overwrite:
         raise ConfigError(
-            f"--out {target}: the folder exists and is not empty; pass --overwrite to replace "
-            "it, or choose another --out"
+            f"{option} {target}: the folder exists and is not empty; pass --overwrite to "
+            f"replace it, or choose another {option}"
         )
     if target.is_dir():
         if Path.cwd().resolve().is_relative_to(target.resolve()):
-            raise ConfigError(f"--out {target}: holds the current folder; choose another --out")
+            raise ConfigError(
+                f"{option} {target}: holds the current folder; choose another {option}"
+            )
         inside = [path for path in inputs if Path(path).resolve().is_relative_to(target.resolve())]
         if inside:
             raise ConfigError(
-                f"--out {target}: holds the input {inside[0]}, which replacing it would "
-                "delete; choose another --out"
+                f"{option} {target}: holds the input {inside[0]}, which replacing it would "
+                f"delete; choose another {option}"
             )
     if occupied and not replaceable(target):
         raise ConfigError(
-            f"--out {target}: the folder holds no earlier symfuse run, and --overwrite "
-            "replaces only those; choose another --out"
+            f"{option} {target}: the folder holds no earlier symfuse run, and --overwrite "
+            f"replaces only those; choose another {option}"
         )
 
 
@@ -112,7 +115,7 @@ def has_result(folder: Path) -> bool:
     return (Path(folder) / RESULT_FILE).is_file()
 
 
-def create_folder(folder: Path, target: Path) -> Path:
+def create_folder(folder: Path, target: Path, option: str = "--out") -> Path:
     """Create ``folder`` with its parents (as needed for the output folder ``target``).
 
     Raises:
@@ -120,25 +123,25 @@ def create_folder(folder: Path, target: Path) -> Path:
     """
     for path in (folder, *folder.parents):
         if path.exists() and not path.is_dir():
-            raise ConfigError(f"--out {target}: {path} is not a folder")
+            raise ConfigError(f"{option} {target}: {path} is not a folder")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ConfigError(f"--out {target}: cannot create {folder}: {exc.strerror}") from None
+        raise ConfigError(f"{option} {target}: cannot create {folder}: {exc.strerror}") from None
     return folder
 
 
-def _staging_folder(target: Path) -> Path:
+def _staging_folder(target: Path, option: str) -> Path:
     """A new empty folder beside ``target`` (its parent created as needed).
 
     Raises:
         ConfigError: the parent cannot be created or written (read-only, not a folder).
     """
-    parent = create_folder(target.parent, target)
+    parent = create_folder(target.parent, target, option)
     try:
         staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-", dir=parent))
     except OSError as exc:
-        raise ConfigError(f"--out {target}: cannot write in {parent}: {exc.strerror}") from None
+        raise ConfigError(f"{option} {target}: cannot write in {parent}: {exc.strerror}") from None
     staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; a result folder is not
     return staging
 
@@ -150,14 +153,19 @@ def _umask() -> int:
 
 
 def _move_into_place(
-    staging: Path, target: Path, *, overwrite: bool, replaceable: Callable[[Path], bool]
+    staging: Path,
+    target: Path,
+    *,
+    overwrite: bool,
+    replaceable: Callable[[Path], bool],
+    option: str,
 ) -> None:
     """Rename ``staging`` to ``target``; an existing ``target`` (allowed by ``overwrite``,
     or empty) is set aside first and deleted only once the new folder is in place."""
     old = None
     if target.exists():
         # Anything new since the run started?
-        check_target(target, overwrite=overwrite, replaceable=replaceable)
+        check_target(target, overwrite=overwrite, replaceable=replaceable, option=option)
         old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
         os.replace(target, old / target.name)
     os.replace(staging, target)
@@ -172,6 +180,7 @@ def staged_output(
     overwrite: bool = False,
     inputs: Sequence[Path] = (),
     replaceable: Callable[[Path], bool] = holds_earlier_run,
+    option: str = "--out",
 ) -> Iterator[Path]:
     """Stage a run's files beside ``target`` and move them into place when the run ends.
 
@@ -185,14 +194,16 @@ def staged_output(
         ConfigError: ``target`` is refused, or its parent cannot be written.
     """
     target = Path(target)
-    check_target(target, overwrite=overwrite, inputs=inputs, replaceable=replaceable)
-    staging = _staging_folder(target)
+    check_target(target, overwrite=overwrite, inputs=inputs, replaceable=replaceable, option=option)
+    staging = _staging_folder(target, option)
     try:
         yield staging
     except BaseException:
         if has_result(staging):
-            _move_into_place(staging, target, overwrite=overwrite, replaceable=replaceable)
+            _move_into_place(
+                staging, target, overwrite=overwrite, replaceable=replaceable, option=option
+            )
         else:
             shutil.rmtree(staging, ignore_errors=True)
         raise
-    _move_into_place(staging, target, overwrite=overwrite, replaceable=replaceable)
+    _move_into_place(staging, target, overwrite=overwrite, replaceable=replaceable, option=option)

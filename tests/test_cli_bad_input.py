@@ -100,7 +100,7 @@ def test_a_camera_file_that_is_no_camera_is_refused(tmp_path, text, names):
 
 def test_an_empty_depth_npy_is_an_input_error(tmp_path):
     (tmp_path / "depth.npy").write_bytes(b"")
-    with pytest.raises(InputError, match=r"depth\.npy: cannot read as \.npy"):
+    with pytest.raises(InputError, match=r"depth\.npy: not a \.npy file"):
         read_capture(tmp_path / "depth.npy")
 
 
@@ -413,3 +413,55 @@ def test_a_point_too_far_for_any_unit_gets_no_unit_hint_and_no_warning(tmp_path,
         check_distance(np.array([[512.0, 0.0, 0.0]]), "c.json")
     with pytest.raises(InputError, match="512 m from the robot base: no tabletop object"):
         check_distance(np.array([[512.0, 0.0, 0.0]]), "c.json", hint=None)
+
+
+@pytest.mark.parametrize(
+    ("option", "key"), [(["--until-std", "1"], "until_std_mm"), (["--next-grasp", "random"],
+                                                                 "next_grasp")]
+)  # fmt: skip
+def test_an_option_of_later_grasps_in_a_one_grasp_trial_is_refused(run, tmp_path, option, key):
+    code, _, err = run("trial", *option, "--out", tmp_path / "o")
+    assert code == EXIT_BAD_INPUT
+    assert one_error_line(err) == (
+        f"symfuse: error: {option[0]} (trial.{key}) applies to a trial of several grasps; "
+        "give --grasps N with N > 1"
+    )
+    assert not (tmp_path / "o").exists()
+
+
+def test_config_file_sections_a_verb_does_not_read_are_named_in_a_note(run, tmp_path):
+    (tmp_path / "c.toml").write_text("[trial]\ngrasps = 2\n")
+    cloud = tmp_path / "cloud.npy"
+    centre = np.array([0.5, 0.0, 0.1])
+    np.save(cloud, np.random.default_rng(0).normal(0.0, 0.02, (200, 3)) + centre)
+    (tmp_path / "contacts.json").write_text(json.dumps({"frame": "robot", "units": "m",
+        "grasps": [{"taxels": [{"position": [0.5, 0.02, 0.1], "normal": [0, -1, 0],
+                                "pad": "left"}]}]}))  # fmt: skip
+    code, out, err = run("fuse", "--cloud", cloud, "--contacts", tmp_path / "contacts.json",
+                         "--plane=0,1,0", "--config", tmp_path / "c.toml",
+                         "--out", tmp_path / "o")  # fmt: skip
+    assert code in (0, 3), err
+    assert (
+        f"note: symfuse fuse does not read [trial], which {tmp_path / 'c.toml'} changes: "
+        "those settings have no effect"
+    ) in out
+
+
+def test_misnamed_paths_say_what_they_are(run, tmp_path):
+    (tmp_path / "dir.obj").mkdir()
+    code, _, err = run("trial", "--mesh", tmp_path / "dir.obj", "--out", tmp_path / "o")
+    assert one_error_line(err).endswith("dir.obj: a folder, not a mesh file")
+    (tmp_path / "afile").write_text("x")
+    code, _, err = run("view", tmp_path / "afile", "--no-open")
+    assert code == EXIT_BAD_INPUT
+    assert one_error_line(err).endswith("afile: a file, not a run's folder")
+    code, _, err = run("sweep", "explore", "--quick", "--scans", tmp_path / "none",
+                       "--out", tmp_path / "s")  # fmt: skip
+    assert one_error_line(err).endswith("none: no such folder")
+    (tmp_path / "scans" / "a").mkdir(parents=True)
+    (tmp_path / "scans" / "a" / "textured.obj").write_text("")
+    code, _, err = run("sweep", "explore", "--quick", "--scans", tmp_path / "scans",
+                       "--out", tmp_path / "s")  # fmt: skip
+    assert code == EXIT_BAD_INPUT
+    assert "textured.obj: " in one_error_line(err)
+    assert not (tmp_path / "s").exists()

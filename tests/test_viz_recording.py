@@ -160,7 +160,7 @@ def test_view_of_a_folder_without_a_run_is_an_error(tmp_path, capsys):
     [
         ("camera.json", '{"x": 1}', "'intrinsics' must be an object"),
         ("camera.json", '{"intrinsics": {"width": 640}}', "intrinsics.height must be a positive"),
-        ("depth.npy", b"junk", "cannot read as .npy"),
+        ("depth.npy", b"junk", r"not a \.npy file"),
         ("depth.npy", np.zeros((3, 3, 3)), r"expected an \(H, W\) float depth image"),
     ],
 )

@@ -109,7 +109,8 @@ def run_folders(run_dir: Path) -> list[tuple[Path, str]]:
     """
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
-        raise InputError(f"{run_dir}: no such folder")
+        what = "a file, not a run's folder" if run_dir.exists() else "no such folder"
+        raise InputError(f"{run_dir}: {what}")
     if (run_dir / "result.json").is_file():
         return [(run_dir, "world")]
     objects = sorted(p.parent for p in run_dir.glob("*/result.json"))
