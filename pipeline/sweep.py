@@ -120,6 +120,9 @@ def run_sweep(
     ]
     finished_before = len(tasks) - len(pending)
 
+    # Connected before the progress bar starts: a scheduler that cannot be reached is then
+    # the command's only line.
+    client = _dask_client(scheduler) if executor == "dask" and pending else None
     with (
         results_path.open("a", encoding="utf-8") as results,
         tqdm(
@@ -130,8 +133,8 @@ def run_sweep(
             disable=not progress,
         ) as bar,
         contextlib.closing(
-            _run_dask(pending, run_one, scheduler)  # type: ignore[arg-type]
-            if executor == "dask"
+            _run_dask(client, pending, run_one)
+            if client is not None
             else _run_local(pending, run_one, workers or os.cpu_count() or 1)
         ) as lines,
     ):
@@ -397,19 +400,28 @@ def _run_local(pending: Pending, run_one: RunOne, workers: int) -> Iterator[str]
         raise broken
 
 
-def _run_dask(pending: Pending, run_one: RunOne, scheduler: str) -> Iterator[str]:
-    if not pending:
-        return
+def _dask_client(scheduler: str) -> Any:
+    """A Dask client connected to ``scheduler``.
+
+    Raises:
+        ImportError: dask.distributed is not installed.
+        ConfigError: the address is malformed or the scheduler cannot be reached.
+    """
     try:
-        from dask.distributed import Client, as_completed
+        from dask.distributed import Client
     except ImportError as exc:
         raise ImportError(
             "the dask executor needs dask.distributed (pip install 'symfuse[dask]')"
         ) from exc
     try:
-        client = Client(scheduler)
-    except OSError as exc:
-        raise ConfigError(f"dask scheduler {scheduler}: cannot connect ({exc})") from exc
+        return Client(scheduler)
+    except (OSError, ValueError, TypeError) as exc:
+        raise ConfigError(f"--scheduler {scheduler}: cannot connect ({exc})") from exc
+
+
+def _run_dask(client: Any, pending: Pending, run_one: RunOne) -> Iterator[str]:
+    from dask.distributed import as_completed
+
     with client:
         keys, params, hashes = zip(*pending, strict=True)
         futures = client.map(functools.partial(run_task, run_one), keys, params, hashes, pure=False)

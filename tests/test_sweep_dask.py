@@ -46,7 +46,13 @@ def test_an_unreachable_scheduler_is_a_config_error_naming_it(tmp_path):
 
     with (
         dask.config.set({"distributed.comm.timeouts.connect": "1s"}),
-        pytest.raises(ConfigError, match=r"dask scheduler tcp://127\.0\.0\.1:9: cannot connect"),
+        pytest.raises(ConfigError, match=r"--scheduler tcp://127\.0\.0\.1:9: cannot connect"),
     ):
         run_sweep(make_tasks(2), sweep_toy.run_one, tmp_path / "r.jsonl", executor="dask",
                   scheduler="tcp://127.0.0.1:9", progress=False)  # fmt: skip
+
+
+def test_a_malformed_scheduler_address_is_a_config_error_naming_the_option(tmp_path):
+    with pytest.raises(ConfigError, match=r"--scheduler nonsense: cannot connect"):
+        run_sweep(make_tasks(2), sweep_toy.run_one, tmp_path / "r.jsonl", executor="dask",
+                  scheduler="nonsense", progress=False)  # fmt: skip
