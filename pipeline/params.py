@@ -203,6 +203,18 @@ def check_bounds(params: Any, section: str) -> None:
         _check_bound(field, getattr(params, field.name), f"{section}.{field.name}")
 
 
+def check_ordered(params: Any, section: str, low: str, high: str, why: str = "") -> None:
+    """Raise :class:`ConfigError` unless ``params.low < params.high``: two parameters that
+    only make sense in that order (a range's ends, a part inside another). ``section`` is
+    the implementation's config section; ``why`` (optional) ends the message."""
+    low_value, high_value = getattr(params, low), getattr(params, high)
+    if not low_value < high_value:
+        reason = f": {why}" if why else ""
+        raise ConfigError(
+            f"config key '{section}.{low}' ({low_value}) must be < {high} ({high_value}){reason}"
+        )
+
+
 def project(target_cls: type, params: Any) -> Any:
     """An instance of the dataclass ``target_cls`` built from the same-named fields of
     ``params``: how a plugin hands the kernel's own settings type the subset it needs."""

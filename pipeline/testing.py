@@ -35,7 +35,7 @@ import numpy as np
 from .config import load_config
 from .errors import ConfigError
 from .pad_layout import pad_grid
-from .params import param
+from .params import check_ordered, param
 from .registry import Origin, StageRegistry, load_registry
 from .stages import StageImplementation, World
 from .trial import run_trial
@@ -101,12 +101,14 @@ class AnalyticWorld(World):
     @dataclass(frozen=True)
     class Params:
         table_height_m: float = param(0.0, "z of the table top in frame R (m)")
-        max_aperture_m: float = param(0.065, "widest opening between the pads (m)", at_least=0.0)
-        palm_to_pad_centre_m: float = param(0.125, "palm origin to pad centre along z (m)")
-        finger_length_m: float = param(0.154, "palm origin to fingertips along z (m)")
+        max_aperture_m: float = param(0.065, "widest opening between the pads (m)", above=0.0)
+        palm_to_pad_centre_m: float = param(
+            0.125, "palm origin to pad centre along z (m)", above=0.0
+        )
+        finger_length_m: float = param(0.154, "palm origin to fingertips along z (m)", above=0.0)
         rows: int = param(14, "taxel rows per pad, along the finger", at_least=1)
         cols: int = param(6, "taxel columns per pad, across the finger", at_least=1)
-        pitch_m: float = param(0.0034, "taxel centre-to-centre distance (m)", at_least=0.0)
+        pitch_m: float = param(0.0034, "taxel centre-to-centre distance (m)", above=0.0)
         press_m: float = param(0.0005, "how far a touching pad presses in (m)", at_least=0.0)
         pad_stiffness_N_per_m: float = param(
             20_000.0, "pad force per metre pressed in (N/m)", at_least=0.0
@@ -114,6 +116,7 @@ class AnalyticWorld(World):
 
     def __init__(self, params: Params | None = None) -> None:
         super().__init__(params)
+        check_ordered(self.params, f"world.{self.name}", "palm_to_pad_centre_m", "finger_length_m")
         self._scene: Any = None
         self._object_mesh: Any = None
         self._pose: ObjectPose | None = None

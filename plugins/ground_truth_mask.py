@@ -34,11 +34,17 @@ class GroundTruthMask(Segmenter):
             "table plane: 'known' = observation.table_height_m, 'ransac' = fit the pixels "
             "outside the mask, 'auto' = known when the observation has it, else RANSAC",
         )
-        min_height_m: float = param(0.02, "drop points closer than this to the table (m)")
-        min_object_points: int = param(50, "fail when fewer object points than this remain")
-        ransac_inlier_m: float = param(0.005, "RANSAC: distance from the plane of an inlier (m)")
-        ransac_iterations: int = param(200, "RANSAC: random point triples tried")
-        ransac_seed: int = param(0, "RANSAC: seed of its random generator")
+        min_height_m: float = param(
+            0.02, "drop points closer than this to the table (m)", at_least=0.0
+        )
+        min_object_points: int = param(
+            50, "fail when fewer object points than this remain", at_least=1
+        )
+        ransac_inlier_m: float = param(
+            0.005, "RANSAC: distance from the plane of an inlier (m)", above=0.0
+        )
+        ransac_iterations: int = param(200, "RANSAC: random point triples tried", at_least=1)
+        ransac_seed: int = param(0, "RANSAC: seed of its random generator", at_least=0)
 
     def segment(self, observation: DepthObservation) -> PointCloud:
         p = self.params

@@ -31,10 +31,14 @@ class MirrorOnlyEstimator(Estimator):
 
     @dataclass(frozen=True)
     class Params:
-        prior_b_theta_rad: float = param(0.05, "reported std of the bias yaw (rad)")
-        prior_b_xyz_m: float = param(0.01, "reported std of each bias translation component (m)")
-        prior_m_r_m: float = param(0.0325, "reported std of the plane offset m_r (m)")
-        prior_m_theta_rad: float = param(0.17, "reported std of the plane normal angle (rad)")
+        prior_b_theta_rad: float = param(0.05, "reported std of the bias yaw (rad)", above=0.0)
+        prior_b_xyz_m: float = param(
+            0.01, "reported std of each bias translation component (m)", above=0.0
+        )
+        prior_m_r_m: float = param(0.0325, "reported std of the plane offset m_r (m)", above=0.0)
+        prior_m_theta_rad: float = param(
+            0.17, "reported std of the plane normal angle (rad)", above=0.0
+        )
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         started = time.perf_counter()

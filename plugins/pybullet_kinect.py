@@ -9,7 +9,7 @@ import numpy as np
 
 from pipeline import hookimpl
 from pipeline.params import param, project
-from pipeline.sim.camera import CameraParams, observe
+from pipeline.sim.camera import CameraParams, check_camera_params, check_depth_range, observe
 from pipeline.sim.depth_noise import KinectV1Noise, SimulatedDepth, simulate_kinect_v1
 from pipeline.stages import SensorSource, World
 from pipeline.types import CameraIntrinsics, DepthObservation
@@ -29,24 +29,36 @@ class PybulletKinect(SensorSource):
     @dataclass(frozen=True)
     class Params(CameraParams):
         baseline_m: float = param(0.075, "projector-camera baseline along image x (m)")
-        disparity_step_px: float = param(0.125, "disparity quantisation step (px; 1/8)")
-        min_range_m: float = param(0.5, "nearest depth the sensor returns (m)")
-        max_range_m: float = param(4.0, "farthest depth the sensor returns (m)")
+        disparity_step_px: float = param(0.125, "disparity quantisation step (px; 1/8)", above=0.0)
+        min_range_m: float = param(0.5, "nearest depth the sensor returns (m)", at_least=0.0)
+        max_range_m: float = param(4.0, "farthest depth the sensor returns (m)", above=0.0)
         axial_model: Literal["nguyen", "khoshelham"] = param(
             "nguyen",
             "axial noise: 'nguyen' sigma(z, angle) (Nguyen 2012) or 'khoshelham' z^2 law (2012)",
         )
         disparity_sigma_px: float = param(
-            0.0625, "disparity noise of the 'khoshelham' model (px; 0.5 of 1/8 px)"
+            0.0625, "disparity noise of the 'khoshelham' model (px; 0.5 of 1/8 px)", at_least=0.0
         )
         axial_noise: bool = param(True, "add axial (disparity) noise; off leaves quantisation")
         lateral_noise: bool = param(True, "jitter depth edges laterally (Nguyen 2012 sigma_L)")
         shadows: bool = param(True, "drop pixels in the projector's shadow")
         max_incidence_deg: float = param(
-            80.0, "surfaces seen more obliquely than this (ray vs normal) return nothing (deg)"
+            80.0,
+            "surfaces seen more obliquely than this (ray vs normal) return nothing (deg)",
+            above=0.0,
+            at_most=90.0,
         )
-        edge_jump_px: float = param(1.0, "disparity jump that counts as a depth edge (px)")
-        edge_margin_px: int = param(1, "pixels dropped on each side of a depth edge (px)")
+        edge_jump_px: float = param(
+            1.0, "disparity jump that counts as a depth edge (px)", above=0.0
+        )
+        edge_margin_px: int = param(
+            1, "pixels dropped on each side of a depth edge (px)", at_least=0
+        )
+
+    def __init__(self, params: Params | None = None) -> None:
+        super().__init__(params)
+        check_camera_params(self.params, f"sensor.{self.name}")
+        check_depth_range(self.params, f"sensor.{self.name}")
 
     def _corrupt(
         self, depth_m: np.ndarray, intrinsics: CameraIntrinsics, rng: np.random.Generator

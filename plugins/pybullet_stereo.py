@@ -8,7 +8,7 @@ import numpy as np
 
 from pipeline import hookimpl
 from pipeline.params import param, project
-from pipeline.sim.camera import CameraParams, observe
+from pipeline.sim.camera import CameraParams, check_camera_params, check_depth_range, observe
 from pipeline.sim.depth_noise import SimulatedDepth, StereoNoise, simulate_stereo
 from pipeline.stages import SensorSource, World
 from pipeline.types import CameraIntrinsics, DepthObservation
@@ -28,19 +28,30 @@ class PybulletStereo(SensorSource):
 
     @dataclass(frozen=True)
     class Params(CameraParams):
-        fx: float = param(1600.0, "focal length along x (px)")
-        fy: float = param(1600.0, "focal length along y (px)")
+        fx: float = param(1600.0, "focal length along x (px)", above=0.0)
+        fy: float = param(1600.0, "focal length along y (px)", above=0.0)
         cx: float = param(319.5, "principal point column, from the top-left pixel centre (px)")
         cy: float = param(239.5, "principal point row, from the top-left pixel centre (px)")
         baseline_m: float = param(0.09, "distance to the right camera along image x (m)")
-        disparity_sigma_px: float = param(0.2, "disparity noise of the matcher (px)")
-        disparity_step_px: float = param(0.0625, "sub-pixel disparity step (px; 1/16)")
-        min_range_m: float = param(0.3, "nearest depth the disparity search covers (m)")
-        max_range_m: float = param(3.0, "farthest depth the disparity search covers (m)")
+        disparity_sigma_px: float = param(0.2, "disparity noise of the matcher (px)", at_least=0.0)
+        disparity_step_px: float = param(0.0625, "sub-pixel disparity step (px; 1/16)", above=0.0)
+        min_range_m: float = param(
+            0.3, "nearest depth the disparity search covers (m)", at_least=0.0
+        )
+        max_range_m: float = param(3.0, "farthest depth the disparity search covers (m)", above=0.0)
         axial_noise: bool = param(True, "add disparity noise; off leaves quantisation")
         occlusions: bool = param(True, "drop pixels the right camera cannot see")
-        edge_jump_px: float = param(1.0, "disparity jump that counts as a depth edge (px)")
-        edge_margin_px: int = param(2, "pixels dropped on each side of a depth edge (px)")
+        edge_jump_px: float = param(
+            1.0, "disparity jump that counts as a depth edge (px)", above=0.0
+        )
+        edge_margin_px: int = param(
+            2, "pixels dropped on each side of a depth edge (px)", at_least=0
+        )
+
+    def __init__(self, params: Params | None = None) -> None:
+        super().__init__(params)
+        check_camera_params(self.params, f"sensor.{self.name}")
+        check_depth_range(self.params, f"sensor.{self.name}")
 
     def _corrupt(
         self, depth_m: np.ndarray, intrinsics: CameraIntrinsics, rng: np.random.Generator

@@ -41,7 +41,9 @@ class PybulletTaxels(TactileModel):
             0.0015, "rays start this far behind the pad surface, inside the pad (m)", at_least=0.0
         )
         ray_length_m: float = param(
-            0.005, "rays reach this far past the pad surface; >= contact_threshold_m (m)"
+            0.005,
+            "rays reach this far past the pad surface; >= contact_threshold_m (m)",
+            at_least=0.0,
         )
         position_noise_std_m: float = param(
             0.0,
@@ -49,7 +51,10 @@ class PybulletTaxels(TactileModel):
             at_least=0.0,
         )
         dead_taxel_probability: float = param(
-            0.0, "probability that a taxel in contact reports nothing (per taxel, per read)"
+            0.0,
+            "probability that a taxel in contact reports nothing (per taxel, per read)",
+            at_least=0.0,
+            at_most=1.0,
         )
 
     def __init__(self, params: Params | None = None) -> None:
@@ -61,8 +66,6 @@ class PybulletTaxels(TactileModel):
                 f"config key '{key}.ray_length_m' ({p.ray_length_m}) must be >= "
                 f"contact_threshold_m ({p.contact_threshold_m})"
             )
-        if not 0.0 <= p.dead_taxel_probability <= 1.0:
-            raise ConfigError(f"config key '{key}.dead_taxel_probability' must be within [0, 1]")
 
     def read(self, world: World, outcome: GraspOutcome) -> Contacts:
         """Taxels touching the object now, in frame R (``outcome`` is not needed: the

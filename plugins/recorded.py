@@ -45,7 +45,7 @@ class Recorded(SensorSource):
         )
         plane_seed: int = param(0, "support plane: RANSAC seed")
         min_plane_fraction: float = param(
-            0.1, "support plane: least fraction of the valid pixels on it", above=0.0
+            0.1, "support plane: least fraction of the valid pixels on it", above=0.0, at_most=1.0
         )
 
     def read(self) -> Capture:

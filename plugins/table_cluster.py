@@ -9,7 +9,7 @@ import numpy as np
 
 from pipeline import hookimpl
 from pipeline.errors import StageFailure
-from pipeline.params import param
+from pipeline.params import check_ordered, param
 from pipeline.perception.depth import backproject_depth
 from pipeline.perception.segmentation import segment_points
 from pipeline.perception.table import resolve_table
@@ -36,15 +36,25 @@ class TableCluster(Segmenter):
             "table plane: 'known' = observation.table_height_m, 'ransac' = fit it, "
             "'auto' = known when the observation has it, else RANSAC",
         )
-        min_height_m: float = param(0.02, "drop points closer than this to the table (m)")
-        max_height_m: float = param(1.0, "drop points higher than this above the table (m)")
+        min_height_m: float = param(
+            0.02, "drop points closer than this to the table (m)", at_least=0.0
+        )
+        max_height_m: float = param(
+            1.0, "drop points higher than this above the table (m)", above=0.0
+        )
         method: Literal["dbscan", "euclidean"] = param(
             "dbscan", "clustering: DBSCAN, or Euclidean (single linkage, min_points ignored)"
         )
-        eps_m: float = param(0.01, "neighbourhood radius of the clustering (m)")
-        min_points: int = param(10, "DBSCAN: neighbours (self included) of a core point")
-        voxel_m: float = param(0.0, "voxel side for subsampling before clustering (m; 0 = off)")
-        min_object_points: int = param(50, "fail when the largest cluster is smaller than this")
+        eps_m: float = param(0.01, "neighbourhood radius of the clustering (m)", above=0.0)
+        min_points: int = param(
+            10, "DBSCAN: neighbours (self included) of a core point", at_least=1
+        )
+        voxel_m: float = param(
+            0.0, "voxel side for subsampling before clustering (m; 0 = off)", at_least=0.0
+        )
+        min_object_points: int = param(
+            50, "fail when the largest cluster is smaller than this", at_least=1
+        )
         min_object_area_m2: float = param(
             0.002,
             "segment_objects: drop clusters that show the camera less surface than this (m^2; "
@@ -52,9 +62,15 @@ class TableCluster(Segmenter):
             "cable ends, fragments of objects cut by the image edge",
             at_least=0.0,
         )
-        ransac_inlier_m: float = param(0.005, "RANSAC: distance from the plane of an inlier (m)")
-        ransac_iterations: int = param(200, "RANSAC: random point triples tried")
-        ransac_seed: int = param(0, "RANSAC: seed of its random generator")
+        ransac_inlier_m: float = param(
+            0.005, "RANSAC: distance from the plane of an inlier (m)", above=0.0
+        )
+        ransac_iterations: int = param(200, "RANSAC: random point triples tried", at_least=1)
+        ransac_seed: int = param(0, "RANSAC: seed of its random generator", at_least=0)
+
+    def __init__(self, params: Params | None = None) -> None:
+        super().__init__(params)
+        check_ordered(self.params, f"segmenter.{self.name}", "min_height_m", "max_height_m")
 
     def segment(self, observation: DepthObservation) -> PointCloud:
         return self.segment_objects(observation)[0]

@@ -8,7 +8,7 @@ import numpy as np
 
 from pipeline import hookimpl
 from pipeline.errors import ConfigError
-from pipeline.params import param
+from pipeline.params import check_ordered, param
 from pipeline.perception.candidate import Candidate, CandidateParams, candidate_frame
 from pipeline.perception.grasp_candidates import (
     CandidatePlanner,
@@ -67,37 +67,67 @@ class TopParallel(CandidatePlanner):
         tactile_angle_deg: float = param(
             0.0, "rotation of the closing direction from the plane normal about z (deg)"
         )
-        jaw_clearance_m: float = param(0.01, "front pad distance before the visible surface (m)")
+        jaw_clearance_m: float = param(
+            0.01, "front pad distance before the visible surface (m)", at_least=0.0
+        )
         pad_above_cloud: bool = param(
             True, "keep the pads' lower edge above the cloud's bottom (short objects)"
         )
-        palm_to_pad_centre_m: float = param(0.125, "palm origin to pad centre along z (m)")
-        pad_centre_to_fingertip_m: float = param(0.029, "pad centre to fingertip along z (m)")
+        palm_to_pad_centre_m: float = param(
+            0.125, "palm origin to pad centre along z (m)", above=0.0
+        )
+        pad_centre_to_fingertip_m: float = param(
+            0.029, "pad centre to fingertip along z (m)", at_least=0.0
+        )
         finger_recess_m: float = param(
-            0.003, "candidates: the finger's face behind the pad's surface (m)"
+            0.003, "candidates: the finger's face behind the pad's surface (m)", at_least=0.0
         )
         contact_band_m: float = param(
-            0.008, "depth of the first-touched surface layer, about 4 sigma of depth noise (m)"
+            0.008,
+            "depth of the first-touched surface layer, about 4 sigma of depth noise (m)",
+            at_least=0.0,
         )
         flat_radius_m: float = param(
             0.15,
             "a visible face curved less than this radius counts as flat: the pad touches it "
             "on the closing line, a more curved one at its extreme (m)",
+            above=0.0,
         )
         touch_depth_m: float = param(
-            0.001, "visible surface within this depth of the pad's first touch is touched (m)"
+            0.001,
+            "visible surface within this depth of the pad's first touch is touched (m)",
+            at_least=0.0,
         )
-        pregrasp_height_m: float = param(0.1, "start of the descent above the grasp pose (m)")
+        pregrasp_height_m: float = param(
+            0.1, "start of the descent above the grasp pose (m)", at_least=0.0
+        )
         back_margin_m: float = param(
             0.01,
             "candidates: extra room for the back jaw behind the mirrored back, a guess (m)",
+            at_least=0.0,
         )
-        housing_depth_m: float = param(0.078, "palm origin to the housing's bottom (m)")
-        housing_length_m: float = param(0.112, "housing length along the closing direction (m)")
-        housing_width_m: float = param(0.08, "housing width across the closing direction (m)")
-        jaw_width_m: float = param(0.04, "width of the jaws across the closing direction (m)")
+        housing_depth_m: float = param(0.078, "palm origin to the housing's bottom (m)", above=0.0)
+        housing_length_m: float = param(
+            0.112, "housing length along the closing direction (m)", above=0.0
+        )
+        housing_width_m: float = param(
+            0.08, "housing width across the closing direction (m)", above=0.0
+        )
+        jaw_width_m: float = param(
+            0.04, "width of the jaws across the closing direction (m)", above=0.0
+        )
 
     grippers = ("pg70",)
+
+    def __init__(self, params: Params | None = None) -> None:
+        super().__init__(params)
+        check_ordered(
+            self.params,
+            f"planner.{self.name}",
+            "housing_depth_m",
+            "palm_to_pad_centre_m",
+            "the pads hang below the housing",
+        )
 
     def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params

@@ -79,34 +79,47 @@ class TopThreeFinger(CandidatePlanner):
         tactile_angle_deg: float = param(
             0.0, "rotation of the palm x axis from the plane normal about z (deg)"
         )
-        spread_deg: float = param(60.0, "SDH base rotation; 60 puts the fingers 120 deg apart")
+        spread_deg: float = param(
+            60.0,
+            "SDH base rotation; 60 puts the fingers 120 deg apart",
+            at_least=0.0,
+            at_most=90.0,
+        )
         flat_spread: bool = param(
             True, "use spread 0 (fingers facing the thumb) when the completed back is flat"
         )
         flat_radius_m: float = param(
-            0.15, "a back face curved less than this radius counts as flat (m)"
+            0.15, "a back face curved less than this radius counts as flat (m)", above=0.0
         )
         top_margin_m: float = param(
             0.015,
             "pad top edge below the object's top (m); 5 mm put the pads on lids and domed tops",
+            at_least=0.0,
         )
         keep_above_cloud: bool = param(
             True,
             "raise the pads so their lower edge stays above the cloud's bottom: taxels below "
             "the segmented cloud touch surface no cloud point represents",
         )
-        palm_to_pad_centre_m: float = param(0.21, "palm origin to distal pad centre along z (m)")
+        palm_to_pad_centre_m: float = param(
+            0.21, "palm origin to distal pad centre along z (m)", above=0.0
+        )
         pad_centre_to_fingertip_m: float = param(
-            0.027, "distal pad centre to fingertip along z (m)"
+            0.027, "distal pad centre to fingertip along z (m)", at_least=0.0
         )
         contact_band_m: float = param(
-            0.008, "depth of the first-touched surface layer, about 4 sigma of depth noise (m)"
+            0.008,
+            "depth of the first-touched surface layer, about 4 sigma of depth noise (m)",
+            at_least=0.0,
         )
-        pregrasp_height_m: float = param(0.1, "start of the descent above the grasp pose (m)")
+        pregrasp_height_m: float = param(
+            0.1, "start of the descent above the grasp pose (m)", at_least=0.0
+        )
         descent_clearance_m: float = param(
             0.01,
             "candidates: least gap between the descending hand and the completed cloud, "
             "whose back is only the mirror plane's guess (m)",
+            at_least=0.0,
         )
 
     grippers = ("sdh",)

@@ -8,7 +8,7 @@ from typing import Literal
 import numpy as np
 
 from pipeline import hookimpl
-from pipeline.errors import StageFailure
+from pipeline.errors import ConfigError, StageFailure
 from pipeline.params import param
 from pipeline.perception.principal_axes import table_axes
 from pipeline.perception.visibility import plane_grid, visibility_violations
@@ -54,23 +54,44 @@ class VcInitialiser(SymmetryInitialiser):
             "seed axis contained in the plane: 'major' = the PCA major axis (the paper), "
             "'view' = the PCA axis most perpendicular to the camera's horizontal view",
         )
-        max_angle_deg: float = param(45.0, "largest plane rotation from the seed (deg)")
+        max_angle_deg: float = param(
+            45.0, "largest plane rotation from the seed (deg)", at_least=0.0, at_most=90.0
+        )
         round_axis_ratio: float = param(
             0.0,
             "footprint PCA axis ratio below which all orientations (+-90 deg) are searched "
             "(0 = never); round objects' single views measure 1.0-1.4, boxes and cars "
             "2.2-2.8. 1.5 fixes the mug's plane angle (60-73 -> <3 deg on 4 of 8 kth views) "
             "but not its deviation, and costs the salt cylinder 2.4 mm of plane offset",
+            at_least=0.0,
         )
-        orientations: int = param(19, "number of orientations O (evenly spaced, inclusive)")
-        max_offset_m: float = param(0.06, "largest plane shift from the centroid (m)")
-        offsets: int = param(25, "number of offsets D (evenly spaced, inclusive)")
+        orientations: int = param(
+            19, "number of orientations O (evenly spaced, inclusive)", at_least=1
+        )
+        max_offset_m: float = param(0.06, "largest plane shift from the centroid (m)", at_least=0.0)
+        offsets: int = param(25, "number of offsets D (evenly spaced, inclusive)", at_least=1)
         tolerance_m: float = param(
-            0.01, "how far in front of the measured depth a mirrored point may lie (m)"
+            0.01,
+            "how far in front of the measured depth a mirrored point may lie (m)",
+            at_least=0.0,
         )
         max_violation_fraction: float = param(
-            0.2, "reject when the best hypothesis has a larger fraction of violating points"
+            0.2,
+            "reject when the best hypothesis has a larger fraction of violating points",
+            at_least=0.0,
+            at_most=1.0,
         )
+
+    def __init__(self, params: Params | None = None) -> None:
+        super().__init__(params)
+        p = self.params
+        if p.max_angle_deg == 0.0 and p.orientations > 1:
+            # The orientations would all be the seed's, and on a round footprint the angular
+            # step that extends them to +-90 deg would be 0.
+            raise ConfigError(
+                f"config key 'initialiser.{self.name}.max_angle_deg' ({p.max_angle_deg}) must be "
+                f"> 0 when orientations ({p.orientations}) > 1"
+            )
 
     def propose(self, cloud: PointCloud, observation: DepthObservation | None) -> SymmetryInit:
         p = self.params

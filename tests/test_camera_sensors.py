@@ -137,8 +137,8 @@ def test_stereo_sees_the_box_with_z_squared_noise(world):
 
 
 def test_camera_params_are_validated():
-    with pytest.raises(ConfigError, match="target_m"):
-        build(PybulletStereo.Params, {"target_m": [0.0, 0.1]}, "sensor")
+    with pytest.raises(ConfigError, match=r"sensor\.pybullet-stereo\.target_m': expected 3"):
+        PybulletStereo(build(PybulletStereo.Params, {"target_m": [0.0, 0.1]}, "sensor"))
     with pytest.raises(ConfigError, match="distance_m"):
         build(PybulletKinect.Params, {"distance_m": -1.0}, "sensor")
 

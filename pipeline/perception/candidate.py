@@ -158,18 +158,22 @@ class CandidateParams:
         0.01, "candidates: pad heights tried this far apart (m)", above=0.0
     )
     descent_clearance_m: float = param(
-        0.004, "candidates: least gap between the descending hand and the cloud (m)"
+        0.004, "candidates: least gap between the descending hand and the cloud (m)", at_least=0.0
     )
     touch_tolerance_m: float = param(
-        0.003, "candidates: surface within this of a pad at its first touch counts (m)"
+        0.003,
+        "candidates: surface within this of a pad at its first touch counts (m)",
+        at_least=0.0,
     )
     tipping_weight: float = param(
-        0.2, "candidates: weight of the contact height / half-footprint in the score"
+        0.2, "candidates: weight of the contact height / half-footprint in the score", at_least=0.0
     )
-    top_margin_m: float = param(0.005, "pad top edge below the object's top (m)")
-    table_clearance_m: float = param(0.01, "lowest fingertip height above the table (m)")
+    top_margin_m: float = param(0.005, "pad top edge below the object's top (m)", at_least=0.0)
+    table_clearance_m: float = param(
+        0.01, "lowest fingertip height above the table (m)", at_least=0.0
+    )
     cloud_base_above_table_m: float = param(
-        0.02, "the table lies this far below the cloud's lowest point (m)"
+        0.02, "the table lies this far below the cloud's lowest point (m)", at_least=0.0
     )
 
 

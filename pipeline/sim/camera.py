@@ -11,14 +11,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import pybullet
 
 from pipeline.errors import ConfigError
 from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
-from pipeline.params import param
+from pipeline.params import check_ordered, param
 from pipeline.poses import look_at, rotation_z
 from pipeline.sim.depth_noise import SimulatedDepth
 from pipeline.types import CameraIntrinsics, DepthObservation
@@ -139,7 +139,7 @@ def calibration_error(
 class CameraParams:
     """Viewpoint, image and calibration-error parameters shared by the simulated sensors."""
 
-    distance_m: float = param(1.0, "distance from the camera to the look-at target (m)")
+    distance_m: float = param(1.0, "distance from the camera to the look-at target (m)", above=0.0)
     elevation_deg: float = param(45.0, "camera elevation above the table plane (deg)")
     azimuth_deg: float = param(180.0, "camera azimuth about +z from the robot's +x axis (deg)")
     target_m: tuple[float, ...] = param(
@@ -149,14 +149,16 @@ class CameraParams:
         "object",
         "'object': target_m is an offset from the object's base position; 'robot': absolute",
     )
-    width: int = param(KINECT.width, "image width (px)")
-    height: int = param(KINECT.height, "image height (px)")
-    fx: float = param(KINECT.fx, "focal length along x (px)")
-    fy: float = param(KINECT.fy, "focal length along y (px)")
+    width: int = param(KINECT.width, "image width (px)", at_least=1)
+    height: int = param(KINECT.height, "image height (px)", at_least=1)
+    fx: float = param(KINECT.fx, "focal length along x (px)", above=0.0)
+    fy: float = param(KINECT.fy, "focal length along y (px)", above=0.0)
     cx: float = param(KINECT.cx, "principal point column, from the top-left pixel centre (px)")
     cy: float = param(KINECT.cy, "principal point row, from the top-left pixel centre (px)")
-    near_m: float = param(0.05, "renderer near clipping plane (m)")
-    far_m: float = param(6.0, "renderer far clipping plane (m); nothing is seen beyond it")
+    near_m: float = param(0.05, "renderer near clipping plane (m)", above=0.0)
+    far_m: float = param(
+        6.0, "renderer far clipping plane (m); nothing is seen beyond it", above=0.0
+    )
     noise: bool = param(True, "apply the sensor's noise and missing-data model")
     calibration_yaw_deg: float = param(
         0.0, "calibration error: yaw of the believed camera pose about the target's vertical (deg)"
@@ -165,19 +167,46 @@ class CameraParams:
         (0.0, 0.0, 0.0), "calibration error: translation (x, y, z) of the believed pose in R (m)"
     )
 
-    def __post_init__(self) -> None:
-        for key in ("target_m", "calibration_translation_m"):
-            if len(getattr(self, key)) != 3:
-                raise ConfigError(f"sensor parameter '{key}' must have 3 values (x, y, z)")
-        if self.distance_m <= 0 or self.near_m <= 0 or self.far_m <= self.near_m:
-            raise ConfigError("sensor parameters need distance_m > 0 and 0 < near_m < far_m")
-        if self.width <= 0 or self.height <= 0 or self.fx <= 0 or self.fy <= 0:
-            raise ConfigError("sensor parameters need positive width, height, fx and fy")
-
     @property
     def intrinsics(self) -> CameraIntrinsics:
         """The camera's pinhole intrinsics."""
         return CameraIntrinsics(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
+
+
+def check_camera_params(params: CameraParams, section: str) -> None:
+    """What the declared bounds of :class:`CameraParams` cannot say: three values in each
+    position, and ``near_m < far_m``. ``section`` is the sensor's config section (its
+    messages name the full key).
+
+    Raises:
+        ConfigError: naming the key.
+    """
+    for key in ("target_m", "calibration_translation_m"):
+        values = getattr(params, key)
+        if len(values) != 3:
+            raise ConfigError(
+                f"config key '{section}.{key}': expected 3 values (x, y, z), got {len(values)}"
+            )
+    check_ordered(params, section, "near_m", "far_m")
+
+
+def check_depth_range(params: Any, section: str) -> None:
+    """A triangulating sensor's depth range (``min_range_m``, ``max_range_m``) must be a
+    range that overlaps the renderer's (``near_m``, ``far_m``), or no pixel could ever have
+    a depth; and its ``baseline_m`` must not be 0 (depth is ``f B / disparity``; a negative
+    baseline puts the second viewpoint on the camera's left).
+
+    Raises:
+        ConfigError: naming the key.
+    """
+    check_ordered(params, section, "min_range_m", "max_range_m")
+    check_ordered(params, section, "min_range_m", "far_m", "nothing is rendered beyond it")
+    check_ordered(params, section, "near_m", "max_range_m", "nothing is rendered before near_m")
+    if params.baseline_m == 0.0:
+        raise ConfigError(
+            f"config key '{section}.baseline_m': must not be 0 (depth is f B / disparity; "
+            "a negative baseline puts the second viewpoint on the camera's left)"
+        )
 
 
 def observe(
