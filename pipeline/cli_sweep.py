@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         # The trials of one hand read planner.use alike: the first of each stands for all.
         by_hand = {task.params["gripper"]: task for task in tasks if "gripper" in task.params}
         for task in by_hand.values():
-            check_planner_is_read(trial_config(task.params), registry)
+            check_planner_is_read(trial_config(task.params), registry, user)
     read = {section: resolved[section] for section in sections}
     fingerprint = json.dumps(read, sort_keys=True)
     keys = [task.key for task in tasks]

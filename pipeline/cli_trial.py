@@ -88,20 +88,18 @@ def trial_overrides(args: argparse.Namespace) -> list[str]:
     return overrides
 
 
-def check_several_grasps_options(settings, config, registry) -> None:
-    """Refuse the next-grasp strategy or the stop rule set for a trial of one grasp: they
-    choose and stop later grasps, so neither would act.
+def check_several_grasps_options(settings, changed: dict) -> None:
+    """Refuse the next-grasp strategy or the stop rule set (``changed``: the settings changed
+    from the defaults) for a trial of one grasp: they choose and stop later grasps, so
+    neither would act.
 
     Raises:
         ConfigError: naming the option (and its config key) and ``--grasps``.
     """
-    from .config import changed_settings, load_config
-
     if settings.grasps > 1:
         return
-    changed = changed_settings(config.to_dict(), load_config(registry).to_dict()).get("trial", {})
     for key, option in (("next_grasp", "--next-grasp"), ("until_std_mm", "--until-std")):
-        if key in changed:
+        if key in changed.get("trial", {}):
             raise ConfigError(
                 f"{option} (trial.{key}) applies to a trial of several grasps; give --grasps N "
                 "with N > 1"
@@ -216,6 +214,7 @@ def _progress(message: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .config import changed_settings, load_config
     from .hand_choice import check_planner_is_read
     from .registry import load_registry
     from .trial import run_trial
@@ -226,9 +225,10 @@ def run(args: argparse.Namespace) -> int:
     if args.units:
         overrides.append(f"trial.units={args.units}")
     registry, config = _load(args, overrides, registry=registry)
-    check_planner_is_read(config, registry)
+    changed = changed_settings(config.to_dict(), load_config(registry).to_dict())
+    check_planner_is_read(config, registry, changed)
     settings = config.trial
-    check_several_grasps_options(settings, config, registry)
+    check_several_grasps_options(settings, changed)
     out = args.out or fresh_folder(
         Path("runs") / f"trial-{Path(settings.object).stem}-seed{settings.seed}"
     )

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import Config, load_config
+from .config import Config
 from .errors import ConfigError
 from .params import to_toml
 from .perception.grasp_geometry import narrowest_width
@@ -52,18 +52,21 @@ def named_hand_planners(config: Config, registry: StageRegistry) -> list[str]:
     return [configured] if configured in naming or not naming else naming
 
 
-def check_planner_is_read(config: Config, registry: StageRegistry) -> None:
-    """Refuse a ``planner.use`` the user chose (in a ``--config`` file or ``--set``) that
-    would not plan: with ``trial.gripper = "auto"`` every installed planner competes, and a
-    named hand is planned by ``planner.use`` only when it names that hand or no planner
-    does (:func:`named_hand_planners`).
+def check_planner_is_read(
+    config: Config, registry: StageRegistry, changed: Mapping[str, Any]
+) -> None:
+    """Refuse a ``planner.use`` the user chose (``changed``: the settings the user's files
+    and ``--set`` changed from the defaults) that would not plan: with ``trial.gripper =
+    "auto"`` every installed planner competes, and a named hand is planned by
+    ``planner.use`` only when it names that hand or no planner does
+    (:func:`named_hand_planners`).
 
     Raises:
         ConfigError: naming ``planner.use``, the hands it plans for and what to do.
     """
-    chosen = config.choices["planner"]
-    if chosen == load_config(registry).choices["planner"]:
+    if "use" not in changed.get("planner", {}):
         return
+    chosen = config.choices["planner"]
     gripper = config.trial.gripper
     hands = ", ".join(registry.get("planner", chosen).cls.grippers) or "none"
     if gripper == AUTO:
