@@ -206,6 +206,22 @@ def test_paired_difference_of_second_grasp_gains():
     assert explore.paired_gain_difference([], "information", "random")[3] == 0
 
 
+def test_paired_ranks_count_the_poses_and_test_them():
+    # Information gains more at all five poses, by distinct amounts: the exact two-sided
+    # signed-rank p is the chance of all five signs alike, 2 / 2^5.
+    rows = [
+        _row(f"o{i}", strategy, [3.0 + i, 3.0 + i - gain], [True, True], yaw=float(i))
+        for i in range(5)
+        for strategy, gain in (("information", 1.0 + 0.1 * i), ("random", 0.5))
+    ]
+    assert explore.paired_gain_ranks(rows, "information", "random") == pytest.approx((5, 0, 2 / 32))
+    # A pose where both gain alike is left out of the counts and the test.
+    rows += [_row("tie", s, [4.0, 3.0], [True, True], yaw=9.0) for s in ("information", "random")]
+    assert explore.paired_gain_ranks(rows, "information", "random")[:2] == (5, 0)
+    better, worse, p_value = explore.paired_gain_ranks([], "information", "random")
+    assert (better, worse) == (0, 0) and np.isnan(p_value)
+
+
 def test_paired_difference_interval_matches_the_normal_theory_for_many_poses():
     """With 400 poses the bootstrap interval of the mean difference is the central-limit
     one, mean +- 1.96 s / sqrt(n), to within a few per cent of its width."""
