@@ -10,17 +10,18 @@ hands) is asked for every feasible grasp on that model
 * ``paper``: the first grasp's rule again, the best-scored of the planners' own plans on
   the current model;
 * ``random``: a feasible alternative drawn uniformly (seeded by the trial);
-* ``information``: the alternative with the largest expected reduction of the hidden side's
-  uncertainty relative to the visible side, the object's shape
-  (:func:`pipeline.estimation.uncertainty.hidden_side_gain_m2` with
-  :func:`~pipeline.estimation.uncertainty.shape_gram`), from the
-  taxels it is predicted to touch on the current model (:func:`predicted_contacts`) where
-  no earlier grasp touched (:func:`new_places`) and the
-  estimator's own measurement model, weighted by the planner's score of the grasp (in
-  [0, 1]: how squarely its pads meet the sides and how far it is from tipping the object),
-  so that the expected gain counts only as much as the grasp is likely to deliver it, among
-  the grasps scored at least half the best (:data:`PLANNER_FLOOR`). The planners score on
-  one scale, as when the first grasp's hand is chosen (:mod:`pipeline.hand_choice`).
+* ``information``: the alternative with the largest expected reduction of the completed
+  model's positional uncertainty where the grasp will hold the object, its shape and its
+  place (:func:`pipeline.estimation.uncertainty.expected_gain_m2` with
+  :func:`~pipeline.estimation.uncertainty.model_gram`), from the taxels it is predicted
+  to touch on the current model (:func:`predicted_contacts`) where no earlier grasp
+  touched (:func:`new_places`) and the estimator's own measurement model, weighted by how
+  likely the grasp is to deliver them (:func:`delivery`: the planner's score without its
+  alignment factor, in [0, 1]: how squarely its pads meet the sides and how far it is
+  from tipping the object), among the grasps weighted at least half the best
+  (:data:`PLANNER_FLOOR`) and not predicted to turn the object further than the
+  estimator follows (:func:`predicted_turn_rad`, :data:`TURN_SIGMAS`). The planners score
+  on one scale, as when the first grasp's hand is chosen (:mod:`pipeline.hand_choice`).
 
 The stop rule (:func:`stop_reason`) ends the trial once the plane offset and the hidden side
 are known well enough, or when the grasps run out.
@@ -37,7 +38,9 @@ import numpy as np
 import scipy.spatial
 
 from .metrics import plane_after_bias
+from .perception.candidate import alignment
 from .perception.pad_contact import (
+    PadContact,
     PadTaxels,
     flat_pad_taxels,
     pad_coverage,
@@ -63,11 +66,18 @@ TOUCH_TOLERANCE_M = 0.003
 #: again after the millimetres the object moves between grasps.
 SAME_PLACE_M = 0.005
 
-#: ``information`` chooses among the alternatives the planner scores at least this fraction
-#: of its best. Below it are grasps that meet an edge or hold the object off its centre, which
-#: turn it as the pads close: on the CD drive, third grasps there turned it 7-10 deg, more
-#: than the re-grasp noise ``Q`` lets the estimator follow.
+#: ``information`` chooses among the alternatives whose :func:`delivery` is at least this
+#: fraction of the best. Below it are grasps that meet an edge or hold the object off its
+#: centre, which turn it as the pads close: on the CD drive, third grasps there turned it
+#: 7-10 deg, more than the re-grasp noise ``Q`` lets the estimator follow.
 PLANNER_FLOOR = 0.5
+
+
+#: ``information`` leaves out the grasps predicted to turn the object by more than this many
+#: stds of the re-grasp noise's yaw (:func:`predicted_turn_rad`): the estimator follows the
+#: object from one grasp to the next within ``Q``, and a turn beyond two stds of it is one
+#: it does not expect.
+TURN_SIGMAS = 2.0
 
 
 @dataclass(frozen=True)
@@ -215,6 +225,37 @@ def _taxel_cells(points_m: np.ndarray, approach: PadApproach) -> np.ndarray:
     return np.where(inside, row * cols + col, -1)
 
 
+def pad_contacts(
+    plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarray
+) -> list[tuple[PadApproach, PadContact]]:
+    """Each pad of ``plan`` that is predicted to touch the model ``model_m``, and how."""
+    found = []
+    for approach in pad_approaches(plan, gripper):
+        contact = pad_coverage(
+            model_m, approach.origin_m, approach.direction, approach.taxels, TOUCH_TOLERANCE_M
+        )
+        if contact is not None:
+            found.append((approach, contact))
+    return found
+
+
+def predicted_turn_rad(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarray) -> float:
+    """How far ``plan`` is predicted to turn the object about the vertical (rad, about +z):
+    the turn its touching pads share (:attr:`~pipeline.perception.pad_contact.PadContact.turn_rad`,
+    the angle by which the side of the model ``model_m`` in front of each is turned from
+    facing it), the smallest when all are turned the same way, else 0.
+
+    An object turned by an angle turns every side by it, and pads pressing sides turned
+    alike press them into line with themselves: a flat object held by parallel jaws at an
+    angle to its faces turns by that angle. A round object held off its centre meets the
+    pads turned opposite ways, and is pushed across rather than turned. 0 when no pad
+    touches."""
+    turns = np.array([contact.turn_rad for _, contact in pad_contacts(plan, gripper, model_m)])
+    if not turns.size or not (np.all(turns > 0.0) or np.all(turns < 0.0)):
+        return 0.0
+    return float(turns[np.argmin(np.abs(turns))])
+
+
 def predicted_contacts(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarray) -> Contacts:
     """The taxels ``plan`` is predicted to touch on the completed model ``model_m``
     (``(K, 3)``, frame R): each pad closes on the layer of the model facing it until its
@@ -222,16 +263,7 @@ def predicted_contacts(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarra
     taxel whose cell holds a touched model point reads a contact at the centroid of those
     points, its normal the pad's closing direction."""
     positions, normals, pads, indices = [], [], [], []
-    for approach in pad_approaches(plan, gripper):
-        contact = pad_coverage(
-            model_m,
-            approach.origin_m,
-            approach.direction,
-            approach.taxels,
-            TOUCH_TOLERANCE_M,
-        )
-        if contact is None:
-            continue
+    for approach, contact in pad_contacts(plan, gripper, model_m):
         cell = _taxel_cells(contact.points, approach)
         for index in np.unique(cell[cell >= 0]):
             positions.append(contact.points[cell == index].mean(axis=0))
@@ -265,27 +297,27 @@ def information_scores(
     model: MeasurementModel,
     earlier: tuple[GraspPlan, ...] = (),
 ) -> list[float]:
-    """Each plan's expected reduction of the hidden side's mean squared positional std
-    relative to the visible side (m^2, the shape; the bias, which the next release forgets,
-    is a nuisance) if its predicted taxels on new surface were fused into ``stage`` (module
-    docstring), from the covariance the estimator will fuse them with: ``stage``'s plus the
-    re-grasp noise. Each plan's taxels are those of its own hand, ``grippers[plan.gripper]``.
-    The surface the ``earlier`` plans (the grasps fused so far) reach on the current model is
-    not new (:func:`new_places`). All zero when ``stage`` has no finite covariance (the
-    planner's best is then taken)."""
+    """Each plan's expected reduction of the completed model's mean squared positional std
+    where the grasp holds the object (m^2: the visible side moved by the grasp's bias, the
+    hidden side by the bias and the plane) if its predicted taxels on new surface were
+    fused into ``stage`` (module docstring), from the covariance the estimator will fuse
+    them with: ``stage``'s plus the re-grasp noise. Each plan's taxels are those of its own
+    hand, ``grippers[plan.gripper]``. The surface the ``earlier`` plans (the grasps fused so
+    far) reach on the current model is not new (:func:`new_places`). All zero when
+    ``stage`` has no finite covariance (the best delivered is then taken)."""
     from .estimation.correspondences import PointIndex
     from .estimation.problem import grasp_contacts
     from .estimation.uncertainty import (
-        hidden_side_gain_m2,
+        expected_gain_m2,
+        model_gram,
         predicted_measurement,
-        shape_gram,
     )
 
     covariance = np.asarray(stage.covariance, dtype=float) + model.regrasp_noise
     if not np.all(np.isfinite(covariance)):
         return [0.0] * len(plans)  # an estimator without a covariance: nothing to rank by
     g, pivot, points = state_vector(stage), stage.bias.pivot_m, stage.points
-    gram = shape_gram(points, g, pivot)
+    gram = model_gram(points, g, pivot)
     index = PointIndex(points)
     variance = np.full(len(points), model.point_std_m**2)
     touched = [
@@ -306,7 +338,7 @@ def information_scores(
         jacobian, nuisance = predicted_measurement(
             index, points, g, pivot, taxels, covariance, variance
         )
-        scores.append(hidden_side_gain_m2(covariance, jacobian, nuisance, gram))
+        scores.append(expected_gain_m2(covariance, jacobian, nuisance, gram))
     return scores
 
 
@@ -319,8 +351,12 @@ class NextGraspChoice:
         strategy: the strategy that chose it.
         alternatives: the feasible plans it chose among (every hand's).
         scores: the information score of each alternative (m^2), ``information`` only;
-            the choice maximises it times the alternative's planner score among the
-            alternatives scored at least :data:`PLANNER_FLOOR` of the best.
+            the choice maximises it times the alternative's :func:`delivery` among the
+            alternatives whose delivery is at least :data:`PLANNER_FLOOR` of the best,
+            leaving out those predicted to turn the object too far.
+        turns_rad: each alternative's :func:`predicted_turn_rad`, ``information`` only.
+        turn_limit_rad: the turn beyond which an alternative is left out
+            (:data:`TURN_SIGMAS` stds of the re-grasp noise's yaw).
         chosen: index of ``plan`` among ``alternatives`` (None when refused).
     """
 
@@ -329,6 +365,8 @@ class NextGraspChoice:
     alternatives: tuple[GraspPlan, ...] = ()
     scores: tuple[float, ...] = ()
     chosen: int | None = None
+    turns_rad: tuple[float, ...] = ()
+    turn_limit_rad: float = math.inf
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -337,6 +375,11 @@ class NextGraspChoice:
             "chosen": self.chosen,
             "scores_mm2": [1e6 * s for s in self.scores],
             "planner_scores": [_planner_score(plan) for plan in self.alternatives],
+            "delivery": [delivery(plan) for plan in self.alternatives],
+            "turns_deg": [math.degrees(turn) for turn in self.turns_rad],
+            "turn_limit_deg": (
+                None if math.isinf(self.turn_limit_rad) else math.degrees(self.turn_limit_rad)
+            ),
             "grippers": [plan.gripper for plan in self.alternatives],
         }
 
@@ -344,6 +387,21 @@ class NextGraspChoice:
 def _planner_score(plan: GraspPlan) -> float:
     """The planner's score of ``plan`` in [0, 1]; 1 when the planner gives none."""
     return 1.0 if math.isnan(plan.score) else float(plan.score)
+
+
+def delivery(plan: GraspPlan) -> float:
+    """How likely ``plan`` is to deliver the taxels it is predicted to touch, in [0, 1]: the
+    planner's score without its alignment factor (:func:`~pipeline.perception.candidate.alignment`),
+    which leaves how squarely the pads meet the sides and how far the grasp is from tipping
+    the object. The alignment factor is the planners' stand-in for what the estimator learns
+    from a grasp, which ``information`` computes itself; counted again, it halved the
+    weight of the grasps that close along the plane, the only ones that feel where along
+    the plane the object sits. A plan that does not record the one candidate it was made
+    from (``GraspPlan.candidates``) keeps the planner's score."""
+    score = _planner_score(plan)
+    if len(plan.candidates) != 1:
+        return score
+    return min(1.0, score / alignment(math.radians(plan.candidates[0].closing_angle_deg)))
 
 
 @dataclass(frozen=True)
@@ -383,7 +441,16 @@ def choose_next_grasp(
         return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
     grippers = {hand.gripper.name: hand.gripper for hand in hands}
     scores = tuple(information_scores(stage, alternatives, grippers, model, earlier))
-    rated = np.array([_planner_score(plan) for plan in alternatives])
+    # A grasp that would turn the object further than the re-grasp noise lets the estimator
+    # follow delivers taxels on a model that no longer stands where they are predicted.
+    turn_limit = TURN_SIGMAS * math.sqrt(model.regrasp_noise[0, 0])
+    turns = tuple(
+        predicted_turn_rad(plan, grippers[plan.gripper], stage.completed) for plan in alternatives
+    )
+    followed = np.abs(turns) <= turn_limit
+    rated = np.array([delivery(plan) for plan in alternatives]) * followed
     expected = np.where(rated >= PLANNER_FLOOR * rated.max(), np.multiply(scores, rated), -1.0)
     chosen = int(np.argmax(expected))
-    return NextGraspChoice(alternatives[chosen], strategy, alternatives, scores, chosen)
+    return NextGraspChoice(
+        alternatives[chosen], strategy, alternatives, scores, chosen, turns, turn_limit
+    )

@@ -14,19 +14,31 @@ from pipeline.cli import main
 from pipeline.next_grasp import (
     PLANNER_FLOOR,
     SAME_PLACE_M,
+    TURN_SIGMAS,
     MeasurementModel,
     NextHand,
     Uncertainty,
     choose_next_grasp,
+    delivery,
     information_scores,
     new_places,
+    pad_contacts,
     predicted_contacts,
+    predicted_turn_rad,
     stop_reason,
 )
+from pipeline.perception.candidate import candidate_score
 from pipeline.perception.grasp_geometry import hand_pose
 from pipeline.sim.hands import GRIPPERS
 from pipeline.trial import attempt_to_json, unfused_reason
-from pipeline.types import Bias, Contacts, GraspPlan, StageEstimate, SymmetryPlane
+from pipeline.types import (
+    Bias,
+    Contacts,
+    GraspCandidate,
+    GraspPlan,
+    StageEstimate,
+    SymmetryPlane,
+)
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +57,8 @@ def test_two_grasp_trial_records_each_grasp(two_grasps):
     assert grasps[1]["chosen_by"]["strategy"] == "information"
     assert grasps[1]["chosen_by"]["alternatives"] >= 1
     chosen_by = grasps[1]["chosen_by"]
-    rated = np.array(chosen_by["planner_scores"])
+    followed = np.abs(chosen_by["turns_deg"]) <= chosen_by["turn_limit_deg"]
+    rated = np.array(chosen_by["delivery"]) * followed
     expected = np.multiply(chosen_by["scores_mm2"], rated)
     eligible = expected[rated >= PLANNER_FLOOR * rated.max()]
     assert eligible.max() > 0.0
@@ -253,7 +266,132 @@ class _Planner:
         return self.plans
 
 
-MODEL = MeasurementModel((0.003, 0.0017), (0.001, 0.003), 0.002, True, np.zeros((6, 6)))
+#: The estimator's measurement model; the object turns between grasps by the default
+#: re-grasp noise's yaw (0.02 rad), and moves no other way.
+MODEL = MeasurementModel(
+    (0.003, 0.0017), (0.001, 0.003), 0.002, True, np.diag([0.02, 0, 0, 0, 0, 0]) ** 2
+)
+
+
+def _rated(plan, angle_deg, contact, tipping_ratio=0.0):
+    """``plan`` as a candidate planner makes it: scored, recording its one candidate."""
+    score = candidate_score((contact,), math.radians(angle_deg), tipping_ratio, 0.2)
+    candidate = GraspCandidate(angle_deg, 0.04, 0.0, 0.04, (contact,), tipping_ratio, score, True)
+    return replace(plan, score=score, candidates=(candidate,))
+
+
+def test_delivery_is_the_planners_score_without_its_alignment():
+    plan = _plan(0.0)
+    # Contact over the tipping factor, whatever the closing angle.
+    for angle_deg in (0.0, 30.0, 90.0, -60.0):
+        assert delivery(_rated(plan, angle_deg, 0.7, 0.3)) == pytest.approx(0.7 / 1.06)
+    # Along the plane the planner's score is half of it.
+    assert _rated(plan, 90.0, 0.7).score == pytest.approx(0.35)
+    # A plan without its candidate keeps the planner's score; an unscored one counts as 1.
+    assert delivery(replace(plan, score=0.3)) == 0.3
+    assert delivery(plan) == 1.0
+
+
+def test_predicted_turn_is_the_angle_between_jaws_and_faces():
+    stage = _box_stage()
+    gripper = GRIPPERS["pg70"]
+    for angle_deg in (0.0, 5.0, 15.0):
+        direction = np.array(
+            [math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg)), 0.0]
+        )
+        plan = replace(
+            _plan(0.0),
+            T_robot_hand=hand_pose(np.array([0.5, 0.0, 0.165]), direction),
+            closing_direction=direction,
+        )
+        # The faces are flat and vertical: the pads meet them turned back by the closing
+        # angle, and press the box into line with themselves.
+        turn = predicted_turn_rad(plan, gripper, stage.completed)
+        assert math.degrees(turn) == pytest.approx(-angle_deg, rel=0.03)
+    # A cylinder held off its axis meets the jaws turned opposite ways: it is pushed
+    # across, not turned, though each side alone is turned from its pad by about 20 deg.
+    angle, z = np.meshgrid(np.linspace(-np.pi, np.pi, 721), np.linspace(0.0, 0.08, 41))
+    radius = 0.03
+    cylinder = np.column_stack(
+        [0.5 + radius * np.cos(angle.ravel()), radius * np.sin(angle.ravel()), z.ravel()]
+    )
+    off_axis = _plan(0.01)
+    sides = [contact.turn_rad for _, contact in pad_contacts(off_axis, gripper, cylinder)]
+    assert len(sides) == 2 and sides[0] * sides[1] < 0.0
+    assert min(map(abs, sides)) > math.radians(10.0)
+    assert predicted_turn_rad(off_axis, gripper, cylinder) == 0.0
+    beside = predicted_turn_rad(_plan(0.3), gripper, stage.completed)
+    assert beside == 0.0  # touches nothing
+
+
+def test_information_leaves_out_grasps_that_turn_the_object_beyond_q():
+    stage = _box_stage()
+    gripper = GRIPPERS["pg70"]
+    square = _plan(-0.03)
+    direction = np.array([math.cos(math.radians(10.0)), math.sin(math.radians(10.0)), 0.0])
+    turned = replace(
+        _plan(0.03),
+        T_robot_hand=hand_pose(np.array([0.5, 0.03, 0.165]), direction),
+        closing_direction=direction,
+    )
+    yaw_std = math.radians(1.0)
+    model = replace(MODEL, regrasp_noise=np.diag([yaw_std, 0.005, 0.005, 0.0005, 0, 0]) ** 2)
+    choices = {}
+    for label, plans in (("both", [turned, square]), ("turned only", [turned])):
+        choices[label] = choose_next_grasp(
+            "information",
+            [NextHand(_Planner(plans), gripper)],
+            stage,
+            model,
+            np.random.default_rng(0),
+        )
+    both = choices["both"]
+    assert abs(both.turns_rad[0]) > TURN_SIGMAS * yaw_std >= abs(both.turns_rad[1])
+    assert both.scores[0] > 0.0 and both.chosen == 1
+    assert both.to_json()["turn_limit_deg"] == pytest.approx(TURN_SIGMAS)
+    # Where every grasp would turn it too far, the planner's best is taken.
+    assert choices["turned only"].chosen == 0
+
+
+def test_information_feels_along_the_plane_where_the_place_is_unknown():
+    """After a grasp across a short box the plane and the place across it are known, where
+    along the plane the box sits is not: jaws closing along the plane teach that, and are
+    chosen although the planner's alignment factor rates them half."""
+    box = _box_stage(length=0.05)
+    # The camera at an angle sees the front half of both end faces too.
+    x, z = np.meshgrid(np.linspace(0.48, 0.5, 7), np.linspace(0.0, 0.08, 25))
+    ends = [np.column_stack([x.ravel(), np.full(x.size, y), z.ravel()]) for y in (-0.025, 0.025)]
+    points = np.vstack([box.points, *ends])
+    stage = replace(
+        box,
+        points=points,
+        completed=np.vstack([points, box.plane.mirror(points)]),
+        bias=Bias(pivot_m=points.mean(axis=0)),
+        covariance=np.diag([0.01, 0.001, 0.01, 0.001, 0.001, 0.01]) ** 2,
+    )
+    across = _rated(_plan(0.0), 0.0, 0.6)
+    position = np.array([0.5, 0.0, 0.04 + 0.125])
+    along = replace(
+        _plan(0.0),
+        T_robot_hand=hand_pose(position, np.array([0.0, 1.0, 0.0])),
+        closing_direction=np.array([0.0, 1.0, 0.0]),
+        predicted_contacts=np.array([[0.5, -0.025, 0.04]]),
+    )
+    along = _rated(along, 90.0, 0.5)
+    gripper = GRIPPERS["pg70"]
+    contacts = predicted_contacts(along, gripper, stage.completed)
+    assert len(contacts) and np.allclose(np.abs(contacts.normals[:, 1]), 1.0)
+    assert along.score < PLANNER_FLOOR * across.score <= delivery(along)
+    choice = choose_next_grasp(
+        "information",
+        [NextHand(_Planner([across, along]), gripper)],
+        stage,
+        MODEL,
+        np.random.default_rng(0),
+    )
+    assert choice.scores[1] > choice.scores[0] > 0.0
+    assert choice.chosen == 1
+    assert choice.to_json()["delivery"] == pytest.approx([0.6, 0.5])
 
 
 def test_strategies_choose_among_the_alternatives():

@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 
 from pipeline.estimation.correspondences import PointIndex, exclusive_sides, find_correspondences
-from pipeline.estimation.geometry import apply_mirror_bias
+from pipeline.estimation.geometry import apply_bias, apply_mirror_bias
 from pipeline.estimation.measurement import freeze, predict
 from pipeline.estimation.problem import grasp_contacts
 from pipeline.estimation.structured import block_diagonal
 from pipeline.estimation.uncertainty import (
-    hidden_side_gain_m2,
+    expected_gain_m2,
     hidden_side_gram,
     hidden_side_std_m,
+    model_gram,
     plane_offset_std_m,
     predicted_measurement,
-    shape_gram,
 )
 from pipeline.types import Contacts
 
@@ -79,7 +79,7 @@ def _numeric_jacobian(function, x, step=1e-7):
 
 
 def _subset_gain(points, g, pivot, taxels, subset, covariance, gram, point_std_m=0.002):
-    """:func:`hidden_side_gain_m2` of the taxels ``subset`` alone."""
+    """:func:`expected_gain_m2` of the taxels ``subset`` alone."""
     contacts = type(taxels)(
         taxels.positions_m[subset],
         taxels.pads[subset],
@@ -91,7 +91,7 @@ def _subset_gain(points, g, pivot, taxels, subset, covariance, gram, point_std_m
     H, N = predicted_measurement(
         PointIndex(points), points, g, pivot, contacts, covariance, variance
     )
-    return hidden_side_gain_m2(covariance, H, N, gram)
+    return expected_gain_m2(covariance, H, N, gram)
 
 
 def test_gain_matches_bayes_on_the_dense_state():
@@ -109,7 +109,7 @@ def test_gain_matches_bayes_on_the_dense_state():
     )
     assert len(jacobian) > 0
     gram = hidden_side_gram(points, g, pivot)
-    score = hidden_side_gain_m2(covariance, jacobian, nuisance, gram)
+    score = expected_gain_m2(covariance, jacobian, nuisance, gram)
 
     measurement = _frozen(points, g, pivot, taxels, covariance)
     n = len(points)
@@ -153,7 +153,7 @@ def test_gain_matches_brute_force_expected_posterior_over_the_plane():
         index, points, g, pivot, taxels, covariance, variance
     )
     gram = hidden_side_gram(points, g, pivot)
-    score = hidden_side_gain_m2(covariance, jacobian, nuisance, gram)
+    score = expected_gain_m2(covariance, jacobian, nuisance, gram)
 
     measurement = _frozen(points, g, pivot, taxels, covariance)
     R = block_diagonal(measurement.noise)
@@ -195,7 +195,7 @@ def test_no_contact_no_gain_and_more_taxels_more_gain():
     gram = hidden_side_gram(points, g, pivot)
     index = PointIndex(points)
     variance = np.full(len(points), 0.002**2)
-    assert hidden_side_gain_m2(covariance, np.zeros((0, 6)), np.zeros((0, 0)), gram) == 0.0
+    assert expected_gain_m2(covariance, np.zeros((0, 6)), np.zeros((0, 0)), gram) == 0.0
     far = Contacts(np.array([[0.9, 0.4, 0.05]]), np.array([[1.0, 0, 0]]), ["left"], [0])
     jacobian, _ = predicted_measurement(
         index, points, g, pivot, grasp_contacts(far, WINDOW, NOISE), covariance, variance
@@ -209,35 +209,32 @@ def test_no_contact_no_gain_and_more_taxels_more_gain():
     assert 0.0 < front_only < both_sides
 
 
-def test_shape_gram_is_the_mirror_images_spread_under_the_plane_alone():
+def test_model_gram_is_both_sides_spread_where_the_object_stands():
     rng = np.random.default_rng(5)
     points, g, pivot, taxels = _problem(rng)
-    gram = shape_gram(points, g, pivot)
+    gram = model_gram(points, g, pivot)
+    covariance = np.diag([0.03, 0.004, 0.004, 0.002, 0.003, 0.05]) ** 2
+    # Finite differences of the visible side moved by the bias and of its mirror image.
+    n = len(points)
+    front = _numeric_jacobian(lambda x: apply_bias(points, x, pivot).ravel(), g.copy())
+    back = _numeric_jacobian(lambda x: apply_mirror_bias(points, x, pivot).ravel(), g.copy())
+    jacobians = np.concatenate([front.reshape(n, 3, 6), back.reshape(n, 3, 6)])
+    expected = np.mean([np.trace(J @ covariance @ J.T) for J in jacobians])
+    assert np.trace(covariance @ gram) == pytest.approx(expected, rel=1e-4)
+    # The visible side does not depend on the plane: a plane-only covariance moves the
+    # mirror image alone, half the points.
     plane_only = np.diag([0.0, 0.0, 0.0, 0.0, 0.003, 0.05]) ** 2
-    # Finite differences of the mirror image in the plane's two components, unbiased.
-    jacobians = [
-        _numeric_jacobian(
-            lambda x, p=p: apply_mirror_bias(p[None, :], np.r_[0.0, 0.0, 0.0, 0.0, x], pivot)[0],
-            g[4:].copy(),
-        )
-        for p in points
-    ]
-    expected = np.mean([np.trace(J @ plane_only[4:, 4:] @ J.T) for J in jacobians])
-    assert np.trace(plane_only @ gram) == pytest.approx(expected, rel=1e-4)
-    # The bias moves both sides alike: it does not change the shape.
-    bias_only = np.diag([0.03, 0.004, 0.004, 0.002, 0.0, 0.0]) ** 2
-    assert np.trace(bias_only @ gram) == 0.0
+    hidden = np.trace(plane_only @ hidden_side_gram(points, g, pivot))
+    assert np.trace(plane_only @ gram) == pytest.approx(hidden / 2, rel=1e-9)
 
-    # Taxels on the front face alone pin the bias; with a prior that does not couple the
-    # bias to the plane they teach the shape nothing, and both faces teach it something.
-    covariance = np.diag([0.03, 0.004, 0.004, 0.002, 0.01, 0.2]) ** 2
+    # Taxels on the front face alone pin the object's place, which the model gram counts;
+    # both faces teach more.
+    prior = np.diag([0.03, 0.004, 0.004, 0.002, 0.01, 0.2]) ** 2
 
-    def gain(subset, weights):
-        return _subset_gain(points, g, pivot, taxels, subset, covariance, weights)
+    def gain(subset):
+        return _subset_gain(points, g, pivot, taxels, subset, prior, gram)
 
-    assert gain([0, 1], hidden_side_gram(points, g, pivot)) > 0.0
-    assert gain([0, 1], gram) == pytest.approx(0.0, abs=1e-15)
-    assert gain([0, 1, 2, 3], gram) > 0.0
+    assert 0.0 < gain([0, 1]) < gain([0, 1, 2, 3])
 
 
 def test_plane_offset_std_is_the_distance_from_the_pivot():

@@ -32,16 +32,15 @@ the drop of the squared hidden-side std above. It weighs the plane and bias by h
 they move the hidden surface: a plane angle error matters in proportion to the object's
 length along the plane, a bias error everywhere.
 
-**What a grasp teaches about the shape.** The bias only moves the object: it carries the
-visible and the hidden side alike, and the object is released and moved again before the
-next grasp, which adds the re-grasp noise ``Q`` back. Ranking grasps by ``M`` therefore
-ranks them mostly by how well each pins the bias it will forget, the same for every grasp
-that touches: ``tr(Q M)`` is tens of mm^2 against the plane's few. The shape, the hidden
-side relative to the visible side, depends on the plane alone, so :func:`shape_gram`
-keeps only the plane's columns of ``J_n`` (``M_s``), and ``tr((P - P+) M_s)`` is what a
-grasp teaches about the object's hidden side wherever the object stands. The bias stays in
-``P`` and ``P+`` as a nuisance: a grasp that cannot tell the plane from the bias teaches
-the shape little.
+**What a grasp teaches about the model where it holds the object.** The estimate after a
+grasp places the whole completed model where the object stands in that grasp: the visible
+side moved by the bias (``J_n = d f_b / d g``, no plane columns), the hidden side by the
+bias and the plane. :func:`model_gram` averages ``J_n^T J_n`` over both sides, so
+``tr(P M_m)`` is the model's mean squared positional std and ``tr((P - P+) M_m)`` what a
+grasp teaches about the model it leaves behind, the shape and the object's place alike.
+Every grasp that touches learns the bias across its pads' closing direction; only one that
+presses on faces turned along the plane learns where along the plane the object sits,
+which the prior and the re-grasp noise ``Q`` leave uncertain by about a centimetre.
 """
 
 from __future__ import annotations
@@ -50,7 +49,7 @@ import numpy as np
 import scipy.linalg
 
 from .correspondences import PointIndex, exclusive_sides, find_correspondences
-from .geometry import BIAS_PLANE_DIM, PLANE, side_jacobian
+from .geometry import BIAS_PLANE_DIM, side_jacobian
 from .iekf import GraspContacts
 from .measurement import freeze, linearise
 
@@ -63,13 +62,16 @@ def hidden_side_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -
     return np.einsum("nki,nkj->ij", jacobians, jacobians) / len(jacobians)
 
 
-def shape_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
-    """:func:`hidden_side_gram` restricted to the plane: ``tr(P M_s)`` is the hidden side's
-    mean squared positional std relative to the visible side (its shape), which the bias
-    does not change. Shape (6, 6), zero outside the plane's block."""
-    gram = np.zeros((BIAS_PLANE_DIM, BIAS_PLANE_DIM))
-    gram[PLANE, PLANE] = hidden_side_gram(points_m, g, pivot_m)[PLANE, PLANE]
-    return gram
+def model_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
+    """``M_m = mean J_n^T J_n`` over the visible side (``points_m`` moved by the bias) and
+    its mirror image together (``(N, 3)``, unbiased frame R) at the state ``g``:
+    ``tr(P M_m)`` is the completed model's mean squared positional std under a covariance
+    ``P`` of ``g``. Shape (6, 6)."""
+    points = np.asarray(points_m, dtype=float)
+    jacobians = np.concatenate(
+        [side_jacobian(points, g, pivot_m, back=back) for back in (False, True)]
+    )
+    return np.einsum("nki,nkj->ij", jacobians, jacobians) / len(jacobians)
 
 
 def hidden_side_std_m(covariance: np.ndarray, gram: np.ndarray) -> float:
@@ -101,10 +103,11 @@ def expected_posterior(
     return (posterior + posterior.T) / 2.0
 
 
-def hidden_side_gain_m2(
+def expected_gain_m2(
     covariance: np.ndarray, jacobian: np.ndarray, nuisance: np.ndarray, gram: np.ndarray
 ) -> float:
-    """Expected reduction of the hidden side's mean squared positional std (m^2) by the
+    """Expected reduction of ``tr(P M)`` (m^2), the mean squared positional std of the
+    points ``gram`` was built over (:func:`hidden_side_gram`, :func:`model_gram`), by the
     measurement of :func:`expected_posterior`: ``tr((P - P+) M)``, never negative."""
     if len(jacobian) == 0:
         return 0.0
@@ -124,7 +127,7 @@ def predicted_measurement(
     """The linearised measurement the IEKF would make of ``contacts`` at the state
     ``(g, points_m)``: its correspondences (eq. 9, gates from ``covariance``, one side per
     taxel), frozen weights and Jacobian (paper eqs. 10-12), as ``(H_g, H_p D H_p^T + R)``
-    for :func:`hidden_side_gain_m2`, with ``R`` the noise the reported covariance counts
+    for :func:`expected_gain_m2`, with ``R`` the noise the reported covariance counts
     the taxels with (``contacts.reported_noise_matrix``), as the filter will after the grasp. No
     taxel with a correspondence gives an empty ``H_g`` (``(0, 6)``): the grasp would teach
     nothing.

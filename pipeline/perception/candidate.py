@@ -68,12 +68,17 @@ def covering_plane(
     return SymmetryPlane(plane.theta_rad, offset)
 
 
+def alignment(angle_rad: float) -> float:
+    """The score's alignment factor of a grasp closing ``angle_rad`` from the plane normal:
+    1 along the normal, 1/2 along the plane."""
+    return (1.0 + abs(math.cos(angle_rad))) / 2.0
+
+
 def candidate_score(
     coverages: tuple[float, ...], angle_rad: float, tipping_ratio: float, tipping_weight: float
 ) -> float:
     """The module docstring's score: contact x alignment x stability, in [0, 1]."""
-    alignment = (1.0 + abs(math.cos(angle_rad))) / 2.0
-    return min(coverages) * alignment / (1.0 + tipping_weight * tipping_ratio)
+    return min(coverages) * alignment(angle_rad) / (1.0 + tipping_weight * tipping_ratio)
 
 
 def footprint_half_m(completed_robot: np.ndarray, direction: np.ndarray) -> float:

@@ -27,12 +27,16 @@ class PadContact:
         coverage: fraction of its taxels within the tolerance of the surface then.
         points: ``(K, 3)`` surface points under those taxels.
         inclination_rad: angle between the surface's normal there and the pad's.
+        turn_rad: the part of that angle about the vertical, signed: the angle about +z
+            by which the side in front of the pad is turned from facing it (from the
+            surface's slope across the pad).
     """
 
     touch_m: float
     coverage: float
     points: np.ndarray
     inclination_rad: float = 0.0
+    turn_rad: float = 0.0
 
     @property
     def quality(self) -> float:
@@ -151,25 +155,28 @@ def pad_coverage(
     touching = seen[surface <= touch + tolerance_m]
     if len(np.unique(touching // cols)) < _MIN_CONTACT_ROWS:
         return None  # an edge or a horizontal top, not a side
+    across, up = _slopes(
+        taxels.col_u[seen % cols], taxels.row_z[seen // cols], surface, touch, tolerance_m
+    )
     return PadContact(
         touch_m=touch + float(origin_m @ direction),
         coverage=len(touching) / (len(taxels.row_z) * cols),
         points=kept[np.isin(taxel, touching)],
-        inclination_rad=_inclination(
-            taxels.col_u[seen % cols], taxels.row_z[seen // cols], surface, touch, tolerance_m
-        ),
+        inclination_rad=float(np.arctan(np.hypot(across, up))),
+        turn_rad=float(-np.arctan(across)),
     )
 
 
-def _inclination(
+def _slopes(
     u: np.ndarray, z: np.ndarray, surface: np.ndarray, touch: float, tolerance_m: float
-) -> float:
-    """Angle between the pad's normal and the surface's, from a plane
+) -> tuple[float, float]:
+    """The surface's slopes ``b`` across the pad and ``c`` in height, from a plane
     ``surface = a + b u + c z`` fitted over the taxels whose surface lies within three
-    tolerances of the touch (too few of them, or a degenerate layout: 0)."""
+    tolerances of the touch (too few of them, or a degenerate layout: both 0); the angle
+    between the pad's normal and the surface's is ``arctan(hypot(b, c))``."""
     near = surface <= touch + 3.0 * tolerance_m
     design = np.column_stack([np.ones(np.count_nonzero(near)), u[near], z[near]])
     if len(design) < 4 or np.linalg.matrix_rank(design) < 3:
-        return 0.0
+        return 0.0, 0.0
     _, b, c = np.linalg.lstsq(design, surface[near], rcond=None)[0]
-    return float(np.arctan(np.hypot(b, c)))
+    return float(b), float(c)
