@@ -225,10 +225,14 @@ def _taxel_cells(points_m: np.ndarray, approach: PadApproach) -> np.ndarray:
     return np.where(inside, row * cols + col, -1)
 
 
-def pad_contacts(
-    plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarray
-) -> list[tuple[PadApproach, PadContact]]:
-    """Each pad of ``plan`` that is predicted to touch the model ``model_m``, and how."""
+#: A pad of a plan that is predicted to touch the model, and how.
+PadTouch = tuple[PadApproach, PadContact]
+
+
+def pad_contacts(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarray) -> list[PadTouch]:
+    """Each pad of ``plan`` that is predicted to touch the completed model ``model_m``
+    (``(K, 3)``, frame R): it closes on the layer of the model facing it until its first
+    taxel meets it (:func:`pipeline.perception.pad_contact.pad_coverage`)."""
     found = []
     for approach in pad_approaches(plan, gripper):
         contact = pad_coverage(
@@ -239,18 +243,19 @@ def pad_contacts(
     return found
 
 
-def predicted_turn_rad(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarray) -> float:
-    """How far ``plan`` is predicted to turn the object about the vertical (rad, about +z):
-    the turn its touching pads share (:attr:`~pipeline.perception.pad_contact.PadContact.turn_rad`,
-    the angle by which the side of the model ``model_m`` in front of each is turned from
-    facing it), the smallest when all are turned the same way, else 0.
+def predicted_turn_rad(touches: Sequence[PadTouch]) -> float:
+    """How far a grasp whose pads touch as ``touches`` (:func:`pad_contacts`) is predicted
+    to turn the object about the vertical (rad, about +z): the turn its pads share
+    (:attr:`~pipeline.perception.pad_contact.PadContact.turn_rad`, the angle by which the
+    side in front of each is turned from facing it), the smallest when all are turned the
+    same way, else 0.
 
     An object turned by an angle turns every side by it, and pads pressing sides turned
     alike press them into line with themselves: a flat object held by parallel jaws at an
     angle to its faces turns by that angle. A round object held off its centre meets the
     pads turned opposite ways, and is pushed across rather than turned. 0 when no pad
     touches."""
-    turns = np.array([contact.turn_rad for _, contact in pad_contacts(plan, gripper, model_m)])
+    turns = np.array([contact.turn_rad for _, contact in touches])
     if not turns.size or not (np.all(turns > 0.0) or np.all(turns < 0.0)):
         return 0.0
     return float(turns[np.argmin(np.abs(turns))])
@@ -258,12 +263,16 @@ def predicted_turn_rad(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarra
 
 def predicted_contacts(plan: GraspPlan, gripper: GripperSpec, model_m: np.ndarray) -> Contacts:
     """The taxels ``plan`` is predicted to touch on the completed model ``model_m``
-    (``(K, 3)``, frame R): each pad closes on the layer of the model facing it until its
-    first taxel meets it (:func:`pipeline.perception.pad_contact.pad_coverage`), and every
-    taxel whose cell holds a touched model point reads a contact at the centroid of those
-    points, its normal the pad's closing direction."""
+    (``(K, 3)``, frame R; :func:`pad_contacts`, :func:`taxel_readings`)."""
+    return taxel_readings(pad_contacts(plan, gripper, model_m))
+
+
+def taxel_readings(touches: Sequence[PadTouch]) -> Contacts:
+    """The taxels of the pads ``touches`` (:func:`pad_contacts`): every taxel whose cell
+    holds a touched model point reads a contact at the centroid of those points, its
+    normal the pad's closing direction."""
     positions, normals, pads, indices = [], [], [], []
-    for approach, contact in pad_contacts(plan, gripper, model_m):
+    for approach, contact in touches:
         cell = _taxel_cells(contact.points, approach)
         for index in np.unique(cell[cell >= 0]):
             positions.append(contact.points[cell == index].mean(axis=0))
@@ -296,6 +305,7 @@ def information_scores(
     grippers: Mapping[str, GripperSpec],
     model: MeasurementModel,
     earlier: tuple[GraspPlan, ...] = (),
+    touches: Sequence[Sequence[PadTouch]] | None = None,
 ) -> list[float]:
     """Each plan's expected reduction of the completed model's mean squared positional std
     where the grasp holds the object (m^2: the visible side moved by the grasp's bias, the
@@ -303,7 +313,8 @@ def information_scores(
     fused into ``stage`` (module docstring), from the covariance the estimator will fuse
     them with: ``stage``'s plus the re-grasp noise. Each plan's taxels are those of its own
     hand, ``grippers[plan.gripper]``. The surface the ``earlier`` plans (the grasps fused so
-    far) reach on the current model is not new (:func:`new_places`). All zero when
+    far) reach on the current model is not new (:func:`new_places`). ``touches``: each
+    plan's :func:`pad_contacts` on ``stage``'s model, where already found. All zero when
     ``stage`` has no finite covariance (the best delivered is then taken)."""
     from .estimation.correspondences import PointIndex
     from .estimation.problem import grasp_contacts
@@ -326,9 +337,10 @@ def information_scores(
     ]
     touched_m = np.concatenate(touched) if touched else np.zeros((0, 3))
     scores = []
-    for plan in plans:
-        predicted = predicted_contacts(plan, grippers[plan.gripper], stage.completed)
-        contacts = new_places(predicted, touched_m)
+    if touches is None:
+        touches = [pad_contacts(plan, grippers[plan.gripper], stage.completed) for plan in plans]
+    for touch in touches:
+        contacts = new_places(taxel_readings(touch), touched_m)
         if len(contacts) == 0:
             scores.append(0.0)
             continue
@@ -440,13 +452,12 @@ def choose_next_grasp(
         chosen = int(rng.integers(len(alternatives)))
         return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
     grippers = {hand.gripper.name: hand.gripper for hand in hands}
-    scores = tuple(information_scores(stage, alternatives, grippers, model, earlier))
+    touches = [pad_contacts(plan, grippers[plan.gripper], stage.completed) for plan in alternatives]
+    scores = tuple(information_scores(stage, alternatives, grippers, model, earlier, touches))
     # A grasp that would turn the object further than the re-grasp noise lets the estimator
     # follow delivers taxels on a model that no longer stands where they are predicted.
     turn_limit = TURN_SIGMAS * math.sqrt(model.regrasp_noise[0, 0])
-    turns = tuple(
-        predicted_turn_rad(plan, grippers[plan.gripper], stage.completed) for plan in alternatives
-    )
+    turns = tuple(predicted_turn_rad(touch) for touch in touches)
     followed = np.abs(turns) <= turn_limit
     rated = np.array([delivery(plan) for plan in alternatives]) * followed
     expected = np.where(rated >= PLANNER_FLOOR * rated.max(), np.multiply(scores, rated), -1.0)

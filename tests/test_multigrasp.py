@@ -306,7 +306,7 @@ def test_predicted_turn_is_the_angle_between_jaws_and_faces():
         )
         # The faces are flat and vertical: the pads meet them turned back by the closing
         # angle, and press the box into line with themselves.
-        turn = predicted_turn_rad(plan, gripper, stage.completed)
+        turn = predicted_turn_rad(pad_contacts(plan, gripper, stage.completed))
         assert math.degrees(turn) == pytest.approx(-angle_deg, rel=0.03)
     # A cylinder held off its axis meets the jaws turned opposite ways: it is pushed
     # across, not turned, though each side alone is turned from its pad by about 20 deg.
@@ -316,11 +316,12 @@ def test_predicted_turn_is_the_angle_between_jaws_and_faces():
         [0.5 + radius * np.cos(angle.ravel()), radius * np.sin(angle.ravel()), z.ravel()]
     )
     off_axis = _plan(0.01)
-    sides = [contact.turn_rad for _, contact in pad_contacts(off_axis, gripper, cylinder)]
+    touches = pad_contacts(off_axis, gripper, cylinder)
+    sides = [contact.turn_rad for _, contact in touches]
     assert len(sides) == 2 and sides[0] * sides[1] < 0.0
     assert min(map(abs, sides)) > math.radians(10.0)
-    assert predicted_turn_rad(off_axis, gripper, cylinder) == 0.0
-    beside = predicted_turn_rad(_plan(0.3), gripper, stage.completed)
+    assert predicted_turn_rad(touches) == 0.0
+    beside = predicted_turn_rad(pad_contacts(_plan(0.3), gripper, stage.completed))
     assert beside == 0.0  # touches nothing
 
 
