@@ -10,6 +10,7 @@ import numpy as np
 from pipeline import hookimpl
 from pipeline.errors import ConfigError, StageFailure
 from pipeline.params import param
+from pipeline.perception.depth import project_points
 from pipeline.perception.principal_axes import table_axes
 from pipeline.perception.visibility import plane_grid, visibility_violations
 from pipeline.stages import SymmetryInitialiser
@@ -127,6 +128,12 @@ class VcInitialiser(SymmetryInitialiser):
             tolerance_m=p.tolerance_m,
         )
         theta, offset = grid.theta_rad.ravel(), grid.offset_m.ravel()
+        violations = violations + mirrored_out_of_view(
+            cloud.points, theta, offset, observation.intrinsics, observation.T_robot_camera
+        )
+        camera = np.asarray(observation.T_robot_camera)[:3, 3]
+        in_front = camera_side_share(cloud.points, theta, offset, camera) < MIN_CAMERA_SIDE_SHARE
+        violations = np.where(in_front, len(cloud), violations)
         spread = tie_spread(cloud.points, theta, offset, violations, depth_sum)
         order = np.lexsort((spread, depth_sum, violations))
         hypotheses = tuple(
@@ -147,12 +154,63 @@ class VcInitialiser(SymmetryInitialiser):
                 status="rejected",
                 reason=(
                     f"the best of {len(hypotheses)} plane hypotheses puts {best.score:.0%} of "
-                    f"the mirrored points in free space (max_violation_fraction = "
-                    f"{p.max_violation_fraction:.0%}); the true plane may be nearly parallel "
-                    "to the viewing direction"
+                    "the mirrored points in seen free space or out of view "
+                    f"(max_violation_fraction = {p.max_violation_fraction:.0%}): no mirror "
+                    "plane the view supports, or the true one is nearly parallel to the "
+                    "viewing direction"
                 ),
             )
         return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+
+
+#: Least share of the cloud on the camera's side of a plane hypothesis: a plane in front of
+#: every visible point would mirror the object toward the camera, where it was not seen.
+MIN_CAMERA_SIDE_SHARE = 0.02
+
+
+def mirrored_points(
+    points_m: np.ndarray, theta_rad: np.ndarray, offset_m: np.ndarray
+) -> np.ndarray:
+    """``(H, N, 3)`` the cloud mirrored in each vertical plane ``n(theta) . p = offset``."""
+    normals = np.column_stack([np.cos(theta_rad), np.sin(theta_rad), np.zeros(len(theta_rad))])
+    signed = normals[:, :2] @ np.asarray(points_m)[:, :2].T - offset_m[:, None]
+    return points_m[None, :, :] - 2.0 * signed[:, :, None] * normals[:, None, :]
+
+
+def mirrored_out_of_view(
+    points_m: np.ndarray,
+    theta_rad: np.ndarray,
+    offset_m: np.ndarray,
+    intrinsics,
+    T_robot_camera: np.ndarray,
+    chunk: int = 32,
+) -> np.ndarray:
+    """``(H,)`` how many mirrored points of each hypothesis fall outside the image or
+    behind the camera. The camera's view there says nothing for or against them, but an
+    object standing in view has its hidden side in view too: a plane that throws part
+    of it out of the picture is not the object's (a can in front of a box mirrored
+    toward the camera lands below the image)."""
+    counts = np.zeros(len(theta_rad), dtype=np.int64)
+    for start in range(0, len(theta_rad), chunk):
+        block = slice(start, start + chunk)
+        rows, cols, depth = project_points(
+            mirrored_points(points_m, theta_rad[block], offset_m[block]),
+            intrinsics,
+            T_robot_camera,
+        )
+        inside = (rows >= 0) & (rows < intrinsics.height) & (cols >= 0) & (cols < intrinsics.width)
+        counts[block] = np.count_nonzero(~(inside & (depth > 0.0)), axis=1)
+    return counts
+
+
+def camera_side_share(
+    points_m: np.ndarray, theta_rad: np.ndarray, offset_m: np.ndarray, camera_m: np.ndarray
+) -> np.ndarray:
+    """``(H,)`` share of the cloud on the camera's side of each vertical plane hypothesis."""
+    normals = np.column_stack([np.cos(theta_rad), np.sin(theta_rad)])
+    signed = normals @ np.asarray(points_m)[:, :2].T - offset_m[:, None]
+    camera_side = np.sign(normals @ np.asarray(camera_m)[:2] - offset_m)
+    return np.mean(signed * camera_side[:, None] > 0.0, axis=1)
 
 
 def tie_spread(

@@ -3,13 +3,11 @@ no support (a lone carton) is exit 2; a room scan never raises."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
+from box_scenes import points_camera, ray_cast, write_capture
 
 from pipeline.cli import main
-from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.perception.clustering import voxel_subsample_indices
 from pipeline.perception.segmentation import merge_overlapping_footprints
 from pipeline.perception.support import fit_support_plane
@@ -20,53 +18,6 @@ from pipeline.poses import look_at
 TABLE = ((-0.5, -0.8, -0.03), (0.8, 0.8, 0.0))
 WALL = ((1.0, -3.0, -0.8), (1.05, 3.0, 2.5))
 MUG_SIZED_BOX = ((0.0, -0.04, 0.0), (0.08, 0.04, 0.1))
-
-
-def ray_cast(boxes, T_robot_camera: np.ndarray, stride: int = 2) -> np.ndarray:
-    """Depth image (every ``stride``-th Kinect pixel, m, NaN = no hit) of axis-aligned
-    boxes seen from ``T_robot_camera`` (slab test per box, nearest hit per ray)."""
-    rows, cols = np.mgrid[0 : KINECT.height : stride, 0 : KINECT.width : stride]
-    rays_camera = np.stack(
-        [(cols - KINECT.cx) / KINECT.fx, (rows - KINECT.cy) / KINECT.fy, np.ones(rows.shape)],
-        axis=-1,
-    )
-    rays = rays_camera @ T_robot_camera[:3, :3].T
-    origin = T_robot_camera[:3, 3]
-    depth = np.full(rows.shape, np.inf)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for low, high in boxes:
-            t0 = (np.asarray(low) - origin) / rays
-            t1 = (np.asarray(high) - origin) / rays
-            near = np.minimum(t0, t1).max(axis=-1)
-            far = np.maximum(t0, t1).min(axis=-1)
-            hit = (near <= far) & (near > 0.0)
-            depth = np.where(hit & (near < depth), near, depth)
-    return np.where(np.isfinite(depth), depth, np.nan).astype(np.float32)
-
-
-def points_camera(depth: np.ndarray, stride: int = 2) -> np.ndarray:
-    rows, cols = np.nonzero(np.isfinite(depth))
-    z = depth[rows, cols].astype(np.float64)
-    u, v = cols * stride, rows * stride
-    return np.column_stack([(u - KINECT.cx) * z / KINECT.fx, (v - KINECT.cy) * z / KINECT.fy, z])
-
-
-def write_capture(folder, depth: np.ndarray, stride: int = 2):
-    """``depth.npy`` and its camera.json (no robot frame: symfuse builds it on the support)."""
-    k = KINECT
-    camera = {
-        "intrinsics": {
-            "width": depth.shape[1],
-            "height": depth.shape[0],
-            "fx": k.fx / stride,
-            "fy": k.fy / stride,
-            "cx": k.cx / stride,
-            "cy": k.cy / stride,
-        }
-    }
-    (folder / "camera.json").write_text(json.dumps(camera))
-    np.save(folder / "depth.npy", depth)
-    return folder / "depth.npy"
 
 
 @pytest.fixture(scope="module")
