@@ -32,14 +32,14 @@ def test_camera_side_share_by_hand():
     np.testing.assert_allclose(share, [0.0, 1.0, 5 / 11])
 
 
-def test_points_mirrored_behind_the_camera_or_off_the_image_are_counted():
+def test_the_share_of_points_mirrored_off_the_image_by_hand():
     k = CameraIntrinsics(width=100, height=100, fx=100.0, fy=100.0, cx=50.0, cy=50.0)
     T = np.eye(4)  # camera at the origin looking along +z of frame R
     points = np.array([[0.0, 0.0, 1.0], [0.2, 0.0, 1.0]])
     # Mirrored in the plane x = 0.1: the points swap; in x = 0.6: x = 1.2 and 1.0, both
     # off the image (|x / z| > 0.5); in x = 0 the second one lands at x = -0.2, in view.
     counts = mirrored_out_of_view(points, np.zeros(3), np.array([0.1, 0.6, 0.0]), k, T)
-    np.testing.assert_array_equal(counts, [0, 2, 0])
+    np.testing.assert_array_equal(counts, [0.0, 1.0, 0.0])
 
 
 def block_view(boxes, azimuth_deg: float):

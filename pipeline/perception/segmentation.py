@@ -155,15 +155,22 @@ def merge_overlapping_footprints(
     return np.where(merged >= 0, renumbered - int(np.any(merged < 0)), -1)
 
 
-def outside_view(valid: np.ndarray) -> np.ndarray:
-    """``(H, W) bool``: the pixels outside the view, i.e. without depth and connected
-    (4-neighbours) to the image border, like the band a Kinect returns nothing in along
-    its edges. Shadows and dark spots inside the view are not part of it."""
+def outside_view(valid: np.ndarray, band_px: int) -> np.ndarray:
+    """``(H, W) bool``: the pixels outside the view: the image border, and the pixels
+    without depth within ``band_px`` of it that connect (4-neighbours) to it, like the
+    band a Kinect returns nothing in along its edges. A no-data region reaching further in
+    (a black or shiny background, a cloud cropped to a box) is not the edge of the view:
+    an object in front of it is seen whole, and shadows and dark spots inside the view
+    are not part of it either."""
     from scipy import ndimage
 
     labels, _ = ndimage.label(~np.asarray(valid, dtype=bool))
     border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
     outside = np.isin(labels, border[border > 0])
+    height, width = outside.shape
+    rows, cols = np.ogrid[:height, :width]
+    distance = np.minimum(np.minimum(rows, height - 1 - rows), np.minimum(cols, width - 1 - cols))
+    outside &= distance < band_px
     outside[[0, -1], :] = True
     outside[:, [0, -1]] = True
     return outside

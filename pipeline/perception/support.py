@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .clustering import voxel_subsample_indices
 from .table import refit_until_settled
 
 
@@ -104,7 +103,13 @@ def fit_support_plane(
     points = np.asarray(points_camera, dtype=np.float64)
     if len(points) < 3:
         raise ValueError(f"a plane needs at least 3 points, got {len(points)}")
-    grid = points[voxel_subsample_indices(points, voxel_m)] if voxel_m > 0.0 else points
+    grid = points
+    if voxel_m > 0.0:
+        from pipeline.open3d_loader import open3d
+
+        o3d = open3d()
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+        grid = np.asarray(cloud.voxel_down_sample(voxel_m).points)
     if len(grid) < 3:
         raise ValueError("fewer than 3 points are left on the voxel grid")
     planes = candidate_planes(
