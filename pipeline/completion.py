@@ -37,9 +37,6 @@ from .types import (
 
 #: Pixels between an object and the edge of the view below which it is set aside.
 VIEW_EDGE_MARGIN_PX = 2
-#: Width (px) of the band along the image border where pixels without depth are outside
-#: the view (a depth camera returns nothing along its edges).
-VIEW_EDGE_BAND_PX = 16
 #: What ``--object`` accepts besides an object number.
 OBJECT_CHOICES = ("all", "largest", "nearest")
 
@@ -93,7 +90,7 @@ def segment_scene(
     Raises:
         StageFailure: no object, or every object touches the edge of the view.
     """
-    outside = outside_view(np.isfinite(observation.depth_m), VIEW_EDGE_BAND_PX)
+    outside = outside_view(np.isfinite(observation.depth_m))
     objects, set_aside = [], []
     for cloud in segmenter.segment_objects(observation):
         if touches_view_edge(cloud.pixels, outside, VIEW_EDGE_MARGIN_PX):

@@ -155,24 +155,33 @@ def merge_overlapping_footprints(
     return np.where(merged >= 0, renumbered - int(np.any(merged < 0)), -1)
 
 
-def outside_view(valid: np.ndarray, band_px: int) -> np.ndarray:
-    """``(H, W) bool``: the pixels outside the view: the image border, and the pixels
-    without depth within ``band_px`` of it that connect (4-neighbours) to it, like the
-    band a Kinect returns nothing in along its edges. A no-data region reaching further in
-    (a black or shiny background, a cloud cropped to a box) is not the edge of the view:
-    an object in front of it is seen whole, and shadows and dark spots inside the view
-    are not part of it either."""
-    from scipy import ndimage
+#: A row or column along the image border is a dead margin when fewer than this share of
+#: its pixels have depth.
+MARGIN_VALID_SHARE = 0.1
 
-    labels, _ = ndimage.label(~np.asarray(valid, dtype=bool))
-    border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
-    outside = np.isin(labels, border[border > 0])
-    height, width = outside.shape
-    rows, cols = np.ogrid[:height, :width]
-    distance = np.minimum(np.minimum(rows, height - 1 - rows), np.minimum(cols, width - 1 - cols))
-    outside &= distance < band_px
-    outside[[0, -1], :] = True
-    outside[:, [0, -1]] = True
+
+def outside_view(valid: np.ndarray) -> np.ndarray:
+    """``(H, W) bool``: the pixels outside the view: the image's dead margins (the rows
+    and columns along each border in which fewer than :data:`MARGIN_VALID_SHARE` of the
+    pixels have depth, like the band a Kinect returns nothing in along its edges) and the
+    outermost row or column inside them. A no-data region inside the view (a black or
+    shiny background, a cloud cropped to a box, a shadow) is not its edge: an object in
+    front of it was seen whole."""
+    valid = np.asarray(valid, dtype=bool)
+    height, width = valid.shape
+
+    def margin(shares: np.ndarray) -> int:
+        alive = np.flatnonzero(shares >= MARGIN_VALID_SHARE)
+        return int(alive[0]) if len(alive) else len(shares)
+
+    rows, cols = valid.mean(axis=1), valid.mean(axis=0)
+    top, bottom = margin(rows), margin(rows[::-1])
+    left, right = margin(cols), margin(cols[::-1])
+    outside = np.zeros((height, width), dtype=bool)
+    outside[: top + 1] = True
+    outside[height - bottom - 1 :] = True
+    outside[:, : left + 1] = True
+    outside[:, width - right - 1 :] = True
     return outside
 
 
