@@ -109,6 +109,7 @@ class TableCluster(Segmenter):
                 observation.intrinsics,
                 observation.T_robot_camera,
                 table,
+                backprojected=(points, pixels),
                 min_height_m=p.min_height_m,
                 max_height_m=p.max_height_m,
                 eps_m=p.eps_m,

@@ -205,6 +205,7 @@ def segment_image(
     T_robot_camera: np.ndarray,
     table: TablePlane,
     *,
+    backprojected: tuple[np.ndarray, np.ndarray] | None = None,
     min_height_m: float = 0.02,
     max_height_m: float = np.inf,
     eps_m: float = 0.01,
@@ -223,6 +224,7 @@ def segment_image(
     Args:
         depth_m, intrinsics, T_robot_camera: the view (:func:`backproject_depth`).
         table: the supporting plane, frame R.
+        backprojected: the view's points and pixels when the caller has them already.
         min_height_m, max_height_m: the band of heights above the table kept.
         eps_m: largest gap between neighbouring pixels' points of one region at 1 m depth
             (scaled with the depth, as the pixels' spacing is).
@@ -240,7 +242,7 @@ def segment_image(
     from .surfaces import concave_creases, connected_regions, image_normals
 
     depth = np.asarray(depth_m, dtype=np.float64)
-    points_list, pixels = backproject_depth(depth, intrinsics, T_robot_camera)
+    points_list, pixels = backprojected or backproject_depth(depth, intrinsics, T_robot_camera)
     shape = depth.shape
     points = np.full((*shape, 3), np.nan)
     points[pixels[:, 0], pixels[:, 1]] = points_list
