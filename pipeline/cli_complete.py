@@ -120,7 +120,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def scene_table(scene: SceneCompletion) -> str:
-    """One row per object: number, points, footprint, plane, status."""
+    """One row per object: number, points, footprint, plane, status; then one per cluster
+    set aside at the edge of the view."""
     import numpy as np
 
     from .tables import format_table
@@ -140,6 +141,10 @@ def scene_table(scene: SceneCompletion) -> str:
                 completion.status,
             ]
         )
+    rows += [
+        ["-", points, "-", "-", "-", "-", "set aside: at the edge of the view"]
+        for points in scene.set_aside
+    ]
     header = ["object", "points", "footprint mm", "height mm", "plane θ°", "offset mm", "status"]
     return format_table(header, rows)
 

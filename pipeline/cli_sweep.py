@@ -36,6 +36,21 @@ def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
     return Path(args.scans).resolve()
 
 
+def _captures_folder(args: argparse.Namespace, experiment) -> Path | None:
+    """``--captures DIR``, for an experiment that reads recorded captures.
+
+    Raises:
+        ConfigError: the experiment reads none.
+    """
+    if args.captures is None:
+        return None
+    if not getattr(experiment, "reads_captures", False):
+        raise ConfigError(
+            f"--captures: experiment '{args.experiment}' reads no captures (scenes does)"
+        )
+    return Path(args.captures).resolve()
+
+
 def run(args: argparse.Namespace) -> int:
     from .config import changed_settings, load_config
     from .experiments import EXPERIMENTS, ExperimentOptions
@@ -73,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
         repeats=args.repeats,
         out_dir=out.resolve(),
         scans=_scans_folder(args, experiment),
+        captures=_captures_folder(args, experiment),
     )
     tasks = experiment.tasks(options)
     if "use" in user.get("planner", {}):
@@ -144,6 +160,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         type=Path,
         metavar="DIR",
         help="explore: also grasp every scanned mesh DIR/*/textured.obj (e.g. YCB scans)",
+    )
+    parser.add_argument(
+        "--captures",
+        type=Path,
+        metavar="DIR",
+        help="scenes: the labelled captures DIR/**/*.pcd (a 'label' field, OSD convention)",
     )
     parser.add_argument("--seed", type=counting_number(0), default=0, help="base seed (default 0)")
     parser.add_argument(

@@ -48,7 +48,9 @@ class ObjectCompletion:
     Attributes:
         index: its number (0 = the largest object).
         cloud: its points, frame R, with their pixels.
-        status: ``"not selected"``, ``"rejected"`` (the initialiser found no usable plane),
+        status: ``"not selected"``, ``"asymmetric"`` (without contacts: the initialiser
+            found no mirror plane the view supports; the visible cloud is the object, with
+            no mirrored half), ``"rejected"`` (the same with contacts to fuse),
             ``"completed"`` (Stage 0 without contacts), or the fused estimate's status.
         init: the initialiser's output, when it ran.
         result: Stage 0 (and 1, 2 when fused), when there is one.
@@ -157,6 +159,9 @@ def complete_object(
     init = proposal
     if grasps:
         init = initialiser.refine(proposal, cloud, plans[0] if plans else None, grasps[0])
+    if init.status != "ok" and not grasps:
+        # No mirror plane the view supports: the object is what was seen of it.
+        return ObjectCompletion(index, cloud, "asymmetric", init, reason=init.reason)
     if init.status != "ok":
         return ObjectCompletion(index, cloud, "rejected", init, reason=init.reason)
     if not grasps:

@@ -22,9 +22,12 @@ class Recorded(SensorSource):
 
     Reads ``path`` (see :mod:`pipeline.captures` and :mod:`pipeline.bags`) and ignores the
     world. When the recording has no robot frame (no ``T_robot_camera`` in camera.json, no
-    /tf in the bag) the frame is built on the support plane: the dominant plane of the
-    scene (open3d RANSAC), z up along its normal, x along the optical axis projected on it,
-    table height 0. Without a colour image, ``rgb`` holds the depth in grey levels.
+    /tf in the bag) the frame is built on the support plane: among the scene's dominant
+    planes (open3d RANSAC), the one below the camera with something standing on it,
+    facing up in the image where one does (a table, not the wall behind it; see
+    :func:`~pipeline.perception.support.fit_support_plane`), z up along its normal, x
+    along the optical axis projected on it, table height 0. Without a colour image,
+    ``rgb`` holds the depth in grey levels.
     """
 
     name = "recorded"
@@ -45,7 +48,10 @@ class Recorded(SensorSource):
         )
         plane_seed: int = param(0, "support plane: RANSAC seed")
         min_plane_fraction: float = param(
-            0.1, "support plane: least fraction of the valid pixels on it", above=0.0, at_most=1.0
+            0.1,
+            "support plane: least fraction of the valid pixels (and of the voxels) on it",
+            above=0.0,
+            at_most=1.0,
         )
 
     def read(self) -> Capture:
@@ -72,6 +78,7 @@ class Recorded(SensorSource):
                 iterations=p.plane_iterations,
                 voxel_m=p.plane_voxel_m,
                 seed=p.plane_seed,
+                min_fraction=p.min_plane_fraction,
             )
         except ValueError as exc:
             raise InputError(f"{capture.source}: no support plane: {exc}") from None

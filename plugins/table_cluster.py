@@ -11,7 +11,7 @@ from pipeline import hookimpl
 from pipeline.errors import StageFailure
 from pipeline.params import check_ordered, param
 from pipeline.perception.depth import backproject_depth
-from pipeline.perception.segmentation import segment_points
+from pipeline.perception.segmentation import segment_image, segment_points
 from pipeline.perception.table import resolve_table
 from pipeline.stages import Segmenter
 from pipeline.types import DepthObservation, PointCloud
@@ -42,8 +42,12 @@ class TableCluster(Segmenter):
         max_height_m: float = param(
             1.0, "drop points higher than this above the table (m)", above=0.0
         )
-        method: Literal["dbscan", "euclidean"] = param(
-            "dbscan", "clustering: DBSCAN, or Euclidean (single linkage, min_points ignored)"
+        method: Literal["auto", "dbscan", "euclidean", "convex"] = param(
+            "auto",
+            "clustering: DBSCAN, Euclidean (single linkage, min_points ignored), convex "
+            "regions of the depth image cut at concave creases and depth steps (objects that "
+            "touch or stand on each other come apart), or auto: DBSCAN for a trial's one "
+            "object (the paper's rule), convex for every object of a scene (symfuse complete)",
         )
         eps_m: float = param(0.01, "neighbourhood radius of the clustering (m)", above=0.0)
         min_points: int = param(
@@ -73,10 +77,15 @@ class TableCluster(Segmenter):
         check_ordered(self.params, f"segmenter.{self.name}", "min_height_m", "max_height_m")
 
     def segment(self, observation: DepthObservation) -> PointCloud:
-        return self.segment_objects(observation)[0]
+        method = "dbscan" if self.params.method == "auto" else self.params.method
+        return self._objects(observation, method)[0]
 
     def segment_objects(self, observation: DepthObservation) -> tuple[PointCloud, ...]:
         """Every cluster of at least ``min_object_points`` points, the largest first."""
+        method = "convex" if self.params.method == "auto" else self.params.method
+        return self._objects(observation, method)
+
+    def _objects(self, observation: DepthObservation, method: str) -> tuple[PointCloud, ...]:
         p = self.params
         points, pixels = backproject_depth(
             observation.depth_m, observation.intrinsics, observation.T_robot_camera
@@ -94,15 +103,28 @@ class TableCluster(Segmenter):
             )
         except ValueError as error:
             raise StageFailure(f"segmenter 'table-cluster': no table plane: {error}") from error
-        result = segment_points(
-            points,
-            table,
-            min_height_m=p.min_height_m,
-            max_height_m=p.max_height_m,
-            eps_m=p.eps_m,
-            min_points=1 if p.method == "euclidean" else p.min_points,
-            voxel_m=p.voxel_m,
-        )
+        if method == "convex":
+            result = segment_image(
+                observation.depth_m,
+                observation.intrinsics,
+                observation.T_robot_camera,
+                table,
+                backprojected=(points, pixels),
+                min_height_m=p.min_height_m,
+                max_height_m=p.max_height_m,
+                eps_m=p.eps_m,
+                min_points=p.min_points,
+            )
+        else:
+            result = segment_points(
+                points,
+                table,
+                min_height_m=p.min_height_m,
+                max_height_m=p.max_height_m,
+                eps_m=p.eps_m,
+                min_points=1 if method == "euclidean" else p.min_points,
+                voxel_m=p.voxel_m,
+            )
         if len(result.indices) < p.min_object_points:
             raise StageFailure(
                 f"segmenter 'table-cluster': largest cluster has {len(result.indices)} points "

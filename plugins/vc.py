@@ -127,6 +127,13 @@ class VcInitialiser(SymmetryInitialiser):
             tolerance_m=p.tolerance_m,
         )
         theta, offset = grid.theta_rad.ravel(), grid.offset_m.ravel()
+        out_of_view = mirrored_out_of_view(
+            cloud.points, theta, offset, observation.intrinsics, observation.T_robot_camera
+        )
+        violations = violations + np.rint(out_of_view * len(cloud)).astype(np.int64)
+        camera = np.asarray(observation.T_robot_camera)[:3, 3]
+        in_front = camera_side_share(cloud.points, theta, offset, camera) < MIN_CAMERA_SIDE_SHARE
+        violations = np.where(in_front, len(cloud), violations)
         spread = tie_spread(cloud.points, theta, offset, violations, depth_sum)
         order = np.lexsort((spread, depth_sum, violations))
         hypotheses = tuple(
@@ -147,12 +154,67 @@ class VcInitialiser(SymmetryInitialiser):
                 status="rejected",
                 reason=(
                     f"the best of {len(hypotheses)} plane hypotheses puts {best.score:.0%} of "
-                    f"the mirrored points in free space (max_violation_fraction = "
-                    f"{p.max_violation_fraction:.0%}); the true plane may be nearly parallel "
-                    "to the viewing direction"
+                    "the mirrored points in seen free space or out of view "
+                    f"(max_violation_fraction = {p.max_violation_fraction:.0%}): no mirror "
+                    "plane the view supports, or the true one is nearly parallel to the "
+                    "viewing direction"
                 ),
             )
         return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+
+
+#: Least share of the cloud on the camera's side of a plane hypothesis: a plane in front of
+#: every visible point would mirror the object toward the camera, where it was not seen.
+MIN_CAMERA_SIDE_SHARE = 0.02
+
+
+#: Points of the cloud (an even subsample) the out-of-view and in-front checks look at.
+CHECK_POINTS = 500
+
+
+def check_sample(points_m: np.ndarray) -> np.ndarray:
+    """At most about :data:`CHECK_POINTS` of the cloud, evenly spread over its order."""
+    return np.asarray(points_m)[:: max(1, len(points_m) // CHECK_POINTS)]
+
+
+def mirrored_out_of_view(
+    points_m: np.ndarray,
+    theta_rad: np.ndarray,
+    offset_m: np.ndarray,
+    intrinsics,
+    T_robot_camera: np.ndarray,
+) -> np.ndarray:
+    """``(H,)`` share of the cloud (:func:`check_sample`) each hypothesis mirrors outside
+    the image or behind the camera. The camera's view there says nothing for or against
+    those points, but an object standing in view has its hidden side in view too: a plane
+    that throws part of it out of the picture is not the object's (a can in front of a box
+    mirrored toward the camera lands below the image).
+
+    Mirroring is affine, so in camera coordinates ``q' = q - 2 (n . p - m) R^T n``."""
+    points = check_sample(points_m)
+    T = np.asarray(T_robot_camera, dtype=np.float64)
+    q = (points - T[:3, 3]) @ T[:3, :3]
+    normals = np.column_stack([np.cos(theta_rad), np.sin(theta_rad), np.zeros(len(theta_rad))])
+    twice_signed = 2.0 * (normals[:, :2] @ points[:, :2].T - offset_m[:, None])
+    normals_camera = normals @ T[:3, :3]
+    x, y, z = (q[None, :, k] - twice_signed * normals_camera[:, k, None] for k in range(3))
+    k = intrinsics
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = k.fx * x / z + k.cx
+        v = k.fy * y / z + k.cy
+    inside = (z > 0.0) & (u > -0.5) & (u < k.width - 0.5) & (v > -0.5) & (v < k.height - 0.5)
+    return 1.0 - inside.mean(axis=1)
+
+
+def camera_side_share(
+    points_m: np.ndarray, theta_rad: np.ndarray, offset_m: np.ndarray, camera_m: np.ndarray
+) -> np.ndarray:
+    """``(H,)`` share of the cloud (:func:`check_sample`) on the camera's side of each
+    vertical plane hypothesis."""
+    normals = np.column_stack([np.cos(theta_rad), np.sin(theta_rad)])
+    signed = normals @ check_sample(points_m)[:, :2].T - offset_m[:, None]
+    camera_side = np.sign(normals @ np.asarray(camera_m)[:2] - offset_m)
+    return np.mean(signed * camera_side[:, None] > 0.0, axis=1)
 
 
 def tie_spread(

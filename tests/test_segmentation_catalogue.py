@@ -1,8 +1,8 @@
-"""open3d's DBSCAN, voxel grid and RANSAC segment the catalogue scenes as the textbook
-definitions do.
+"""DBSCAN (scipy), the voxel grid and RANSAC (open3d) segment the catalogue scenes as the
+textbook definitions do.
 
 Every catalogue object stands on the table in PyBullet and the simulated Kinect (noise on)
-sees it; the scene cloud is segmented with :mod:`pipeline.perception` (open3d) and compared
+sees it; the scene cloud is segmented with :mod:`pipeline.perception` and compared
 with independent numpy/scipy references of the same definitions written here:
 
 * DBSCAN: core points and their clusters are defined uniquely, so they must match exactly;

@@ -68,6 +68,8 @@ class ExperimentOptions:
             trial's files under ``out_dir/trials/<key>/`` (None: trials are not kept).
         scans: a folder of scanned meshes (``*/textured.obj``) for the experiments that
             read one (``READS_SCANS = True`` in their module), or None.
+        captures: a folder of labelled recorded captures (``*.pcd``) for the experiments
+            that read one (``READS_CAPTURES = True``), or None.
     """
 
     estimator: str = "iekf"
@@ -78,3 +80,4 @@ class ExperimentOptions:
     repeats: int | None = None
     out_dir: Path | None = None
     scans: Path | None = None
+    captures: Path | None = None

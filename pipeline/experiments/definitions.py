@@ -196,6 +196,10 @@ class ModuleExperiment:
         return getattr(self.module, "READS_SCANS", False)
 
     @property
+    def reads_captures(self) -> bool:
+        return getattr(self.module, "READS_CAPTURES", False)
+
+    @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]:
         return self.module.run_one
 
@@ -250,6 +254,7 @@ _ROWS: tuple[Experiment, ...] = (
     ModuleExperiment("kth", "pipeline.experiments.kth"),
     ModuleExperiment("init", "pipeline.experiments.init"),
     ModuleExperiment("explore", "pipeline.experiments.explore"),
+    ModuleExperiment("scenes", "pipeline.experiments.scenes"),
 )
 
 #: Experiment name -> its definition.

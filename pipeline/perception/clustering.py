@@ -1,4 +1,4 @@
-"""Clustering and subsampling of point clouds, with open3d.
+"""Clustering (scipy) and subsampling (open3d) of point clouds.
 
 open3d is imported where it is used: :mod:`pipeline.perception` loads this module, and the
 plugins that import from that package must stay quick to import (``symfuse plugins``).
@@ -20,35 +20,48 @@ def dbscan_labels(points: np.ndarray, eps_m: float, min_points: int) -> np.ndarr
     """DBSCAN cluster labels ``(N,)`` int: 0, 1, ... per cluster, -1 for noise.
 
     A point is *core* when at least ``min_points`` points, itself included, lie within
-    ``eps_m``; clusters are the connected components of core points linked by ``eps_m``
-    (open3d's ``cluster_dbscan``), numbered in the order of their first core point; a
-    non-core point within ``eps_m`` of a core point joins the cluster of the nearest one;
-    the rest is noise. open3d gives such a border point to whichever cluster reaches it
-    first, which depends on the order of the points; taking the nearest core point instead
-    makes the segmentation of a scene independent of how its points are ordered (a depth
-    image and the point cloud made from it). With ``min_points = 1`` it is plain Euclidean
-    (single-linkage) clustering.
+    ``eps_m``; clusters are the connected components of core points linked by ``eps_m``,
+    numbered in the order of their first core point; a non-core point within ``eps_m`` of
+    a core point joins the cluster of the nearest one; the rest is noise. (open3d's
+    ``cluster_dbscan`` gives such a border point to whichever cluster reaches it first,
+    which depends on the order of the points; the nearest core point makes the
+    segmentation of a scene independent of how its points are ordered.) With
+    ``min_points = 1`` it is plain Euclidean (single-linkage) clustering. Written on
+    scipy's k-d tree and graph components: the same partition as open3d's, without
+    loading open3d.
 
     Args:
         points: ``(N, 3)`` coordinates (metres).
         eps_m: neighbourhood radius.
         min_points: neighbours (self included) that make a point core.
     """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
     points = np.asarray(points, dtype=np.float64)
-    if len(points) == 0:
-        return np.zeros(0, dtype=np.int64)
-    labels = np.asarray(
-        _cloud(points).cluster_dbscan(eps_m, min_points, print_progress=False), dtype=np.int64
-    )
+    labels = np.full(len(points), -1, dtype=np.int64)
     tree = cKDTree(points)
-    core = tree.query_ball_point(points, eps_m, return_length=True) >= min_points
-    border = np.flatnonzero((labels >= 0) & ~core)
-    if len(border):
-        core_index = np.flatnonzero(core)
-        _, nearest = cKDTree(points[core_index]).query(points[border])
-        labels[border] = labels[core_index[nearest]]
+    core = np.flatnonzero(tree.query_ball_point(points, eps_m, return_length=True) >= min_points)
+    if len(core) == 0:
+        return labels
+    core_tree = cKDTree(points[core])
+    pairs = core_tree.query_pairs(eps_m, output_type="ndarray")
+    graph = coo_matrix(
+        (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])),
+        shape=(len(core), len(core)),
+    )
+    _, component = connected_components(graph, directed=False)
+    # Components are numbered by their first core point (core is sorted by index).
+    _, first = np.unique(component, return_index=True)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))
+    labels[core] = rank[component]
+    others = np.setdiff1d(np.arange(len(points)), core, assume_unique=True)
+    if len(others):
+        distance, nearest = core_tree.query(points[others])
+        border = distance <= eps_m
+        labels[others[border]] = labels[core[nearest[border]]]
     return labels
 
 

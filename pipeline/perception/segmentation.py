@@ -78,8 +78,16 @@ def segment_points(
     )
 
 
+#: How far outside a footprint's hull (m) a point still counts as inside it: rounding.
+HULL_TOLERANCE_M = 1e-12
+
+
 def merge_overlapping_footprints(
-    points_robot: np.ndarray, labels: np.ndarray, table: TablePlane, gap_m: float = 0.0
+    points_robot: np.ndarray,
+    labels: np.ndarray,
+    table: TablePlane,
+    gap_m: float = 0.0,
+    min_height_overlap: float = 0.0,
 ) -> np.ndarray:
     """``labels`` (``-1``: noise) with every two clusters merged when a point of one lies
     within ``gap_m`` of the convex hull of the other's footprint (its points projected
@@ -87,14 +95,22 @@ def merge_overlapping_footprints(
 
     The hull is dilated by ``gap_m`` as a 16-gon about each vertex (within 2 % of a
     disc): two parts of one object whose footprints nearly touch, apart in space only
-    because the surface joining them is unseen or sparse, are then one object."""
-    from scipy.spatial import ConvexHull, Delaunay
+    because the surface joining them is unseen or sparse, are then one object.
+
+    With ``min_height_overlap > 0`` two clusters are merged only when their ranges of
+    height above the table overlap by at least that fraction of the shorter range: a box
+    standing on another has its footprint inside the lower one's but starts where the
+    lower one ends, while a container's near wall and the far wall seen over its rim
+    span the same heights."""
+    from scipy.spatial import ConvexHull
 
     normal = np.asarray(table.normal, dtype=np.float64)
     u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
     u /= np.linalg.norm(u)
     flat = points_robot @ np.column_stack([u, np.cross(normal, u)])
     count = int(labels.max()) + 1 if len(labels) else 0
+    if count == 0:
+        return labels
     parent = np.arange(count)
     angles = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)
     disc = gap_m * np.column_stack([np.cos(angles), np.sin(angles)])
@@ -104,36 +120,68 @@ def merge_overlapping_footprints(
             i = parent[i]
         return i
 
+    clustered = np.flatnonzero(labels >= 0)
+    order = clustered[np.argsort(labels[clustered], kind="stable")]
+    members = np.split(order, np.cumsum(np.bincount(labels[clustered], minlength=count))[:-1])
+    height = table.height_m(points_robot)
+    spans = np.array([[height[m].min(), height[m].max()] for m in members]).reshape(-1, 2)
+    low = np.array([flat[m].min(axis=0) for m in members]).reshape(-1, 2)
+    high = np.array([flat[m].max(axis=0) for m in members]).reshape(-1, 2)
+
+    def stacked(i: int, j: int) -> bool:
+        overlap = min(spans[i, 1], spans[j, 1]) - max(spans[i, 0], spans[j, 0])
+        shorter = min(spans[i, 1] - spans[i, 0], spans[j, 1] - spans[j, 0])
+        return overlap < min_height_overlap * shorter
+
     for i in range(count):
-        footprint = flat[labels == i]
+        footprint = flat[members[i]]
         # Joggled ("QJ"): a footprint on one line, or of a point or two, still has a hull.
         outline = footprint[ConvexHull(footprint, qhull_options="QJ").vertices]
         dilated = (outline[:, None, :] + disc[None, :, :]).reshape(-1, 2)
-        hull = Delaunay(dilated[ConvexHull(dilated, qhull_options="QJ").vertices])
-        # Only points within the dilated footprint's bounding box can lie inside it.
-        near = np.flatnonzero(
-            np.all((flat >= dilated.min(axis=0)) & (flat <= dilated.max(axis=0)), axis=1)
-        )
-        inside = near[hull.find_simplex(flat[near]) >= 0]
-        for j in np.unique(labels[inside][labels[inside] >= 0]):
-            parent[root(int(j))] = root(i)
+        facets = ConvexHull(dilated, qhull_options="QJ").equations
+        # Only clusters whose bounding boxes meet the dilated footprint's can reach into it.
+        box_low, box_high = dilated.min(axis=0), dilated.max(axis=0)
+        candidates = np.flatnonzero(np.all((low <= box_high) & (high >= box_low), axis=1))
+        for j in candidates:
+            # Inside the hull: on the inner side of every facet (a x + b <= 0).
+            outside = flat[members[j]] @ facets[:, :2].T + facets[:, 2] > HULL_TOLERANCE_M
+            if j != i and outside.any(axis=1).all():
+                continue
+            if min_height_overlap == 0.0 or not stacked(i, int(j)):
+                parent[root(int(j))] = root(i)
     roots = np.array([root(i) for i in range(count)], dtype=np.int64)
     merged = np.where(labels >= 0, roots[np.maximum(labels, 0)], -1)
     _, renumbered = np.unique(merged, return_inverse=True)
     return np.where(merged >= 0, renumbered - int(np.any(merged < 0)), -1)
 
 
-def outside_view(valid: np.ndarray) -> np.ndarray:
-    """``(H, W) bool``: the pixels outside the view, i.e. without depth and connected
-    (4-neighbours) to the image border, like the band a Kinect returns nothing in along
-    its edges. Shadows and dark spots inside the view are not part of it."""
-    from scipy import ndimage
+#: A row or column along the image border is a dead margin when fewer than this share of
+#: its pixels have depth.
+MARGIN_VALID_SHARE = 0.1
 
-    labels, _ = ndimage.label(~np.asarray(valid, dtype=bool))
-    border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
-    outside = np.isin(labels, border[border > 0])
-    outside[[0, -1], :] = True
-    outside[:, [0, -1]] = True
+
+def outside_view(valid: np.ndarray) -> np.ndarray:
+    """``(H, W) bool``: the pixels outside the view: the image's dead margins (the rows
+    and columns along each border in which fewer than :data:`MARGIN_VALID_SHARE` of the
+    pixels have depth, like the band a Kinect returns nothing in along its edges) and the
+    outermost row or column inside them. A no-data region inside the view (a black or
+    shiny background, a cloud cropped to a box, a shadow) is not its edge: an object in
+    front of it was seen whole."""
+    valid = np.asarray(valid, dtype=bool)
+    height, width = valid.shape
+
+    def margin(shares: np.ndarray) -> int:
+        alive = np.flatnonzero(shares >= MARGIN_VALID_SHARE)
+        return int(alive[0]) if len(alive) else len(shares)
+
+    rows, cols = valid.mean(axis=1), valid.mean(axis=0)
+    top, bottom = margin(rows), margin(rows[::-1])
+    left, right = margin(cols), margin(cols[::-1])
+    outside = np.zeros((height, width), dtype=bool)
+    outside[: top + 1] = True
+    outside[height - bottom - 1 :] = True
+    outside[:, : left + 1] = True
+    outside[:, width - right - 1 :] = True
     return outside
 
 
@@ -149,3 +197,87 @@ def touches_view_edge(pixels: np.ndarray, outside: np.ndarray, margin_px: int) -
             if outside[r, c].any():
                 return True
     return False
+
+
+def segment_image(
+    depth_m: np.ndarray,
+    intrinsics,
+    T_robot_camera: np.ndarray,
+    table: TablePlane,
+    *,
+    backprojected: tuple[np.ndarray, np.ndarray] | None = None,
+    min_height_m: float = 0.02,
+    max_height_m: float = np.inf,
+    eps_m: float = 0.01,
+    min_points: int = 10,
+    window_px: int = 7,
+    step_px: int = 3,
+    min_turn: float = 0.3,
+    min_height_overlap: float = 0.5,
+) -> SegmentationResult:
+    """Segment the objects standing on ``table`` in a depth image by convex regions
+    (:mod:`.surfaces`): the pixels above the table, cut at concave creases and depth steps
+    into connected regions; crease pixels and regions of fewer than ``min_points`` pixels
+    join the nearest region within ``eps_m``; regions whose footprints overlap are one
+    object unless one stands on the other (:func:`merge_overlapping_footprints`).
+
+    Args:
+        depth_m, intrinsics, T_robot_camera: the view (:func:`backproject_depth`).
+        table: the supporting plane, frame R.
+        backprojected: the view's points and pixels when the caller has them already.
+        min_height_m, max_height_m: the band of heights above the table kept.
+        eps_m: largest gap between neighbouring pixels' points of one region at 1 m depth
+            (scaled with the depth, as the pixels' spacing is).
+        min_points: smallest region that stands on its own.
+        window_px: side of the pixel square each normal is fitted to.
+        step_px, min_turn: the crease test (:func:`concave_creases`).
+        min_height_overlap: see :func:`merge_overlapping_footprints`.
+
+    Returns:
+        Every object's indices into :func:`backproject_depth`'s points, largest first.
+    """
+    from scipy.spatial import cKDTree
+
+    from .depth import backproject_depth
+    from .surfaces import concave_creases, connected_regions, image_normals
+
+    depth = np.asarray(depth_m, dtype=np.float64)
+    points_list, pixels = backprojected or backproject_depth(depth, intrinsics, T_robot_camera)
+    shape = depth.shape
+    points = np.full((*shape, 3), np.nan)
+    points[pixels[:, 0], pixels[:, 1]] = points_list
+    flat_index = np.full(shape, -1, dtype=np.int64)
+    flat_index[pixels[:, 0], pixels[:, 1]] = np.arange(len(pixels))
+    height = np.full(shape, np.nan)
+    height[pixels[:, 0], pixels[:, 1]] = table.height_m(points_list)
+    with np.errstate(invalid="ignore"):
+        above = (height >= min_height_m) & (height <= max_height_m)
+    normals = image_normals(points, above, window_px)
+    viewpoint = np.asarray(T_robot_camera, dtype=np.float64)[:3, 3]
+    crease = concave_creases(points, normals, viewpoint, step_px, min_turn) & above
+    max_gap = eps_m * np.where(np.isfinite(depth), np.maximum(depth, 1.0), 0.0)
+    regions = connected_regions(points, above & ~crease, max_gap)
+    sizes = np.bincount(regions[regions >= 0])
+    regions[(regions >= 0) & (sizes[np.maximum(regions, 0)] < min_points)] = -1
+    loose = above & (regions < 0)
+    anchored = regions >= 0
+    if loose.any() and anchored.any():
+        tree = cKDTree(points[anchored])
+        distance, nearest = tree.query(points[loose], distance_upper_bound=eps_m)
+        found = np.isfinite(distance)
+        loose_labels = np.full(len(found), -1)
+        loose_labels[found] = regions[anchored][nearest[found]]
+        regions[loose] = loose_labels
+    kept = flat_index[regions >= 0]
+    labels = np.unique(regions[regions >= 0], return_inverse=True)[1]
+    labels = merge_overlapping_footprints(
+        points_list[kept], labels, table, min_height_overlap=min_height_overlap
+    )
+    clusters = int(labels.max()) + 1 if len(labels) else 0
+    sizes = np.bincount(labels, minlength=clusters)
+    order = np.argsort(-sizes, kind="stable")
+    return SegmentationResult(
+        objects=tuple(np.sort(kept[labels == label]) for label in order),
+        above_table=int(above.sum()),
+        clusters=clusters,
+    )
