@@ -250,6 +250,7 @@ _ROWS: tuple[Experiment, ...] = (
     ModuleExperiment("kth", "pipeline.experiments.kth"),
     ModuleExperiment("init", "pipeline.experiments.init"),
     ModuleExperiment("explore", "pipeline.experiments.explore"),
+    ModuleExperiment("objects", "pipeline.experiments.objects"),
 )
 
 #: Experiment name -> its definition.
