@@ -36,7 +36,7 @@ from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask, explore
 from .common import fmt, plugin_registry, task_seed
 from .init import yaws_deg
-from .paper_tasks import paper_task, trial_root, user_settings
+from .paper_tasks import paper_task, sweep_params, user_settings
 from .paper_trial import FAILURE_STAGES, run_paper_trial
 from .rows import value
 
@@ -71,7 +71,6 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
     from ..config import load_config
 
     count = QUICK_YAWS if options.quick else (options.repeats or YAWS)
-    root = trial_root(options)
     init = load_config(plugin_registry(), settings=user_settings(options)).choices["initialiser"]
     found = explore.objects(options)
     if options.quick:
@@ -90,10 +89,7 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
                 "yaw_deg": float(yaw),
                 "seed": task_seed(options.seed, key),
                 "overrides": ["trial.pictures=false"],
-                "config": user_settings(options),
-                "estimator": options.estimator,
-                "estimator_params": dict(options.estimator_params),
-                "trial_dir": None if root is None else str(root / key),
+                **sweep_params(options, key),
             }
             result.append(paper_task(key, params))
     return result
