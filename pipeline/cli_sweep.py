@@ -25,7 +25,9 @@ def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
     if args.scans is None:
         return None
     if not experiment.reads_scans:
-        raise ConfigError(f"--scans: experiment '{args.experiment}' grasps no scans (explore does)")
+        raise ConfigError(
+            f"--scans: experiment '{args.experiment}' grasps no scans (objects and explore do)"
+        )
     if not Path(args.scans).is_dir():
         raise ConfigError(f"--scans {args.scans}: no such folder")
     scans = sorted(Path(args.scans).glob("*/textured.obj"))
@@ -159,7 +161,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--scans",
         type=Path,
         metavar="DIR",
-        help="explore: also grasp every scanned mesh DIR/*/textured.obj (e.g. YCB scans)",
+        help="objects, explore: also grasp every scanned mesh DIR/*/textured.obj (e.g. YCB scans)",
     )
     parser.add_argument(
         "--captures",

@@ -78,6 +78,12 @@ class TrialSettings:
         "at most this (mm); 0: make all the grasps",
         at_least=0.0,
     )
+    retries: int = param(
+        2,
+        "after a first grasp whose pads do not touch opposing sides (nothing to fuse): "
+        "release, look again and grasp unlike every grasp that missed, up to this many times",
+        at_least=0,
+    )
 
 
 #: How the grasps after a trial's first may be chosen (:mod:`pipeline.next_grasp`).

@@ -368,3 +368,37 @@ def line_figure(panels: Sequence[LinePanel], out_path: Path, title: str) -> Path
     figure.suptitle(title)
     figure.tight_layout()
     return _save(figure, out_path)
+
+
+@dataclass(frozen=True)
+class DotPanel:
+    """One panel of :func:`dot_figure`: a marker per series and row, and dashed reference
+    lines at ``targets``."""
+
+    x_label: str
+    series: dict[str, Sequence[float]]
+    targets: Sequence[float] = ()
+
+
+def dot_figure(
+    labels: Sequence[str], panels: Sequence[DotPanel], out_path: Path, title: str
+) -> Path:
+    """Panels side by side sharing one row per label (top to bottom), each with a marker
+    per series (NaN left out): a dot chart of many objects' numbers."""
+    from matplotlib.figure import Figure
+
+    rows = np.arange(len(labels))[::-1]
+    figure = Figure(figsize=(5.0 * len(panels), 1.2 + 0.28 * len(labels)), layout="constrained")
+    axes = figure.subplots(1, len(panels), sharey=True, squeeze=False)[0]
+    for ax, panel in zip(axes, panels, strict=True):
+        for marker, (name, values) in zip("osD^v", panel.series.items(), strict=False):
+            ax.plot(np.asarray(values, dtype=float), rows, marker, label=name, alpha=0.8)
+        for target in panel.targets:
+            ax.axvline(target, color="tab:red", linestyle="--", linewidth=0.8)
+        ax.set_xlabel(panel.x_label)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="lower left")
+    axes[0].set_yticks(rows)
+    axes[0].set_yticklabels(labels, fontsize=8)
+    figure.suptitle(title)
+    return _save(figure, out_path)

@@ -15,8 +15,8 @@ size and every hand's aperture.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -110,6 +110,50 @@ class HandChoice:
         return self.answer.plan
 
 
+#: Grasps of one hand whose closing lines lie within this angle of each other (deg) close
+#: alike: after one missed, a re-plan looks for a grasp unlike it (:func:`like_missed`).
+MISSED_LINE_DEG = 20.0
+
+
+def like_missed(plan: GraspPlan, missed: Sequence[GraspPlan]) -> bool:
+    """Whether ``plan`` closes like one of the ``missed`` grasps: the same hand, its closing
+    line within :data:`MISSED_LINE_DEG` of that grasp's (a line and its reverse are one)."""
+    bound = math.cos(math.radians(MISSED_LINE_DEG))
+    return any(
+        plan.gripper == other.gripper
+        and abs(float(plan.closing_direction[:2] @ other.closing_direction[:2]))
+        >= bound
+        * float(np.linalg.norm(plan.closing_direction[:2]))
+        * float(np.linalg.norm(other.closing_direction[:2]))
+        for other in missed
+    )
+
+
+def _plan(
+    planner: GraspPlanner,
+    cloud: PointCloud,
+    proposal: SymmetryInit,
+    gripper: GripperSpec,
+    missed: Sequence[GraspPlan],
+) -> GraspPlan:
+    """``planner``'s plan for ``gripper``; after grasps that ``missed``, its best feasible
+    grasp unlike them (:func:`like_missed`), refused when every one is like them."""
+    plan = planner.plan(cloud, proposal, gripper)
+    if not missed or (plan.status == "ok" and not like_missed(plan, missed)):
+        return plan
+    unlike = [
+        p for p in planner.alternatives(cloud, proposal, gripper) if not like_missed(p, missed)
+    ]
+    if unlike:
+        return unlike[0]
+    return replace(
+        plan,
+        status="refused",
+        reason=plan.reason
+        or f"every feasible grasp closes within {MISSED_LINE_DEG:g} deg of one that missed",
+    )
+
+
 def choose_grasp(
     config: Config,
     registry: StageRegistry,
@@ -117,16 +161,20 @@ def choose_grasp(
     proposal: SymmetryInit,
     grippers: Mapping[str, GripperSpec],
     table_height_m: float,
+    missed: Sequence[GraspPlan] = (),
 ) -> HandChoice:
     """Plan the grasp for ``config.trial.gripper`` (a name in ``grippers``, or ``"auto"``).
 
     Args:
         grippers: the hands available, by name.
         table_height_m: z of the table top (for the size quoted in a refusal), m.
+        missed: earlier grasps of this object whose pads did not touch opposing sides: each
+            planner plans its best grasp unlike them (:func:`like_missed`).
     """
     wanted = config.trial.gripper
     if wanted != AUTO and named_hand_planners(config, registry) == [config.choices["planner"]]:
-        plan = config.create(registry, "planner").plan(cloud, proposal, grippers[wanted])
+        planner = config.create(registry, "planner")
+        plan = _plan(planner, cloud, proposal, grippers[wanted], missed)
         answer = PlannerAnswer(wanted, config.choices["planner"], plan)
         return HandChoice(answer, f"trial.gripper = '{wanted}'", (answer,))
 
@@ -135,7 +183,7 @@ def choose_grasp(
         for gripper in registry.get("planner", name).cls.grippers:
             if gripper in grippers and wanted in (AUTO, gripper):
                 planner = create_planner(config, registry, name)
-                plan = planner.plan(cloud, proposal, grippers[gripper])
+                plan = _plan(planner, cloud, proposal, grippers[gripper], missed)
                 answers.append(PlannerAnswer(gripper, name, plan))
     feasible = [a for a in answers if a.plan.status == "ok"]
     if not feasible:

@@ -286,9 +286,9 @@ def _simulate(
     document: dict[str, Any],
     report: Callable[[str], None],
 ) -> TrialRecord:
-    """The body of :func:`run_trial`: simulate, estimate, evaluate, write."""
-    from .images import save_depth, save_rgb
-
+    """The body of :func:`run_trial`: simulate, estimate, evaluate, write. A first grasp
+    that misses (:class:`MissedGrasp`) is released and the object looked at and grasped
+    again, unlike every grasp that missed, up to ``trial.retries`` times."""
     settings = config.trial
     world = stages["world"]
     report(f"scene: {settings.object} with {settings.gripper}")
@@ -303,60 +303,39 @@ def _simulate(
                     seed=settings.seed,
                 )
             )
-        pose_before = world.object_pose()
-        document["object_pose_before"] = pose_to_json(pose_before)
-        report("sensing")
-        with timer.phase("sensor"):
-            observation = stages["sensor"].observe(world)
-        if settings.pictures:
-            with timer.phase("pictures"):
-                save_rgb(out_dir / "rgb.png", observation.rgb)
-                save_depth(out_dir / "depth.png", observation.depth_m)
-        with timer.phase("write"):
-            np.save(out_dir / "depth.npy", observation.depth_m)
-            write_json(out_dir / "camera.json", camera_to_json(observation))
-        report("segmenting")
-        with timer.phase("segmenter"):
-            cloud = stages["segmenter"].segment(observation)
-        with timer.phase("write"):
-            write_cloud(out_dir / "cloud.ply", cloud.points)
-        document["points"] = len(cloud)
-        report("initialising and planning")
-        with timer.phase("initialiser"):
-            proposal = stages["initialiser"].propose(cloud, observation)
-        with timer.phase("planner"):
-            grippers = {name: world.gripper_spec(name) for name in world.hands}
-            choice = choose_grasp(
-                config, registry, cloud, proposal, grippers, observation.table_height_m
+        missed: list[MissedGrasp] = []
+        document["missed_grasps"] = []
+        while True:
+            pose_before, observation, cloud, proposal, choice = _look_and_plan(
+                config, registry, stages, out_dir, timer, document, report, missed
             )
-        plan = choice.plan
-        document["gripper"] = choice.answer.gripper
-        document["hand"] = choice_to_json(choice)
-        if choice.answer.planner:
-            document["stages_used"]["planner"] = choice.answer.planner
-        document["plan"] = plan_to_json(plan)
-        if plan.status != "ok":
-            if not choice.answer.planner:
-                raise StageFailure(plan.reason)
-            raise StageFailure(f"grasp planner '{choice.answer.planner}' refused: {plan.reason}")
-        with timer.phase("grasp"):
-            world.add_hand(plan.gripper)
-        fused = _grasp_and_fuse(
-            config,
-            registry,
-            stages,
-            obj,
-            world,
-            observation,
-            pose_before,
-            cloud,
-            proposal,
-            choice,
-            out_dir,
-            timer,
-            document,
-            report,
-        )
+            try:
+                fused = _grasp_and_fuse(
+                    config,
+                    registry,
+                    stages,
+                    obj,
+                    world,
+                    observation,
+                    pose_before,
+                    cloud,
+                    proposal,
+                    choice,
+                    out_dir,
+                    timer,
+                    document,
+                    report,
+                )
+                break
+            except MissedGrasp as miss:
+                if len(missed) >= settings.retries:
+                    raise
+                # Release, look again (the pads pushed the object) and grasp unlike this.
+                document["missed_grasps"].append(document.pop("unfused_grasp"))
+                missed.append(miss)
+                report(f"{miss}; grasping again ({len(missed)} of {settings.retries})")
+                with timer.phase("grasp"):
+                    world.release()
     finally:
         world.close()
 
@@ -381,6 +360,94 @@ def _simulate(
     )
     write_json(out_dir / "result.json", document)
     return TrialRecord(out_dir, result, metrics, dict(timer.seconds), document)
+
+
+class MissedGrasp(StageFailure):
+    """The first grasp's pads did not touch opposing sides (:func:`unfused_reason`): there
+    is nothing to fuse. ``plan`` is the grasp that missed; the trial looks again and grasps
+    unlike it while ``trial.retries`` allows."""
+
+    def __init__(self, message: str, plan: GraspPlan) -> None:
+        super().__init__(message)
+        self.plan = plan
+
+
+def _look_and_plan(
+    config: Config,
+    registry: StageRegistry,
+    stages: dict[str, Any],
+    out_dir: Path,
+    timer: PhaseTimer,
+    document: dict[str, Any],
+    report: Callable[[str], None],
+    missed: list[MissedGrasp],
+) -> tuple[ObjectPose, DepthObservation, PointCloud, SymmetryInit, HandChoice]:
+    """Sense, segment, propose a plane and choose the hand and grasp, unlike the grasps
+    that ``missed`` (:func:`~pipeline.hand_choice.choose_grasp`); the hand is in the scene
+    when it returns. Writes the view's files and ``document``'s entries for them (a later
+    look replaces an earlier one's). Returns the object's pose when seen, the observation,
+    the cloud, the proposal and the choice.
+
+    Raises:
+        StageFailure: segmentation found no object, or no hand can grasp it (after a miss:
+            no grasp unlike those that missed; the miss is then the trial's failure).
+    """
+    from .images import save_depth, save_rgb
+
+    settings = config.trial
+    world = stages["world"]
+    pose_before = world.object_pose()
+    report("sensing")
+    with timer.phase("sensor"):
+        observation = stages["sensor"].observe(world)
+    if settings.pictures:
+        with timer.phase("pictures"):
+            save_rgb(out_dir / "rgb.png", observation.rgb)
+            save_depth(out_dir / "depth.png", observation.depth_m)
+    with timer.phase("write"):
+        np.save(out_dir / "depth.npy", observation.depth_m)
+        write_json(out_dir / "camera.json", camera_to_json(observation))
+    report("segmenting")
+    with timer.phase("segmenter"):
+        cloud = stages["segmenter"].segment(observation)
+    with timer.phase("write"):
+        write_cloud(out_dir / "cloud.ply", cloud.points)
+    document["object_pose_before"] = pose_to_json(pose_before)
+    document["points"] = len(cloud)
+    report("initialising and planning")
+    with timer.phase("initialiser"):
+        proposal = stages["initialiser"].propose(cloud, observation)
+    with timer.phase("planner"):
+        # Without a tool change the hand that missed makes every later attempt.
+        hands = world.hands if world.gripper is None or world.changes_hands else ()
+        grippers = {name: world.gripper_spec(name) for name in hands or (world.gripper.name,)}
+        choice = choose_grasp(
+            config,
+            registry,
+            cloud,
+            proposal,
+            grippers,
+            observation.table_height_m,
+            [miss.plan for miss in missed],
+        )
+    plan = choice.plan
+    if plan.status != "ok" and missed:
+        raise MissedGrasp(f"{missed[-1]}; no grasp unlike it: {plan.reason}", missed[-1].plan)
+    document["gripper"] = choice.answer.gripper
+    document["hand"] = choice_to_json(choice)
+    if choice.answer.planner:
+        document["stages_used"]["planner"] = choice.answer.planner
+    document["plan"] = plan_to_json(plan)
+    if plan.status != "ok":
+        if not choice.answer.planner:
+            raise StageFailure(plan.reason)
+        raise StageFailure(f"grasp planner '{choice.answer.planner}' refused: {plan.reason}")
+    with timer.phase("grasp"):
+        if world.gripper is not None and world.gripper.name != plan.gripper:
+            world.remove_hand()
+        if world.gripper is None:
+            world.add_hand(plan.gripper)
+    return pose_before, observation, cloud, proposal, choice
 
 
 @dataclass(frozen=True)
@@ -495,7 +562,7 @@ def _grasp_and_fuse(
                 if len(contacts):  # the taxels are kept for `symfuse fuse`, as read
                     with timer.phase("write"):
                         write_json(out_dir / "contacts.json", contacts_to_json([contacts], [plan]))
-                raise StageFailure(stop)
+                raise MissedGrasp(stop, plan)
             break
         grasps.append(contacts)
         plans.append(plan)

@@ -150,7 +150,9 @@ def test_a_first_grasp_on_one_side_only_ends_the_trial_with_its_taxels_kept(
     # The default trial's jaws press on both faces; read as one side only, nothing is fused.
     monkeypatch.setattr(pipeline.trial, "opposing_contacts", lambda contacts: False)
     out = tmp_path / "one-sided"
-    code = main(["trial", "--set", "trial.pictures=false", "--out", str(out)])
+    code = main(
+        ["trial", "--set", "trial.pictures=false", "--set", "trial.retries=0", "--out", str(out)]
+    )
     assert code == 3
     error = capsys.readouterr().err.strip()
     assert error.startswith("symfuse: error: grasp 1 touched one side only (the object moved ")
@@ -162,6 +164,35 @@ def test_a_first_grasp_on_one_side_only_ends_the_trial_with_its_taxels_kept(
     assert (
         len(kept) == 1 and len(kept[0]["taxels"]) == document["unfused_grasp"]["taxels_in_contact"]
     )
+
+
+def test_a_first_grasp_that_misses_is_made_again_unlike_it(tmp_path, monkeypatch):
+    import pipeline.trial
+    from pipeline.evaluation import opposing_contacts
+    from pipeline.hand_choice import MISSED_LINE_DEG
+
+    # The first grasp is read as one side only; the trial looks again and grasps unlike it.
+    checks = iter([False])
+    monkeypatch.setattr(
+        pipeline.trial,
+        "opposing_contacts",
+        lambda contacts: next(checks, None) is None and opposing_contacts(contacts),
+    )
+    out = tmp_path / "again"
+    assert main(["trial", "--set", "trial.pictures=false", "--out", str(out)]) == 0
+    document = json.loads((out / "result.json").read_text())
+    (missed,) = document["missed_grasps"]
+    assert missed["grasp"] == 1 and "unfused_grasp" not in document
+    # The PG-70 holds the drive along its thin side only: the SDH-2 grasps it instead.
+    first = np.array(missed["plan"]["closing_direction"])[:2]
+    second = np.array(document["plan"]["closing_direction"])[:2]
+    assert (missed["plan"]["gripper"], document["plan"]["gripper"]) == ("pg70", "sdh")
+    assert abs(first @ second) > math.cos(math.radians(MISSED_LINE_DEG))
+    (pg70,) = [answer for answer in document["hand"]["answers"] if answer["gripper"] == "pg70"]
+    assert pg70["reason"] == (
+        f"every feasible grasp closes within {MISSED_LINE_DEG:g} deg of one that missed"
+    )
+    assert document["grasps"][0]["taxels_in_contact"] > 0
 
 
 def test_a_grasp_on_one_side_only_is_not_fused():

@@ -255,6 +255,7 @@ _ROWS: tuple[Experiment, ...] = (
     ModuleExperiment("init", "pipeline.experiments.init"),
     ModuleExperiment("explore", "pipeline.experiments.explore"),
     ModuleExperiment("scenes", "pipeline.experiments.scenes"),
+    ModuleExperiment("objects", "pipeline.experiments.objects"),
 )
 
 #: Experiment name -> its definition.

@@ -40,7 +40,7 @@ from ..sweep import write_csv
 from . import ExperimentOptions, SweepTask
 from .common import failures_section, fmt, task_seed
 from .init import yaws_deg
-from .paper_tasks import paper_task, trial_root, user_settings
+from .paper_tasks import paper_task, sweep_params
 from .paper_trial import run_paper_trial
 from .rows import count_rows, failure_lines, finished_rows, value
 
@@ -88,7 +88,6 @@ def objects(options: ExperimentOptions) -> list[tuple[str, str]]:
 
 def tasks(options: ExperimentOptions) -> list[SweepTask]:
     count = QUICK_YAWS if options.quick else (options.repeats or YAWS)
-    root = trial_root(options)
     result = []
     # Yaw by yaw over every object: a sweep stopped early has covered every object alike.
     for index, yaw in enumerate(yaws_deg(options.seed, count)):
@@ -110,10 +109,7 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
                         f"trial.grasps={GRASPS}",
                         f"trial.next_grasp={strategy}",
                     ],
-                    "config": user_settings(options),
-                    "estimator": options.estimator,
-                    "estimator_params": dict(options.estimator_params),
-                    "trial_dir": None if root is None else str(root / key),
+                    **sweep_params(options, key),
                 }
                 result.append(paper_task(key, params))
     return result

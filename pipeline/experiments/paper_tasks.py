@@ -94,6 +94,19 @@ def user_settings(options: ExperimentOptions) -> dict[str, Any]:
     return {section: value for section, value in options.config.items() if section != "estimator"}
 
 
+def sweep_params(options: ExperimentOptions, key: str) -> dict[str, Any]:
+    """The task params every trial of a sweep shares: the user's config changes, the
+    estimator with its parameters, and the trial's folder ``<out_dir>/trials/<key>`` (None
+    when trials are not kept)."""
+    root = trial_root(options)
+    return {
+        "config": user_settings(options),
+        "estimator": options.estimator,
+        "estimator_params": dict(options.estimator_params),
+        "trial_dir": None if root is None else str(root / key),
+    }
+
+
 def paper_task(key: str, params: dict[str, Any]) -> SweepTask:
     """The task of ``params``, its :attr:`SweepTask.settings` from :func:`trial_overrides`."""
     return SweepTask(key=key, params=params, settings=tuple(trial_overrides(params)))

@@ -10,12 +10,16 @@ fused model; docs/method.md §9), ``stage{k}_deviation_{min,q1,median,q3,max,mea
 and every scalar metric of :func:`pipeline.evaluation.evaluate_stage` as
 ``stage{k}_<metric>`` (thickness, side angle, diameter, plane errors, and the shape scores:
 ``chamfer_mm``, ``precision_2mm``, ``recall_2mm``, ``fscore_2mm``, the same at 5 mm,
-``iou``).
+``iou``); ``opposing_contacts`` (whether the first grasp's pads pressed from opposing
+sides) and, once a grasp was executed, ``grasp_tilt_deg``, ``grasp_shift_mm`` and
+``grasp_reapproaches``. A failed trial's row says where it stopped (``failed_stage``) and
+whether the planners refused (``refused``): :func:`failure_fields`.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
@@ -27,6 +31,10 @@ from ..formats import consistency_fields, hypothesis_field
 from .common import plugin_registry
 from .paper_tasks import trial_config
 from .rows import STAGES
+
+#: Where a trial can stop short of an estimate (:func:`failure_fields`), in pipeline order;
+#: a finished trial whose estimate is worse than vision's counts as ``estimator``.
+FAILURE_STAGES = ("segmentation", "plane", "planner", "contact", "estimator")
 
 #: A trial diverged when the estimator says so, or when its final median deviation from the
 #: true surface exceeds Stage 0's by more than this (mm).
@@ -54,10 +62,13 @@ def run_paper_trial(params: Mapping[str, Any]) -> dict[str, Any]:
             with staged_output(Path(trial_dir), overwrite=True) as staging:
                 record = run_trial(config, registry, staging)
         except StageFailure as exc:
+            recorded = Path(trial_dir) / "result.json"
+            document = json.loads(recorded.read_text()) if recorded.exists() else {}
             return {
                 "failed": str(exc),
                 "status": "failed",
                 "diverged": False,
+                **failure_fields(document),
                 "seconds": time.perf_counter() - started,
             }
         row = trial_row(record.document, record.metrics)
@@ -93,6 +104,8 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
             elif isinstance(value, int | float):
                 row[f"{prefix}_{name}"] = float(value)
     row["diverged"] = is_diverged(row)
+    row.update(grasp_motion_fields(document))
+    row["opposing_contacts"] = True  # the first grasp was fused: its pads opposed
     if document.get("next_grasp"):
         row["stop_reason"] = document.get("stop_reason")
         row["grasps_made"] = len(document["grasps"])
@@ -101,6 +114,52 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
         if unfused := document.get("unfused_grasp"):
             row.update(attempt_fields(unfused, fused=False))
     return row
+
+
+def grasp_motion_fields(document: Mapping[str, Any]) -> dict[str, Any]:
+    """How the (first) grasp moved the object, from a trial's ``result.json`` document:
+    ``grasp_tilt_deg`` (its up axis tilted), ``grasp_shift_mm`` (its centre moved) and
+    ``grasp_reapproaches``; empty when no grasp was executed."""
+    grasp = document.get("grasp") or {}
+    if not grasp.get("executed"):
+        return {}
+    return {
+        "grasp_tilt_deg": grasp.get("object_tilt_deg"),
+        "grasp_shift_mm": grasp.get("object_shift_mm"),
+        "grasp_reapproaches": grasp.get("reapproaches"),
+    }
+
+
+def failure_fields(document: Mapping[str, Any]) -> dict[str, Any]:
+    """Where a trial that raised :class:`StageFailure` stopped, from the ``result.json`` it
+    wrote (``{}`` when it wrote none): ``failed_stage``, one of :data:`FAILURE_STAGES`
+    (``segmentation``: no object cloud; ``plane``: the initialiser gave no plane;
+    ``planner``: no hand's planner found a grasp, or the hand could not execute it;
+    ``contact``: the grasp touched one side only or nothing, and so did every grasp after
+    it, ``trial.retries``; ``estimator``: a later stage refused), ``refused`` (whether the
+    planners refused: the reason then names the measurement that rules each hand out),
+    ``opposing_contacts`` and :func:`grasp_motion_fields`."""
+    plan = document.get("plan") or {}
+    grasp = document.get("grasp") or {}
+    missed = bool(document.get("missed_grasps"))  # every later grasp was refused
+    if "points" not in document:
+        stage = "segmentation"
+    elif not plan:
+        stage = "plane"
+    elif plan.get("status") != "ok" or not grasp.get("executed"):
+        stage = "planner"
+    elif "unfused_grasp" in document or (missed and "init" not in document):
+        stage = "contact"
+    elif (document.get("init") or {}).get("status") != "ok":
+        stage = "plane"
+    else:
+        stage = "estimator"
+    return {
+        "failed_stage": stage,
+        "refused": bool(plan) and plan.get("status") != "ok",
+        "opposing_contacts": False,
+        **grasp_motion_fields(document),
+    }
 
 
 def attempt_fields(entry: Mapping[str, Any], fused: bool) -> dict[str, Any]:
