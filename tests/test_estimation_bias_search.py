@@ -83,8 +83,8 @@ def test_search_finds_a_bias_several_prior_stds_off(gripper, tactile_deg, direct
         # curvature (1.4 mm at 15 mm): the search is held to the grasp's axis.
         normal = case.contacts.normals[0, :2]
         error = error @ normal
-    # 3.5 prior stds away; the grid's spacing is 5 mm.
-    assert np.linalg.norm(error) < 0.006
+    # 3.5 prior stds away; within one and a half steps of the 5 mm grid.
+    assert np.linalg.norm(error) < 0.0075
     assert start[0] == fusion.g_init[0] and start[3] == fusion.g_init[3]
 
 

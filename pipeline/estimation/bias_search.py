@@ -19,11 +19,15 @@ prior, which stays Stage 0's) at the best:
 
 A state's score is the prior's Mahalanobis distance plus, over a few taxels of every pad,
 their squared distance to the completed model (the nearer of the front cloud and its mirror
-image, read from a distance field of the cloud) in units of :attr:`SearchSettings.distance_std_m`,
-truncated at :attr:`SearchSettings.truncation_sigmas`, so a pad off the model costs a fixed
-amount however far off it is (a pad on a part the camera never saw is not forced onto the
-cloud). Each scored taxel counts for its pad's share of the taxels in contact, as the
-filter counts them.
+image, read from a distance field of the cloud) in units of
+:attr:`SearchSettings.distance_std_m`, truncated at :attr:`SearchSettings.truncation_sigmas`,
+so a pad off the model costs a fixed amount however far off it is (a pad on a part the
+camera never saw is not forced onto the cloud). Every pad counts as
+:attr:`SearchSettings.taxels_per_pad` taxels however many touch: counted as the filter
+counts them (a hundred independent taxels on a pad), the data outweighed the prior in
+directions it does not measure, and on the CD drive, whose jaws press on two flat faces,
+the start moved 54 mm along the faces (the object had moved 1 mm) and the filter stayed
+there; with every pad counted alike it starts 4.5 mm along them.
 """
 
 from __future__ import annotations
@@ -158,10 +162,9 @@ def search_start(problem: FusionProblem, settings: SearchSettings) -> np.ndarray
     pads = np.asarray(contacts.pads)
     chosen = scored_taxels(contacts.positions_m, pads, settings.taxels_per_pad)
     taxels = contacts.positions_m[chosen]
-    # Each scored taxel stands for its pad's unscored ones, as the filter counts them.
-    _, pad_of_all, pad_totals = np.unique(pads, return_inverse=True, return_counts=True)
+    # Every pad counts as taxels_per_pad taxels, however many touch.
     _, pad_of, pad_scored = np.unique(pads[chosen], return_inverse=True, return_counts=True)
-    taxel_weight = pad_totals[pad_of_all[chosen]] / pad_scored[pad_of]
+    taxel_weight = settings.taxels_per_pad / pad_scored[pad_of]
     limit = settings.truncation_sigmas * settings.distance_std_m
     truncated = DistanceField.build(problem.points_m, settings.voxel_m, limit)
     pivot = problem.pivot_m
