@@ -293,6 +293,9 @@ def test_random_report_counts_failures_near_each_grid_angle(tmp_path):
     assert runs >= 1
     share, silent = synthetic_report.failure_shares(rows)
     assert share == silent == len(failing) / len(rows)
+    assert all(math.isnan(s) for s in synthetic_report.failure_shares([]))
+    assert synthetic_report.percent(math.nan) == "-"
+    assert synthetic_report.percent(0.125) == "12.5 %"
 
 
 def test_nearest_angle_wraps_around_the_circle():

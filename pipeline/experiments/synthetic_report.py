@@ -130,8 +130,8 @@ def failure_shares(rows: Sequence[Mapping[str, Any]]) -> tuple[float, float]:
 
 
 def percent(share: float) -> str:
-    """A share as a percentage for a Markdown table."""
-    return fmt(100.0 * share) + " %"
+    """A share as a percentage for a Markdown table; '-' for none (NaN)."""
+    return "-" if math.isnan(share) else fmt(100.0 * share) + " %"
 
 
 def diagnosis_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
