@@ -46,7 +46,7 @@ def _captures_folder(args: argparse.Namespace, experiment) -> Path | None:
     """
     if args.captures is None:
         return None
-    if not getattr(experiment, "reads_captures", False):
+    if not experiment.reads_captures:
         raise ConfigError(
             f"--captures: experiment '{args.experiment}' reads no captures (scenes does)"
         )
@@ -64,6 +64,9 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--scheduler applies to --executor dask")
     registry, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
     experiment = EXPERIMENTS[args.experiment]
+    if args.grid and not experiment.randomised:
+        randomised = ", ".join(name for name, row in sorted(EXPERIMENTS.items()) if row.randomised)
+        raise ConfigError(f"sweep {args.experiment}: --grid applies to {randomised} only")
     estimator = config.choices["estimator"]
     resolved = config.to_dict()
     user = changed_settings(resolved, load_config(registry).to_dict())
@@ -86,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
         estimator_params=resolved["estimator"][estimator],
         config=user,
         quick=args.quick,
+        grid=args.grid,
         seed=args.seed,
         repeats=args.repeats,
         out_dir=out.resolve(),
@@ -157,6 +161,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("--estimator", metavar="NAME", help="estimator to run (default: config)")
     parser.add_argument("--quick", action="store_true", help="a reduced grid (smoke test)")
+    parser.add_argument(
+        "--grid",
+        action="store_true",
+        help="fig8, fig9, fig10: the paper's grid instead of randomly drawn cases",
+    )
     parser.add_argument(
         "--scans",
         type=Path,

@@ -61,6 +61,12 @@ class IekfEstimator(Estimator):
             "narrows the gates and starts the second pass, which converges to tolerance_m (m)",
             above=0.0,
         )
+        start_search: bool = param(
+            True,
+            "Stage 1 starts at the best state of a coarse grid over the bias translation and "
+            "the plane, scored by the taxels' distances to the model and the prior (the prior "
+            "stays Stage 0's); False starts at Stage 0 as in the paper",
+        )
         max_iterations: int = param(30, "IEKF iteration cap per grasp, stage and pass", at_least=1)
         tolerance_m: float = param(
             1e-4,

@@ -27,6 +27,14 @@ def test_a_synthetic_sweep_refuses_settings_its_trials_do_not_read(tmp_path, run
     assert not out.exists()
 
 
+def test_grid_is_refused_by_an_experiment_without_random_cases(tmp_path, run):
+    out = tmp_path / "sweep"
+    code, _, err = run("sweep", "table1", "--grid", "--workers", "1", "--out", out)
+    assert code == EXIT_BAD_INPUT
+    assert err.strip() == "symfuse: error: sweep table1: --grid applies to fig10, fig8, fig9 only"
+    assert not out.exists()
+
+
 def test_parameters_a_stage_refuses_together_stop_the_sweep_before_any_trial(tmp_path, run):
     out = tmp_path / "sweep"
     threshold = "tactile.pybullet-taxels.contact_threshold_m=0.01"

@@ -35,6 +35,7 @@ take the exact paths above.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import chain
 
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
@@ -269,9 +270,10 @@ def _gated_weights(
         empty = np.empty(0, dtype=np.int64)
         return empty, empty, np.empty(0)
     neighbours = index.tree.query_ball_point(centres_pre, radii_m, return_sorted=False)
-    counts = np.array([len(found) for found in neighbours], dtype=np.int64)
+    counts = np.fromiter(map(len, neighbours), dtype=np.int64, count=len(neighbours))
     taxel = np.repeat(np.arange(len(centres_pre)), counts)
-    point = np.concatenate([np.asarray(found, dtype=np.int64) for found in neighbours])
+    # One pass over the lists (an array per list costs more than the search at 100k points).
+    point = np.fromiter(chain.from_iterable(neighbours), dtype=np.int64, count=int(counts.sum()))
     inverse = np.linalg.inv(covariance_pre)
     d2 = _quadratic_forms(inverse, taxel, points[point] - centres_pre[taxel])
     gated = d2 < GATE_CHI2_3DOF_95

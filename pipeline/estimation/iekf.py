@@ -136,6 +136,9 @@ class IekfSettings:
             first pass's posterior (see the module docstring).
         gate_tolerance_m: with ``refine_gates``, the first pass stops once the model moves
             less than this (m); the second pass converges to ``tolerance_m``.
+        start_search: when the problem names no ``g_start``, Stage 1's first grasp starts
+            at the best state of :func:`~.bias_search.search_start` (the prior stays
+            ``g_init``).
     """
 
     schedule: Schedule = "hybrid"
@@ -146,6 +149,7 @@ class IekfSettings:
     exclusive_sides: bool = True
     refine_gates: bool = True
     gate_tolerance_m: float = 1e-3
+    start_search: bool = False
 
 
 @dataclass(frozen=True)
@@ -198,6 +202,8 @@ class FusionProblem:
         point_variance_m2: ``(N,)`` isotropic prior variance of each point.
         grasps: the grasps in the order they happened.
         regrasp_noise: ``(6, 6)`` ``Q`` added before every grasp after the first.
+        g_start: ``(6,)`` where Stage 1's iterations on the first grasp begin (the prior
+            stays ``g_init``); None starts at ``g_init``. See :mod:`.bias_search`.
     """
 
     points_m: np.ndarray
@@ -207,6 +213,7 @@ class FusionProblem:
     point_variance_m2: np.ndarray
     grasps: tuple[GraspContacts, ...]
     regrasp_noise: np.ndarray
+    g_start: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -429,6 +436,8 @@ def run_stage(
             reported.add_bias_plane_noise(problem.regrasp_noise)
         if stage == 1:
             g_start, gate = g, covariance.bias_plane()
+            if k == 0 and problem.g_start is not None:
+                g_start = np.asarray(problem.g_start, dtype=float)
         else:
             g_start, gate = stage_one.grasp_g[k], stage_one.grasp_covariance[k]
         update = partial(
@@ -501,12 +510,17 @@ def fuse(
 
     Returns:
         The Stage 1 outcome, then the Stage 2 outcome when ``last_stage == 2``. The KD-tree
-        over the points is built once and its time is counted in Stage 1. When Stage 2
+        over the points is built once and its time, and the start search's, is counted in
+        Stage 1. When Stage 2
         diverges or loses every correspondence its outcome carries Stage 1's state,
         covariance and points (with Stage 2's status, iterations and time), so a failed
         point update never makes the model worse than Stage 1.
     """
     started = time.perf_counter()
+    if settings.start_search and problem.g_start is None:
+        from .bias_search import SearchSettings, search_start
+
+        problem = replace(problem, g_start=search_start(problem, SearchSettings()))
     index = PointIndex(problem.points_m)
     build_seconds = time.perf_counter() - started
     stage_one = run_stage(problem, settings, 1, index, covariance_model)

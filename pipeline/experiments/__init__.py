@@ -62,6 +62,8 @@ class ExperimentOptions:
             nested dict of TOML values), every section; experiments pass on what their
             trials read.
         quick: a reduced grid (a few points per axis) for smoke tests and CI.
+        grid: the paper's grid instead of randomly drawn cases (the experiments with
+            :attr:`~.definitions.Experiment.randomised`).
         seed: base seed; every task derives its own seed from this and its key.
         repeats: trials per grid point where the experiment repeats (None: the paper's).
         out_dir: the sweep's output folder; experiments that run full trials keep each
@@ -76,6 +78,7 @@ class ExperimentOptions:
     estimator_params: Mapping[str, Any] = field(default_factory=dict)
     config: Mapping[str, Any] = field(default_factory=dict)
     quick: bool = False
+    grid: bool = False
     seed: int = 0
     repeats: int | None = None
     out_dir: Path | None = None

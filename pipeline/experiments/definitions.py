@@ -9,10 +9,12 @@ initialisers).
 
 Every row offers what the sweep engine needs: ``name``, ``description``,
 ``config_sections`` (the config sections its trials read; None: all), ``reads_scans``
-(whether it grasps the scans of ``symfuse sweep --scans DIR``), ``tasks(options)``,
-``run_one`` (a top-level, picklable function from a task's JSON params to its JSON row) and
-``report(rows, out_dir)`` (the CSV, figures and ``report.md``). Nothing heavy is imported
-until a row is run, so listing the experiments stays cheap.
+(whether it grasps the scans of ``symfuse sweep --scans DIR``), ``reads_captures`` (whether
+it scores the labelled captures of ``--captures DIR``), ``randomised`` (whether it
+draws its cases at random unless ``symfuse sweep --grid`` asks for the paper's grid),
+``tasks(options)``, ``run_one`` (a top-level, picklable function from a task's JSON params
+to its JSON row) and ``report(rows, out_dir)`` (the CSV, figures and ``report.md``). Nothing
+heavy is imported until a row is run, so listing the experiments stays cheap.
 """
 
 from __future__ import annotations
@@ -39,24 +41,36 @@ class Experiment(Protocol):
     @property
     def reads_scans(self) -> bool: ...
     @property
+    def reads_captures(self) -> bool: ...
+    @property
+    def randomised(self) -> bool: ...
+    @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]: ...
     def tasks(self, options: ExperimentOptions) -> list[SweepTask]: ...
     def report(self, rows: list[dict], out_dir: Path) -> list[Path]: ...
 
 
+#: Trials of a randomised Fig. 8 or 9 study.
+RANDOM_TRIALS = 400
+
+
 @dataclass(frozen=True)
 class SymmetryGrid:
     """Synthetic cylinder, one gripper: the final diameter error over the initial symmetry
-    error ``theta x r`` for each tactile angle, zero bias (:mod:`.synthetic_study`).
+    error ``theta x r`` and the tactile angle, zero bias (:mod:`.synthetic_study`).
 
-    The full grid is theta 0..90 deg (11.25 deg steps) x r -50..50 mm (10 mm steps);
-    ``quick`` keeps theta {0, 45} and r {-20, +20}.
+    By default :data:`RANDOM_TRIALS` trials (``repeats`` when given, 6 with ``quick``) draw
+    theta in 0..90 deg, r in -50..50 mm and the tactile angle in ``tactile_span_deg``
+    uniformly (:func:`~.synthetic_report.report_random`: failing shares per grid angle).
+    With ``grid`` the paper's: theta 0..90 deg (11.25 deg steps) x r -50..50 mm (10 mm
+    steps) per tactile angle; ``quick`` keeps theta {0, 45} and r {-20, +20}.
 
     Attributes:
         figure: the paper's figure number.
         hand: the hand as the reports name it.
         gripper: ``"parallel"`` or ``"three_finger"``.
-        tactile_angles_deg: the grasp angles relative to the view (deg).
+        tactile_angles_deg: the grasp angles relative to the view (deg) of the grid.
+        tactile_span_deg: the range the randomised study draws the tactile angle from (deg).
         claims: the paper's statements, quoted in the report.
     """
 
@@ -65,6 +79,7 @@ class SymmetryGrid:
     hand: str
     gripper: str
     tactile_angles_deg: tuple[float, ...]
+    tactile_span_deg: tuple[float, float]
     claims: tuple[str, ...]
 
     @property
@@ -85,6 +100,8 @@ class SymmetryGrid:
         return CONFIG_SECTIONS
 
     reads_scans = False
+    reads_captures = False
+    randomised = True
 
     @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]:
@@ -93,8 +110,12 @@ class SymmetryGrid:
         return run_trial
 
     def tasks(self, options: ExperimentOptions) -> list[SweepTask]:
-        from .synthetic_study import R_MM_FULL, THETA_DEG_FULL, grid_tasks
+        from .synthetic_study import R_MM_FULL, THETA_DEG_FULL, Draws, grid_tasks, random_tasks
 
+        if not options.grid:
+            draws = Draws(self.tactile_span_deg, theta_deg=(0.0, 90.0), r_mm=(-50.0, 50.0))
+            count = options.repeats or (6 if options.quick else RANDOM_TRIALS)
+            return random_tasks(options, gripper=self.gripper, count=count, draws=draws)
         return grid_tasks(
             options,
             gripper=self.gripper,
@@ -104,8 +125,17 @@ class SymmetryGrid:
         )
 
     def report(self, rows: list[dict], out_dir: Path) -> list[Path]:
-        from .synthetic_report import report_grid
+        from .synthetic_report import report_grid, report_random
 
+        if rows and all("/trial" in row.get("key", "") for row in rows):
+            return report_random(
+                rows,
+                out_dir,
+                name=self.name,
+                title=self.title,
+                claims=self.claims,
+                tactile_angles_deg=self.tactile_angles_deg,
+            )
         return report_grid(rows, out_dir, name=self.name, title=self.title, claims=self.claims)
 
 
@@ -140,6 +170,8 @@ class MeasureTable:
     inits: tuple[str, ...] = ("ps", "vc")
     config_sections = None
     reads_scans = False
+    reads_captures = False
+    randomised = False
 
     @property
     def description(self) -> str:
@@ -200,6 +232,10 @@ class ModuleExperiment:
         return getattr(self.module, "READS_CAPTURES", False)
 
     @property
+    def randomised(self) -> bool:
+        return getattr(self.module, "RANDOMISED", False)
+
+    @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]:
         return self.module.run_one
 
@@ -228,6 +264,7 @@ _ROWS: tuple[Experiment, ...] = (
         hand="parallel jaw",
         gripper="parallel",
         tactile_angles_deg=(0.0, 45.0, -45.0, 90.0, -90.0),
+        tactile_span_deg=(-90.0, 90.0),
         claims=(
             "tactile angle 0: diameter error < 4 mm for theta up to 45 deg and |r| <= 30 mm",
             "tactile angle +-45: more sensitive to the initialisation",
@@ -242,6 +279,7 @@ _ROWS: tuple[Experiment, ...] = (
         # At 0 the thumb touches the front and two fingers the back; at 180 two fingers
         # touch the front.
         tactile_angles_deg=(0.0, 90.0, -90.0, 180.0),
+        tactile_span_deg=(-135.0, 225.0),
         claims=(
             "tactile angle 180 (two contacts on the front) is the best, less sensitive to theta",
             "tactile angle 0: a large theta may leave a back finger without correspondences",

@@ -112,6 +112,28 @@ def success_summary(
 FLAGGED_STATUSES = ("no_correspondence", "diverged", "inconsistent")
 
 
+def flagged(row: Mapping[str, Any]) -> bool:
+    """The last stage's status reports a failure (:data:`FLAGGED_STATUSES`)."""
+    stage = 2 if "stage2_status" in row else 1
+    return row.get(f"stage{stage}_status") in FLAGGED_STATUSES
+
+
+def failure_shares(rows: Sequence[Mapping[str, Any]]) -> tuple[float, float]:
+    """The share of ``rows`` that fail (final diameter error not below :data:`SUCCESS_MM`,
+    or none) and the share that fail silently (failing, yet their last stage's status is
+    not :func:`flagged`); NaN for no rows."""
+    if not rows:
+        return math.nan, math.nan
+    failing = [row for row in rows if not final_error(row) < SUCCESS_MM]
+    silent = sum(not flagged(row) for row in failing)
+    return len(failing) / len(rows), silent / len(rows)
+
+
+def percent(share: float) -> str:
+    """A share as a percentage for a Markdown table; '-' for none (NaN)."""
+    return "-" if math.isnan(share) else fmt(100.0 * share) + " %"
+
+
 def diagnosis_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     """Markdown lines on the self-diagnosis: how often a correct result (final diameter
     error < :data:`SUCCESS_MM`) was flagged (a false alarm) and how often a wrong one was
@@ -119,11 +141,6 @@ def diagnosis_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     last = [row for row in rows if "stage2_status" in row or "stage1_status" in row]
     if not last:
         return []
-
-    def flagged(row: Mapping[str, Any]) -> bool:
-        stage = 2 if "stage2_status" in row else 1
-        return row[f"stage{stage}_status"] in FLAGGED_STATUSES
-
     correct = [row for row in last if final_error(row) < SUCCESS_MM]
     wrong = [row for row in last if not final_error(row) < SUCCESS_MM]
     alarms = sum(flagged(row) for row in correct)
@@ -237,3 +254,136 @@ def report_grid(
     report_path = out_dir / "report.md"
     report_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return [csv_path, figure, report_path]
+
+
+def nearest_angle(angle_deg: float, angles_deg: Sequence[float]) -> float:
+    """The angle of ``angles_deg`` nearest to ``angle_deg`` around the circle."""
+    gaps = [abs((angle_deg - a + 180.0) % 360.0 - 180.0) for a in angles_deg]
+    return angles_deg[int(np.argmin(gaps))]
+
+
+def in_claim_region(row: Mapping[str, Any]) -> bool:
+    """The trial's initial plane error lies in the paper's claim region."""
+    params = row["params"]
+    return params["theta_deg"] <= CLAIM_THETA_MAX_DEG and abs(params["r_mm"]) <= CLAIM_R_MAX_MM
+
+
+def failing_share_map(
+    rows: Sequence[Mapping[str, Any]], theta_edges: np.ndarray, r_edges: np.ndarray
+) -> np.ndarray:
+    """``(len(theta_edges) - 1, len(r_edges) - 1)`` failing share (%) of the trials in each
+    theta x r cell (NaN for an empty cell)."""
+    shape = (len(theta_edges) - 1, len(r_edges) - 1)
+    failing, counts = np.zeros(shape), np.zeros(shape)
+    for row in rows:
+        i = np.searchsorted(theta_edges, row["params"]["theta_deg"], side="right") - 1
+        j = np.searchsorted(r_edges, row["params"]["r_mm"], side="right") - 1
+        i, j = min(max(i, 0), shape[0] - 1), min(max(j, 0), shape[1] - 1)
+        counts[i, j] += 1
+        failing[i, j] += not final_error(row) < SUCCESS_MM
+    with np.errstate(invalid="ignore"):
+        return 100.0 * failing / counts
+
+
+#: A map cell of failing shares is outlined when fewer than this share (%) of its trials fail.
+FAILING_OUTLINE_PERCENT = 10.0
+
+
+def failing_share_figure(
+    panels: Sequence[GridPanel], out_path: Path, *, xlabel: str, ylabel: str, title: str
+) -> Path:
+    """Maps of failing shares (%), cells under :data:`FAILING_OUTLINE_PERCENT` outlined."""
+    return error_grid_figure(
+        panels,
+        out_path,
+        xlabel=xlabel,
+        ylabel=ylabel,
+        colour_label=f"failing trials (%); outlined: < {FAILING_OUTLINE_PERCENT:g} %",
+        vmax=100.0,
+        threshold=FAILING_OUTLINE_PERCENT,
+        title=title,
+    )
+
+
+def report_random(
+    rows: Sequence[Mapping[str, Any]],
+    out_dir: Path,
+    *,
+    name: str,
+    title: str,
+    claims: Sequence[str],
+    tactile_angles_deg: Sequence[float],
+) -> list[Path]:
+    """CSV, failing-share map PNG and ``report.md`` of a randomised theta x r study.
+
+    Every trial counts for the grid's tactile angle nearest to its own. Per such angle the
+    report gives the share of trials that fail (final diameter error >= 4 mm, or none) and
+    that fail silently (not flagged), in the paper's claim region and over everything, and
+    the stages' median errors in the claim region; the map shows the failing share over
+    theta x r cells (11.25 deg x 10 mm), one panel per angle.
+    """
+    out_dir = Path(out_dir)
+    csv_path = write_csv(rows, out_dir / "results.csv")
+    good, failed = ok_rows(rows)
+    angles = sorted(tactile_angles_deg, key=lambda p: (abs(p), p))
+    groups = {
+        angle: [
+            row
+            for row in good
+            if nearest_angle(row["params"]["tactile_angle_deg"], tactile_angles_deg) == angle
+        ]
+        for angle in angles
+    }
+    lines = [f"# {title}", "", "Paper:", ""]
+    lines += [f"- {claim}" for claim in claims]
+    lines += [
+        "",
+        f"Ours, randomised: theta, r and the tactile angle drawn uniformly per trial; every "
+        f"trial counts for the nearest of the paper's tactile angles. Fail = final (Stage 2) "
+        f"diameter error >= {SUCCESS_MM:g} mm or none; silent = failing while the final "
+        f"status claims success. Claim region: theta <= {CLAIM_THETA_MAX_DEG:g} deg and "
+        f"|r| <= {CLAIM_R_MAX_MM:g} mm.",
+        "",
+        "| tactile angle | runs | claim region runs | claim region fail / silent "
+        "| median err. in claim region S0 / S1 / S2 (mm) | all fail / silent |",
+        "|---|---|---|---|---|---|",
+    ]
+    theta_edges = np.arange(0.0, 90.01, 11.25)
+    r_edges = np.arange(-50.0, 50.01, 10.0)
+    panels = []
+    for angle, subset in groups.items():
+        if not subset:
+            continue
+        claim = [row for row in subset if in_claim_region(row)]
+        claim_fail, claim_silent = failure_shares(claim)
+        all_fail, all_silent = failure_shares(subset)
+        errors = [[stage_error(row, k) for row in claim] for k in (0, 1, 2)]
+        medians = [
+            fmt(float(np.nanmedian(e))) if any(not math.isnan(v) for v in e) else "-"
+            for e in errors
+        ]
+        lines.append(
+            f"| {angle:+g} | {len(subset)} | {len(claim)} | {percent(claim_fail)} / "
+            f"{percent(claim_silent)} | {' / '.join(medians)} | {percent(all_fail)} / "
+            f"{percent(all_silent)} |"
+        )
+        panels.append(
+            GridPanel(
+                f"tactile angle near {angle:+g} deg",
+                0.5 * (r_edges[1:] + r_edges[:-1]),
+                0.5 * (theta_edges[1:] + theta_edges[:-1]),
+                failing_share_map(subset, theta_edges, r_edges),
+            )
+        )
+    lines += diagnosis_section(good)
+    paths = [csv_path]
+    if panels:
+        figure = failing_share_figure(
+            panels, out_dir / f"{name}.png", xlabel="r (mm)", ylabel="theta (deg)", title=title
+        )
+        paths.append(figure)
+        lines += ["", f"![{name}]({figure.name})"]
+    lines += failures_section(failed)
+    report_path = out_dir / "report.md"
+    report_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return [*paths, report_path]

@@ -15,7 +15,9 @@ the file boundary; everything is converted to SI before it reaches the generator
     seed               the trial's random seed (cloud noise)
     estimator          estimator name; estimator_params: its parameter overrides
 
-Result rows add ``stage{k}_diameter_error_mm`` (None when the completed cloud admits no circle
+Result rows add ``bias_to_pads_deg`` (the bias direction relative to the nearest pad,
+:attr:`~pipeline.synthetic.cases.SyntheticCase.bias_to_pads_rad`),
+``stage{k}_diameter_error_mm`` (None when the completed cloud admits no circle
 fit), ``stage{k}_status``, ``stage{k}_iterations``, ``stage{k}_seconds``,
 ``stage{k}_hypothesis`` (empty unless an alternative hypothesis replaced the fused model,
 docs/method.md §9) for k = 0, 1, 2 (as far as the estimator returns stages), and the cloud
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -123,6 +126,52 @@ def grid_tasks(
     return tasks
 
 
+@dataclass(frozen=True)
+class Draws:
+    """The ranges a randomised study draws each trial's case from, uniformly.
+
+    Attributes:
+        tactile_deg: the grasp's angle relative to the view (deg).
+        theta_deg, r_mm: the initial plane error (deg, mm).
+    """
+
+    tactile_deg: tuple[float, float]
+    theta_deg: tuple[float, float]
+    r_mm: tuple[float, float]
+
+
+def random_tasks(
+    options: ExperimentOptions,
+    *,
+    gripper: str,
+    count: int,
+    draws: Draws,
+    bias_mm: float = 0.0,
+    default_estimator_params: Mapping[str, Any] | None = None,
+) -> list[SweepTask]:
+    """``count`` trials whose tactile angle, plane error and bias direction are drawn
+    uniformly (the direction over the full turn), each from a generator seeded by its key,
+    so a trial's case does not depend on which others the sweep holds."""
+    tasks = []
+    for k in range(count):
+        key = f"{gripper}/bias{bias_mm:g}/trial{k}"
+        rng = np.random.default_rng(task_seed(options.seed, key + "/draw"))
+        tasks.append(
+            trial_params(
+                options,
+                key,
+                gripper=gripper,
+                tactile_angle_deg=float(rng.uniform(*draws.tactile_deg)),
+                theta_deg=float(rng.uniform(*draws.theta_deg)),
+                r_mm=float(rng.uniform(*draws.r_mm)),
+                bias_mm=bias_mm,
+                bias_direction_deg=float(rng.uniform(0.0, 360.0)),
+                default_estimator_params=default_estimator_params,
+            )
+        )
+    return tasks
+
+
 def _diameter_error_mm(points: np.ndarray, true_diameter_m: float) -> float | None:
     if not np.all(np.isfinite(points)):
         return None
@@ -150,6 +199,7 @@ def run_trial(params: Mapping[str, Any]) -> dict[str, Any]:
         "points": len(case.cloud),
         "contacts": len(case.contacts),
         "selected_stage": result.selected.stage,
+        "bias_to_pads_deg": math.degrees(case.bias_to_pads_rad),
     }
     for stage in result.stages:
         prefix = f"stage{stage.stage}"

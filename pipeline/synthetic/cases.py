@@ -231,6 +231,20 @@ class SyntheticCase:
         return self.true_bias.pivot_m
 
     @property
+    def bias_to_pads_rad(self) -> float:
+        """The bias translation's direction relative to the pads, in
+        ``[-pi / n_pads, pi / n_pads)``: its angle about +z from the nearest pad's contact
+        azimuth (0: the bias points from the axis toward a pad, so that pad's taxels lie
+        inside the model Stage 0 gives), the pads' spacing folded away. 0 for no bias."""
+        translation = self.true_bias.translation_m
+        if not np.any(translation[:2]):
+            return 0.0
+        spacing = 2.0 * np.pi / len(PAD_NAMES[self.gripper])
+        pad = contact_azimuths(self.gripper, self.tactile_angle_rad, self.viewpoint)[0]
+        angle = np.arctan2(translation[1], translation[0]) - pad
+        return float((angle + 0.5 * spacing) % spacing - 0.5 * spacing)
+
+    @property
     def view(self) -> DepthObservation:
         """The depth image the cloud came from: each cloud pixel holds its point's depth
         along the optical axis; every other pixel is unknown (NaN: the scene has no table
