@@ -15,6 +15,7 @@ from pipeline.perception import sdh_geometry as sdh
 from pipeline.perception.candidate import (
     BEYOND_CENTRE,
     BLIND_PAD_FACTOR,
+    CandidateCloud,
     CandidateSettings,
     height_grid,
 )
@@ -308,8 +309,7 @@ def _jaw_hand():
 def _jaws_closing_along_y(visible: np.ndarray, completed: np.ndarray):
     """The PG-70 candidate closing along +y through the origin, pads centred 60 mm up."""
     return parallel_candidate(
-        visible,
-        completed,
+        CandidateCloud(visible, completed),
         np.zeros(3),
         np.array([0.0, 1.0, 0.0]),
         0.0,
@@ -380,8 +380,7 @@ def test_sdh_fingers_that_would_meet_the_front_from_inside_are_rejected():
         (_wall(0.015, half_width_m=0.012), False),
     ):
         candidate = sdh_candidates.sdh_candidate(
-            front,
-            np.vstack([front, back]),
+            CandidateCloud(front, np.vstack([front, back])),
             centre,
             np.array([0.0, 1.0, 0.0]),
             0.0,
