@@ -99,7 +99,7 @@ def main() -> None:
         trials[scan.parent.name] = [*off, f'trial.object="{scan}"']
     measured = {name: in_process(args.repeats, overrides) for name, overrides in trials.items()}
     with_pictures, _, cpu_pictures = in_process(args.repeats, ["trial.pictures=true"])
-    command, command_cpu = whole_command(args.repeats, ["trial", *off])
+    command, command_cpu = whole_command(args.repeats, ["trial", "--set", *off])
     scene = capture()
     completing = whole_command(args.repeats, ["complete", str(scene)]) if scene else None
 
