@@ -9,7 +9,12 @@ import numpy as np
 from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.params import check_ordered, param
-from pipeline.perception.candidate import Candidate, CandidateParams, candidate_frame
+from pipeline.perception.candidate import (
+    Candidate,
+    CandidateCloud,
+    CandidateParams,
+    candidate_frame,
+)
 from pipeline.perception.grasp_candidates import (
     CandidatePlanner,
     closing_angles,
@@ -233,6 +238,7 @@ class TopParallel(CandidatePlanner):
             housing_depth_m=p.housing_depth_m,
         )
         centre = frame.completed.mean(axis=0)
+        clouds = CandidateCloud(points, frame.completed)
         # Which way is front to back depends on the closing angle alone, not on the height.
         directions = [
             (
@@ -243,8 +249,7 @@ class TopParallel(CandidatePlanner):
         ]
         candidates = [
             parallel_candidate(
-                points,
-                frame.completed,
+                clouds,
                 centre,
                 direction,
                 angle,

@@ -9,7 +9,12 @@ import numpy as np
 from pipeline import hookimpl
 from pipeline.errors import ConfigError
 from pipeline.params import param
-from pipeline.perception.candidate import Candidate, CandidateParams, candidate_frame
+from pipeline.perception.candidate import (
+    Candidate,
+    CandidateCloud,
+    CandidateParams,
+    candidate_frame,
+)
 from pipeline.perception.grasp_candidates import (
     CandidatePlanner,
     closing_angles,
@@ -211,6 +216,7 @@ class TopThreeFinger(CandidatePlanner):
             viewpoint_m=cloud.viewpoint_m,
         )
         centre = frame.completed.mean(axis=0)
+        clouds = CandidateCloud(points, frame.completed)
         # Which way is front to back depends on the closing angle alone, not on the height.
         directions = [
             (
@@ -222,8 +228,7 @@ class TopThreeFinger(CandidatePlanner):
 
         def candidate(spread: float, angle: float, direction: np.ndarray, height: float):
             return sdh_candidate(
-                points,
-                frame.completed,
+                clouds,
                 centre,
                 direction,
                 angle,

@@ -15,12 +15,18 @@ from pipeline.perception import sdh_geometry as sdh
 from pipeline.perception.candidate import (
     BEYOND_CENTRE,
     BLIND_PAD_FACTOR,
+    CandidateCloud,
     CandidateSettings,
     height_grid,
 )
 from pipeline.perception.grasp_candidates import common_reason
 from pipeline.perception.grasp_geometry import front_to_back
-from pipeline.perception.pad_contact import flat_pad_taxels, pad_coverage, sdh_distal_taxels
+from pipeline.perception.pad_contact import (
+    flat_pad_taxels,
+    pad_coverage,
+    pad_coverages,
+    sdh_distal_taxels,
+)
 from pipeline.perception.parallel_candidates import ParallelHand, front_jaw_gap, parallel_candidate
 from pipeline.synthetic import box_object, cylinder_object
 from pipeline.types import PadLayout
@@ -135,6 +141,39 @@ def test_pad_coverage_meets_the_near_side_of_a_cloud_with_two_sides():
     assert contact.touch_m == pytest.approx(0.03)
     assert contact.coverage == 1.0
     assert np.all(contact.points[:, 0] == 0.03)
+
+
+def test_pads_found_together_meet_what_each_meets_alone():
+    # A box 40 x 60 mm around the origin, 0-100 mm high, seen by three pads closing on it
+    # from three sides at 50 mm, and a fourth pad beside it that meets nothing. Found in
+    # one pass, each pad's contact is the one it finds alone, on the whole cloud.
+    rng = np.random.default_rng(2)
+    u, z = rng.uniform(-1.0, 1.0, 3000), rng.uniform(0.0, 0.1, 3000)
+    box = np.vstack(
+        [
+            np.column_stack([np.full(3000, -0.02), 0.03 * u, z]),
+            np.column_stack([np.full(3000, 0.02), 0.03 * u, z]),
+            np.column_stack([0.02 * u, np.full(3000, 0.03), z]),
+        ]
+    )
+    origins = np.array([[-0.1, 0.0, 0.0], [0.1, 0.005, 0.0], [0.0, 0.1, 0.0], [0.2, 0.2, 0.0]])
+    directions = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, -1.0, 0], [1.0, 0, 0]])
+    taxels = sdh_distal_taxels(DISTAL, 0.05)
+    # A flat face touches the 4 flat rows and the curved ones recessed within 3 mm.
+    s = (np.arange(1, 10) - 0.5) * 0.0034
+    rows = 4 + np.sum(0.059 * (1 - np.cos(s / 0.059)) <= 0.003)
+    together = pad_coverages(box[::-1], origins, directions, taxels, 0.003)
+    assert together[3] is None
+    for contact, origin, direction in zip(together[:3], origins[:3], directions[:3], strict=True):
+        alone = pad_coverage(box[::-1], origin, direction, taxels, 0.003)
+        assert contact.touch_m == alone.touch_m
+        assert contact.coverage == alone.coverage == pytest.approx(rows / 13)
+        np.testing.assert_array_equal(contact.points, alone.points)
+        assert contact.inclination_rad == alone.inclination_rad
+    # Each touch is the face's position along the pad's motion: 20, 20 and 30 mm from the
+    # box's centre, before it.
+    touches = [c.touch_m for c in together[:3]]
+    np.testing.assert_allclose(touches, [-0.02, -0.02, -0.03], atol=1e-9)
 
 
 def test_the_distal_pad_tip_curves_away_from_a_flat_face():
@@ -308,8 +347,7 @@ def _jaw_hand():
 def _jaws_closing_along_y(visible: np.ndarray, completed: np.ndarray):
     """The PG-70 candidate closing along +y through the origin, pads centred 60 mm up."""
     return parallel_candidate(
-        visible,
-        completed,
+        CandidateCloud(visible, completed),
         np.zeros(3),
         np.array([0.0, 1.0, 0.0]),
         0.0,
@@ -380,8 +418,7 @@ def test_sdh_fingers_that_would_meet_the_front_from_inside_are_rejected():
         (_wall(0.015, half_width_m=0.012), False),
     ):
         candidate = sdh_candidates.sdh_candidate(
-            front,
-            np.vstack([front, back]),
+            CandidateCloud(front, np.vstack([front, back])),
             centre,
             np.array([0.0, 1.0, 0.0]),
             0.0,

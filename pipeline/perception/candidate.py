@@ -96,6 +96,59 @@ def height_grid(low_m: float, high_m: float, step_m: float) -> np.ndarray:
     return heights if heights[-1] <= low_m + 1e-9 else np.append(heights, low_m)
 
 
+class CandidateCloud:
+    """The clouds every candidate of one plan is evaluated on (frame R, m), with what many
+    candidates share computed once: the points in a height range (a pad's rows at one
+    height), the points above a height (for counts and order statistics)
+    and its half-footprint along a closing direction.
+
+    Attributes:
+        visible: ``(N, 3)`` the segmented cloud.
+        completed: ``(M, 3)`` the visible cloud and its mirror image.
+    """
+
+    def __init__(self, visible: np.ndarray, completed: np.ndarray) -> None:
+        self.visible = visible
+        self.completed = completed
+        self._by_height = {
+            seen: points[np.argsort(points[:, 2], kind="stable")]
+            for seen, points in ((True, visible), (False, completed))
+        }
+        self._slabs: dict[tuple[bool, float, float], np.ndarray] = {}
+        self._bands: dict[tuple[float, float], np.ndarray] = {}
+        self._footprints: dict[tuple[float, ...], float] = {}
+
+    def slab(self, low_m: float, high_m: float, *, visible: bool = False) -> np.ndarray:
+        """The completed (or ``visible``) points with ``low_m <= z <= high_m``, in the
+        cloud's order."""
+        key = (visible, low_m, high_m)
+        if key not in self._slabs:
+            points = self.visible if visible else self.completed
+            self._slabs[key] = points[(points[:, 2] >= low_m) & (points[:, 2] <= high_m)]
+        return self._slabs[key]
+
+    def band(self, height_m: float, half_m: float) -> np.ndarray:
+        """The completed points with ``|z - height_m| <= half_m``, in the cloud's order."""
+        key = (height_m, half_m)
+        if key not in self._bands:
+            z = self.completed[:, 2]
+            self._bands[key] = self.completed[np.abs(z - height_m) <= half_m]
+        return self._bands[key]
+
+    def above(self, z_m: float, *, visible: bool = False) -> np.ndarray:
+        """The completed (or ``visible``) points with ``z >= z_m``, lowest first (not in
+        the cloud's order: for counts and order statistics)."""
+        by_height = self._by_height[visible]
+        return by_height[np.searchsorted(by_height[:, 2], z_m) :]
+
+    def footprint_half_m(self, direction: np.ndarray) -> float:
+        """:func:`footprint_half_m` of the completed cloud along ``direction``."""
+        key = tuple(direction)
+        if key not in self._footprints:
+            self._footprints[key] = footprint_half_m(self.completed, direction)
+        return self._footprints[key]
+
+
 @dataclass(frozen=True)
 class Candidate:
     """One evaluated grasp: its summary (:class:`GraspCandidate`) and, when feasible, the

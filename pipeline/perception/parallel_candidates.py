@@ -3,6 +3,7 @@ candidate closing along a direction at a height (:func:`parallel_candidate`)."""
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -14,9 +15,9 @@ from .candidate import (
     BLIND_PAD_FACTOR,
     MIN_HITS,
     Candidate,
+    CandidateCloud,
     CandidateSettings,
     candidate_score,
-    footprint_half_m,
 )
 from .grasp_geometry import hand_pose
 from .pad_contact import PadContact, PadTaxels, flat_pad_taxels, pad_coverage
@@ -72,8 +73,7 @@ def front_jaw_gap(
 
 
 def parallel_candidate(
-    visible: np.ndarray,
-    completed: np.ndarray,
+    cloud: CandidateCloud,
     centre_m: np.ndarray,
     direction: np.ndarray,
     angle_rad: float,
@@ -101,11 +101,12 @@ def parallel_candidate(
     if fingertip_z < s.table_height_m + s.table_clearance_m:
         return Candidate.rejected(angle_rad, height_m, 0.0, "fingertips below the table clearance")
 
-    def column(points: np.ndarray) -> np.ndarray:
-        across = np.abs((points - centre_m) @ lateral)
-        return points[(across <= hand.jaw_half_width_m) & (points[:, 2] >= fingertip_z)]
+    def column(visible: bool) -> np.ndarray:
+        """The points between the jaws' paths above the fingertips (lowest first)."""
+        points = cloud.above(fingertip_z, visible=visible)
+        return points[np.abs((points - centre_m) @ lateral) <= hand.jaw_half_width_m]
 
-    front_points, all_points = column(visible), column(completed)
+    front_points, all_points = column(visible=True), column(visible=False)
     if len(front_points) == 0:
         return Candidate.rejected(angle_rad, height_m, 0.0, "no visible surface between the jaws")
     front = float(np.percentile(front_points @ direction, 2.0))
@@ -133,32 +134,38 @@ def parallel_candidate(
     position = centre_m + (middle - centre_m @ direction) * direction
     position[2] = height_m + hand.palm_to_pad_centre_m
     housing_bottom = position[2] - hand.housing_depth_m
-    offset = completed - position
+    below_housing = cloud.above(housing_bottom - s.descent_clearance_m)
+    offset = below_housing - position
     under_housing = (
-        (np.abs(offset @ direction) <= hand.housing_half_length_m + s.descent_clearance_m)
-        & (np.abs(offset @ lateral) <= hand.housing_half_width_m + s.descent_clearance_m)
-        & (completed[:, 2] >= housing_bottom - s.descent_clearance_m)
-    )
+        np.abs(offset @ direction) <= hand.housing_half_length_m + s.descent_clearance_m
+    ) & (np.abs(offset @ lateral) <= hand.housing_half_width_m + s.descent_clearance_m)
     if np.count_nonzero(under_housing) >= MIN_HITS:
         return Candidate.rejected(
             angle_rad, height_m, 0.0, "the housing would hit the object's top"
         )
 
     contacts = []
-    taxels = flat_pad_taxels(hand.pad, height_m)
-    for points, sign in ((visible, 1.0), (completed, -1.0)):
+    taxels = _flat_taxels(hand.pad, height_m)
+    for seen, sign in ((True, 1.0), (False, -1.0)):
         side = "front" if sign > 0 else "back"
+        # Only the points at the pad's rows can touch it.
+        points = cloud.slab(*taxels.z_range_m, visible=seen)
         contact = pad_coverage(points, position, sign * direction, taxels, s.touch_tolerance_m)
         if contact is None:
             return Candidate.rejected(angle_rad, height_m, 0.0, f"no surface before the {side} pad")
-        if _finger_meets_first(points, position, sign * direction, taxels, contact, hand, s):
+        below_pad = cloud.slab(
+            float(np.mean(taxels.row_z)) - hand.pad_centre_to_fingertip_m,
+            taxels.z_range_m[0],
+            visible=seen,
+        )
+        if _finger_meets_first(below_pad, position, sign * direction, taxels, contact, hand, s):
             return Candidate.rejected(
                 angle_rad, height_m, 0.0, f"the {side} finger meets the object before its pad"
             )
         contacts.append(contact)
     if not contacts[0].stops_before(centre_m, direction):
         return Candidate.rejected(angle_rad, height_m, 0.0, BEYOND_CENTRE)
-    tipping = (height_m - s.table_height_m) / footprint_half_m(completed, direction)
+    tipping = (height_m - s.table_height_m) / cloud.footprint_half_m(direction)
     if contacts[1].stops_before(centre_m, -direction):
         coverages = tuple(c.quality for c in contacts)
         score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
@@ -184,6 +191,12 @@ def parallel_candidate(
         opening_m=hand.aperture_m,
         predicted_contacts=contacts[0].points,
     )
+
+
+@functools.lru_cache(maxsize=64)
+def _flat_taxels(pad: PadLayout, height_m: float) -> PadTaxels:
+    """:func:`flat_pad_taxels`, once per pad and height."""
+    return flat_pad_taxels(pad, height_m)
 
 
 def _finger_meets_first(

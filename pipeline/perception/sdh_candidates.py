@@ -15,12 +15,12 @@ from .candidate import (
     BEYOND_CENTRE,
     MIN_HITS,
     Candidate,
+    CandidateCloud,
     CandidateSettings,
     candidate_score,
-    footprint_half_m,
 )
 from .grasp_geometry import hand_pose
-from .pad_contact import PadContact, PadTaxels, pad_coverage, sdh_distal_taxels
+from .pad_contact import PadContact, PadTaxels, pad_coverages, sdh_distal_taxels
 
 #: SDH-2 pre-shapes every grasp is tried with: base rotation -> where the object's centre
 #: sits on the palm's x axis (m): at 60 deg the fingers face the palm axis (a tripod); at 0
@@ -43,8 +43,7 @@ _OPEN_STEP_RAD = math.radians(3.0)
 
 
 def sdh_candidate(
-    visible: np.ndarray,
-    completed: np.ndarray,
+    cloud: CandidateCloud,
     centre_m: np.ndarray,
     direction: np.ndarray,
     angle_rad: float,
@@ -60,7 +59,7 @@ def sdh_candidate(
     need the object as wide as their two pads across the closing line.
 
     Each finger's contact angle is the proximal angle at which its distal pad (distal link
-    parallel to the palm axis) touches the ``completed`` cloud (``visible`` and mirrored)
+    parallel to the palm axis) touches the completed cloud (visible and mirrored)
     (:func:`pad_coverage`), before ``centre_m`` on its way (past it, the model has no
     surface on the finger's side there, and the pad would meet the far side from inside);
     the palm height puts the pads' centres at ``height_m`` at those angles. The pre-shape is
@@ -76,20 +75,22 @@ def sdh_candidate(
     palm_xy = centre_m - _CENTRES[spread_rad] * x_hand
     rotation = np.column_stack([x_hand[:2], y_hand[:2]])
     facings = sdh.finger_facings(spread_rad) @ rotation.T
-    taxels = sdh_distal_taxels(pad, height_m)
+    taxels = _distal_taxels(pad, height_m)
+    in_band = cloud.band(height_m, pad.rows * pad.pitch_m / 2.0)
     if spread_rad == 0.0:
         # Fingers 1 and 2 facing the thumb meet the back 33 mm either side of the closing
         # line: the object must be wide enough there for both their pads.
-        in_band = np.abs(completed[:, 2] - height_m) <= pad.rows * pad.pitch_m / 2.0
-        across = completed[in_band] @ y_hand
+        across = in_band @ y_hand
         span = sdh.FINGER_BASES_M[0, 1] + pad.cols * pad.pitch_m / 2.0
         if len(across) == 0 or np.ptp(np.percentile(across, [2.0, 98.0])) < 2.0 * span:
             return Candidate.rejected(angle_rad, height_m, spread_rad, TOO_NARROW)
+    # Only the points at the pads' rows can touch them.
+    reachable = cloud.slab(*taxels.z_range_m)
     # Fingers meet an object off the palm axis inclined, so the palm is moved once, onto
     # the centre of the contacts predicted from the first guess.
     for attempt in range(2):
         bases = palm_xy[:2] + sdh.FINGER_BASES_M @ rotation.T
-        found = _finger_contacts(completed, bases, facings, taxels, s.touch_tolerance_m)
+        found = _finger_contacts(reachable, bases, facings, taxels, s.touch_tolerance_m)
         if isinstance(found, str):
             return Candidate.rejected(angle_rad, height_m, spread_rad, found)
         contacts, alphas = found
@@ -103,16 +104,16 @@ def sdh_candidate(
     ):
         return Candidate.rejected(angle_rad, height_m, spread_rad, BEYOND_CENTRE)
     palm_z = height_m + float(np.mean(sdh.distal_pad_depth_m(np.array(alphas))))
-    depth_below_palm = palm_z - completed[:, 2]
-    radial = np.hypot(*(completed[:, :2] - palm_xy[:2]).T)
+    below_palm = cloud.above(palm_z - sdh.BASE_DEPTH_M - s.descent_clearance_m - _MARGIN_M)
+    radial = np.hypot(*(below_palm[:, :2] - palm_xy[:2]).T)
     palm_hit = (radial <= sdh.PALM_RADIUS_M + s.descent_clearance_m) & (
-        depth_below_palm <= sdh.BASE_DEPTH_M + s.descent_clearance_m
+        palm_z - below_palm[:, 2] <= sdh.BASE_DEPTH_M + s.descent_clearance_m
     )
     if np.count_nonzero(palm_hit) >= MIN_HITS:
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "the palm would hit the object's top"
         )
-    open_alpha = _clear_preshape(completed, bases, facings, depth_below_palm, min(alphas), s)
+    open_alpha = _clear_preshape(cloud, bases, facings, palm_z, min(alphas), s)
     if open_alpha is None:
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "the fingers cannot open around the object"
@@ -120,7 +121,7 @@ def sdh_candidate(
     opening = sdh.opening_for_alpha(open_alpha)
     if opening > aperture_m + 1e-9:
         return Candidate.rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
-    if _closing_collides(visible, bases, facings, palm_z, open_alpha, alphas, s):
+    if _closing_collides(cloud.visible, bases, facings, palm_z, open_alpha, alphas, s):
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "a proximal link would hit the object while closing"
         )
@@ -135,15 +136,15 @@ def sdh_candidate(
             angle_rad, height_m, spread_rad, "fingertips below the table clearance"
         )
     coverages = tuple(c.quality for c in contacts)
-    tipping = (height_m - s.table_height_m) / footprint_half_m(completed, x_hand)
+    tipping = (height_m - s.table_height_m) / cloud.footprint_half_m(x_hand)
     score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
+    above_pads = cloud.above(float(taxels.row_z.max()) + taxels.pitch_m / 2.0)
     if any(
-        _top_edge_above_pad(completed, np.append(base, 0.0), np.append(facing, 0.0), taxels, c)
+        _top_edge_above_pad(above_pads, np.append(base, 0.0), np.append(facing, 0.0), taxels, c)
         for base, facing, c in zip(bases, facings, contacts, strict=True)
     ):
         score *= _EDGE_PENALTY
-    in_band = np.abs(completed[:, 2] - height_m) <= pad.rows * pad.pitch_m / 2.0
-    width = float(np.ptp(completed[in_band] @ x_hand)) if np.any(in_band) else math.nan
+    width = float(np.ptp(in_band @ x_hand)) if len(in_band) else math.nan
     position = np.array([palm_xy[0], palm_xy[1], palm_z])
     order = (2, 0, 1)  # thumb, finger 1, finger 2
     return Candidate(
@@ -165,19 +166,22 @@ def sdh_candidate(
 
 
 def _finger_contacts(
-    completed: np.ndarray,
+    points: np.ndarray,
     bases: np.ndarray,
     facings: np.ndarray,
     taxels: PadTaxels,
     tolerance_m: float,
 ) -> tuple[list[PadContact], list[float]] | str:
-    """Each finger's predicted distal pad contact and its proximal angle there, or why a
-    finger finds none."""
+    """Each finger's predicted distal pad contact with ``points`` (the completed cloud, or
+    the part of it at the pads' rows) and its proximal angle there, or why a finger finds
+    none."""
+    origins = np.column_stack([bases, np.zeros(len(bases))])
+    directions = np.column_stack([facings, np.zeros(len(facings))])
+    found = pad_coverages(points, origins, directions, taxels, tolerance_m)
     contacts, alphas = [], []
-    for finger, base, facing in zip(sdh.FINGERS, bases, facings, strict=True):
-        origin = np.array([base[0], base[1], 0.0])
-        direction = np.array([facing[0], facing[1], 0.0])
-        contact = pad_coverage(completed, origin, direction, taxels, tolerance_m)
+    for finger, origin, direction, contact in zip(
+        sdh.FINGERS, origins, directions, found, strict=True
+    ):
         if contact is None:
             return f"{finger} meets no surface"
         alpha = float(sdh.alpha_for_reach(contact.touch_m - origin @ direction))
@@ -214,35 +218,41 @@ def _contact_centre(
 
 
 def _clear_preshape(
-    completed: np.ndarray,
+    cloud: CandidateCloud,
     bases: np.ndarray,
     facings: np.ndarray,
-    depth_below_palm: np.ndarray,
+    palm_z: float,
     contact_alpha: float,
     s: CandidateSettings,
 ) -> float | None:
     """The most closed proximal angle on a 3-deg grid, at least 3 deg before
-    ``contact_alpha``, at which every finger descends clear of the cloud; None when none
-    does."""
+    ``contact_alpha``, at which every finger descends clear of the completed cloud (the
+    palm at height ``palm_z``); None when none does."""
+    step = math.floor((contact_alpha - _OPEN_STEP_RAD) / _OPEN_STEP_RAD)
+    steps = []
+    while step * _OPEN_STEP_RAD > -sdh.JOINT_LIMIT_RAD:
+        steps.append(step)
+        step -= 1
+    # Points deeper below the palm than any profile reaches, or beside every profile's
+    # grid, are never hit.
+    deepest, t_low, t_high = _profile_bounds(s.descent_clearance_m)
+    points = cloud.above(palm_z - deepest - _MARGIN_M)
+    depth_below_palm = palm_z - points[:, 2]
     corridors = []
     for base, facing in zip(bases, facings, strict=True):
-        relative = completed[:, :2] - base
+        relative = points[:, :2] - base
         across = np.abs(relative @ np.array([-facing[1], facing[0]]))
         near = across <= sdh.FINGER_HALF_WIDTH_M + s.descent_clearance_m
-        corridors.append((relative[near] @ facing, depth_below_palm[near]))
-    step = math.floor((contact_alpha - _OPEN_STEP_RAD) / _OPEN_STEP_RAD)
-    while step * _OPEN_STEP_RAD > -sdh.JOINT_LIMIT_RAD:
-        grid, reach = _swept_profile(step, s.descent_clearance_m)
-        clear = True
+        t, d = relative[near] @ facing, depth_below_palm[near]
+        within = (t >= t_low) & (t <= t_high)
+        corridors.append((t[within], d[within]))
+    for first in range(0, len(steps), _STEPS_AT_ONCE):
+        chunk = tuple(steps[first : first + _STEPS_AT_ONCE])
+        clear = np.ones(len(chunk), dtype=bool)
         for t, d in corridors:
-            index = np.round((t - grid[0]) / _PROFILE_STEP_M).astype(int)
-            inside = (index >= 0) & (index < len(grid))
-            if np.count_nonzero(d[inside] <= reach[index[inside]]) >= MIN_HITS:
-                clear = False
-                break
-        if clear:
-            return step * _OPEN_STEP_RAD
-        step -= 1
+            clear &= _profile_hits(chunk, t, d, s.descent_clearance_m) < MIN_HITS
+        if np.any(clear):
+            return chunk[int(np.argmax(clear))] * _OPEN_STEP_RAD
     return None
 
 
@@ -266,25 +276,70 @@ def _closing_collides(
         across = np.abs(relative @ np.array([-facing[1], facing[0]]))
         near = across <= sdh.FINGER_HALF_WIDTH_M + s.touch_tolerance_m
         t, d = relative[near] @ facing, depth_below_palm[near]
-        for alpha in [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]:
-            if np.count_nonzero(sdh.closing_hits(t, d, alpha, s.touch_tolerance_m)) >= MIN_HITS:
-                return True
+        alphas = [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]
+        hits = sdh.closing_hits(t, d, alphas, s.touch_tolerance_m)
+        if np.any(np.count_nonzero(hits, axis=1) >= MIN_HITS):
+            return True
     return False
 
 
 #: Resolution of the finger profiles the pre-shape search compares the cloud with (m).
 _PROFILE_STEP_M = 0.001
+#: Pre-shapes the search compares the cloud with at once: most are found within a few.
+_STEPS_AT_ONCE = 8
+#: Slack of the cheap height bounds that select the points an exact test then checks (m).
+_MARGIN_M = 1e-6
 
 
 @functools.lru_cache(maxsize=256)
 def _swept_profile(step: int, clearance_m: float) -> tuple[np.ndarray, np.ndarray]:
     """The finger profile at proximal angle ``step`` x 3 deg, grown by ``clearance_m`` in
     both directions."""
-    from scipy.ndimage import maximum_filter1d  # deferred: planners load with `plugins`
-
     grid, depth = sdh.finger_profile(step * _OPEN_STEP_RAD, _PROFILE_STEP_M)
-    width = 2 * math.ceil(clearance_m / _PROFILE_STEP_M) + 1
-    return grid, maximum_filter1d(depth, width) + clearance_m
+    half = math.ceil(clearance_m / _PROFILE_STEP_M)
+    # The greatest depth within ``half`` cells either side, the ends mirrored.
+    padded = np.pad(depth, half, mode="symmetric")
+    grown = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1).max(axis=1)
+    return grid, grown + clearance_m
+
+
+@functools.lru_cache(maxsize=16)
+def _profile_bounds(clearance_m: float) -> tuple[float, float, float]:
+    """Over every pre-shape within the joint limits: the deepest any grown profile reaches
+    below the palm, and the least and greatest distance along the facing a point may have
+    and still fall on a profile's grid (m)."""
+    limit = math.ceil(sdh.JOINT_LIMIT_RAD / _OPEN_STEP_RAD)
+    profiles = [_swept_profile(step, clearance_m) for step in range(-limit, limit + 1)]
+    return (
+        max(float(reach.max()) for _, reach in profiles),
+        min(float(grid[0]) for grid, _ in profiles) - _PROFILE_STEP_M,
+        max(float(grid[-1]) for grid, _ in profiles) + _PROFILE_STEP_M,
+    )
+
+
+@functools.lru_cache(maxsize=1024)
+def _profile_table(steps: tuple[int, ...], clearance_m: float) -> tuple[np.ndarray, ...]:
+    """The grown profiles of ``steps`` (:func:`_swept_profile`) as arrays: each grid's
+    first distance ``(K,)``, its length ``(K,)`` and the reaches ``(K, longest)``, padded
+    with -inf."""
+    profiles = [_swept_profile(step, clearance_m) for step in steps]
+    lengths = np.array([len(grid) for grid, _ in profiles])
+    reaches = np.full((len(steps), lengths.max()), -np.inf)
+    for row, (_, reach) in enumerate(profiles):
+        reaches[row, : len(reach)] = reach
+    return np.array([grid[0] for grid, _ in profiles]), lengths, reaches
+
+
+def _profile_hits(
+    steps: tuple[int, ...], t: np.ndarray, d: np.ndarray, clearance_m: float
+) -> np.ndarray:
+    """``(K,)``: how many points at distance ``t`` along a finger's facing and depth ``d``
+    below the palm (both ``(N,)``) each pre-shape of ``steps`` sweeps on its descent."""
+    starts, lengths, reaches = _profile_table(steps, clearance_m)
+    index = np.round((t[None, :] - starts[:, None]) / _PROFILE_STEP_M).astype(int)
+    inside = (index >= 0) & (index < lengths[:, None])
+    reach = np.take_along_axis(reaches, np.clip(index, 0, reaches.shape[1] - 1), axis=1)
+    return np.count_nonzero(inside & (d[None, :] <= reach), axis=1)
 
 
 #: How deep behind a pad's touch the surface counts as the side it closes on, looking for
@@ -294,6 +349,12 @@ _EDGE_DEPTH_M = 0.015
 #: such a grasp is taken only where no other comes near, as on a box too tall for the pads
 #: to reach clear of its top edge (docs/method.md §5 has what a quarter and a fiftieth did).
 _EDGE_PENALTY = 0.1
+
+
+@functools.lru_cache(maxsize=64)
+def _distal_taxels(pad: PadLayout, height_m: float) -> PadTaxels:
+    """:func:`sdh_distal_taxels`, once per pad and height."""
+    return sdh_distal_taxels(pad, height_m)
 
 
 def _top_edge_above_pad(

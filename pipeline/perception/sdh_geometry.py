@@ -20,6 +20,7 @@ pads touch.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -136,17 +137,18 @@ def finger_profile(alpha_rad: float, step_m: float = 0.001) -> tuple[np.ndarray,
 
 
 def closing_hits(
-    t_m: np.ndarray, depth_m: np.ndarray, alpha_rad: float, clearance_m: float
+    t_m: np.ndarray, depth_m: np.ndarray, alphas_rad: Sequence[float], clearance_m: float
 ) -> np.ndarray:
-    """Which points, at distance ``t_m`` along a finger's facing from its base and
-    ``depth_m`` below the palm (both ``(N,)``, within the finger's width), lie inside the
-    finger's knuckle or proximal link with pad, grown by ``clearance_m``, at proximal angle
-    ``alpha_rad``. The distal link is left out: its pad is where the finger means to touch,
-    and its tip only ever moves toward the surface that pad meets."""
+    """``(K, N)``: which points, at distance ``t_m`` along a finger's facing from its base
+    and ``depth_m`` below the palm (both ``(N,)``, within the finger's width), lie inside
+    the finger's knuckle or proximal link with pad, grown by ``clearance_m``, at each of the
+    ``K`` proximal angles ``alphas_rad``. The distal link is left out: its pad is where the
+    finger means to touch, and its tip only ever moves toward the surface that pad meets."""
     knuckle = (np.abs(t_m) <= KNUCKLE_RADIUS_M + clearance_m) & (
         (depth_m >= BASE_DEPTH_M - clearance_m) & (depth_m <= KNUCKLE_DEPTH_M + clearance_m)
     )
-    s, c = math.sin(alpha_rad), math.cos(alpha_rad)
+    s = np.array([math.sin(alpha) for alpha in alphas_rad])[:, None]
+    c = np.array([math.cos(alpha) for alpha in alphas_rad])[:, None]
     relative_d = depth_m - KNUCKLE_DEPTH_M
     along = t_m * s + relative_d * c
     across = t_m * c - relative_d * s
