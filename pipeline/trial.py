@@ -50,7 +50,7 @@ from .formats import (
     write_completed_clouds,
     write_json,
 )
-from .hand_choice import HandChoice, choice_to_json, choose_grasp, create_planner
+from .hand_choice import HandChoice, choice_to_json, choose_grasp, create_planner, next_try
 from .next_grasp import (
     MeasurementModel,
     NextHand,
@@ -481,7 +481,9 @@ def _grasp_and_fuse(
             document["grasp"] = executed
             document["object_pose_after"] = pose_to_json(outcome.object_after)
             if not outcome.executed:
-                raise StageFailure(f"grasp not executed: {outcome.reason}")
+                raise StageFailure(
+                    f"grasp not executed: {outcome.reason}{next_try(world.hands, plan.gripper)}"
+                )
         elif not outcome.executed:
             stop = f"grasp {k + 1} not executed: {outcome.reason}"
             document["unfused_grasp"] = attempt_to_json(k, plan, chosen_by, executed)
@@ -495,7 +497,7 @@ def _grasp_and_fuse(
                 if len(contacts):  # the taxels are kept for `symfuse fuse`, as read
                     with timer.phase("write"):
                         write_json(out_dir / "contacts.json", contacts_to_json([contacts], [plan]))
-                raise StageFailure(stop)
+                raise StageFailure(stop + next_try(world.hands, plan.gripper))
             break
         grasps.append(contacts)
         plans.append(plan)

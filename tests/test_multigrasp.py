@@ -154,7 +154,8 @@ def test_a_first_grasp_on_one_side_only_ends_the_trial_with_its_taxels_kept(
     assert code == 3
     error = capsys.readouterr().err.strip()
     assert error.startswith("symfuse: error: grasp 1 touched one side only (the object moved ")
-    assert error.endswith("; not fused")
+    # ... and says what to try next: the hand the trial did not use.
+    assert error.endswith("; not fused; try --gripper sdh")
     document = json.loads((out / "result.json").read_text())
     assert document["status"] == "failed" and "stages" not in document
     assert document["unfused_grasp"]["grasp"] == 1

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 
 import numpy as np
@@ -9,15 +11,63 @@ import pytest
 import trimesh
 
 from pipeline.cli import main
+from pipeline.cli_trial import grasps_summary, run_name
 from pipeline.formats import read_cloud
+from pipeline.tables import TERMINAL_WIDTH
 from pipeline.trial import PICTURE_FILES, TRIAL_FILES
 
 
 @pytest.fixture(scope="module")
 def trial_dir(tmp_path_factory):
+    """The default trial's folder; what it printed is in ``stdout.txt`` beside it."""
     out = tmp_path_factory.mktemp("trial")
-    assert main(["trial", "--out", str(out)]) == 0
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(["trial", "--out", str(out)]) == 0
+    (out.parent / "stdout.txt").write_text(printed.getvalue())
     return out
+
+
+def test_the_output_fits_a_terminal(trial_dir):
+    printed = (trial_dir.parent / "stdout.txt").read_text().splitlines()
+    assert max(len(line) for line in printed) <= TERMINAL_WIDTH
+    assert any(line.startswith("stage  status") for line in printed)
+
+
+def test_the_grasp_table_fits_a_terminal_at_its_widest():
+    # The longest status, two-digit errors and stds, three pads of the SDH-2.
+    stage = {
+        "metrics": {
+            "deviation_m": {"median": 0.0312},
+            "plane_angle_error_deg": 11.2,
+            "plane_offset_error_mm": 10.4,
+        },
+        "status": "no_correspondence",
+        "consistency": {"consistent": True},
+    }
+    grasp = {
+        "grasp": 2,
+        "chosen_by": {"strategy": "information"},
+        "gripper": "sdh",
+        "pads_in_contact": ["finger1_distal", "finger2_distal", "thumb_distal"],
+        "taxels_in_contact": 120,
+        "selected_stage": 2,
+        "stages": [None, None, stage],
+        "uncertainty": {"plane_offset_std_mm": 10.3, "hidden_side_std_mm": 12.4},
+    }
+    document = {"grasps": [grasp], "stop_reason": "grasps done: 2 of 2"}
+    narrow = grasps_summary(document).splitlines()
+    assert max(len(line) for line in narrow) <= TERMINAL_WIDTH
+    assert "10.3 / 12.4" in narrow[2]
+    wide = grasps_summary(document, wide=True).splitlines()
+    assert "finger1_distal finger2_distal thumb_distal" in wide[2] and "12.40" in wide[2]
+
+
+def test_a_mesh_run_is_named_after_its_folder(tmp_path):
+    assert run_name("cd_drive") == "cd_drive"
+    assert run_name(str(tmp_path / "003_cracker_box" / "textured.obj")) == (
+        "003_cracker_box-textured"
+    )
 
 
 def test_trial_writes_every_file(trial_dir):
