@@ -178,16 +178,17 @@ def trial_summary(record, wide: bool = False) -> str:
 
 
 #: The columns of the grasp table only ``--wide`` shows; without it the two stds share one.
-WIDE_GRASP_COLUMNS = ("pads", "consistent", "offset std mm", "hidden std mm")
+WIDE_GRASP_COLUMNS = ("pads", "consistent", "offset std mm", "hidden std mm", "shape std mm")
 
 
 def grasps_summary(document: dict, wide: bool = False) -> str:
     """One row per grasp of a multi-grasp trial: how it was chosen, where it touched, the
     selected stage after fusing it with its deviation and consistency, and the two
     uncertainties of the stop rule (``stds mm``: the plane offset's, then the hidden
-    side's; ``dev mm`` is the median deviation, ``plane °`` and ``offset err`` (mm) the
-    plane's errors); the grasp it stopped on unfused, if any; then why the trial stopped.
-    Without ``wide`` less :data:`WIDE_GRASP_COLUMNS`."""
+    shape's; ``--wide`` adds the hidden side's with the object's place); the grasp it
+    stopped on unfused, if any; then why the trial stopped. ``dev mm`` is the median
+    deviation, ``plane °`` and ``offset err`` (mm) the plane's errors. Without ``wide``
+    less :data:`WIDE_GRASP_COLUMNS`."""
     rows = []
     for entry in document["grasps"]:
         stage = entry["stages"][entry["selected_stage"]]
@@ -209,7 +210,8 @@ def grasps_summary(document: dict, wide: bool = False) -> str:
                 "yes" if consistency.get("consistent") else "NO",
                 f"{known['plane_offset_std_mm']:.2f}",
                 f"{known['hidden_side_std_mm']:.2f}",
-                f"{known['plane_offset_std_mm']:.1f} / {known['hidden_side_std_mm']:.1f}",
+                f"{known['hidden_shape_std_mm']:.2f}",
+                f"{known['plane_offset_std_mm']:.1f} / {known['hidden_shape_std_mm']:.1f}",
             ]
         )
     if unfused := document.get("unfused_grasp"):
@@ -222,7 +224,7 @@ def grasps_summary(document: dict, wide: bool = False) -> str:
                 unfused.get("taxels_in_contact", 0),
                 "-",
                 "not fused",
-                *["-"] * 7,
+                *["-"] * 8,
             ]
         )
     header = [
@@ -239,6 +241,7 @@ def grasps_summary(document: dict, wide: bool = False) -> str:
         "consistent",
         "offset std mm",
         "hidden std mm",
+        "shape std mm",
         "stds mm",
     ]
     table = format_table(header, rows, ("stds mm",) if wide else WIDE_GRASP_COLUMNS)

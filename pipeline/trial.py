@@ -210,7 +210,8 @@ def draw_grasps(
     document: dict[str, Any],
 ) -> None:
     """``grasps.png``: the object from above with every grasp's pads numbered, how it was
-    chosen and by which hand, and the selected stage's median deviation after it."""
+    chosen and by which hand, and the selected stage's median deviation after it; the grasp
+    the trial stopped on without fusing it, where it was planned to touch."""
     from .figures import GraspMarks, grasps_figure
 
     marks = []
@@ -220,6 +221,15 @@ def draw_grasps(
         chosen = f"{entry['chosen_by']['strategy']} ({entry['gripper']})"
         label = f"{chosen}, then {median_mm:.1f} mm (Stage {stage})"
         marks.append(GraspMarks(label, contacts.positions, contacts.pads))
+    if unfused := document.get("unfused_grasp"):
+        planned = np.asarray(unfused["plan"]["predicted_contacts"]).reshape(-1, 3)
+        touched = ", ".join(unfused.get("pads_in_contact", [])) or "nothing"
+        what = f"touched {touched}" if unfused["executed"] else "not executed"
+        label = (
+            f"{unfused['chosen_by']['strategy']} ({unfused['gripper']}), {what}: not fused "
+            "(planned contacts)"
+        )
+        marks.append(GraspMarks(label, planned, np.full(len(planned), "planned"), fused=False))
     grasps_figure(
         out_path,
         result.selected.completed,

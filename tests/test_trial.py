@@ -53,7 +53,11 @@ def test_the_grasp_table_fits_a_terminal_at_its_widest():
         "taxels_in_contact": 120,
         "selected_stage": 2,
         "stages": [None, None, stage],
-        "uncertainty": {"plane_offset_std_mm": 10.3, "hidden_side_std_mm": 12.4},
+        "uncertainty": {
+            "plane_offset_std_mm": 10.3,
+            "hidden_side_std_mm": 21.7,
+            "hidden_shape_std_mm": 12.4,
+        },
     }
     document = {"grasps": [grasp], "stop_reason": "grasps done: 2 of 2"}
     narrow = grasps_summary(document).splitlines()
