@@ -304,7 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Options whose value may start with a minus sign (``--plane -1,0,0.2``).
-SIGNED_VALUE_OPTIONS = ("--plane",)
+SIGNED_VALUE_OPTIONS = ("--plane", "--symmetry")
 
 
 def _join_signed_values(argv: Sequence[str]) -> list[str]:

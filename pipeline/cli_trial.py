@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -68,6 +69,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="MM",
         help="stop once the plane offset and hidden side posterior stds are <= MM",
     )
+    parser.add_argument(
+        "--symmetry",
+        type=three_numbers,
+        metavar="NX,NY,D",
+        help="the --mesh file's true mirror plane, NX x + NY y = D in the file's frame and "
+        "units, so the plane errors are scored",
+    )
     _add_units_option(parser, "the --mesh file")
     _add_config_options(parser)
     _add_output_options(parser, default="runs/trial-OBJECT-seedN[-K]")
@@ -95,7 +103,20 @@ def trial_overrides(args: argparse.Namespace) -> list[str]:
         overrides.append(f"trial.next_grasp={args.next_grasp}")
     if args.until_std is not None:
         overrides.append(f"trial.until_std_mm={args.until_std}")
+    if args.symmetry is not None:
+        overrides.append(f"trial.symmetry={list(args.symmetry)}")
     return overrides
+
+
+def three_numbers(text: str) -> tuple[float, float, float]:
+    """An argparse ``type``: ``NX,NY,D``, three finite numbers."""
+    try:
+        values = tuple(float(field) for field in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected three numbers NX,NY,D, got '{text}'")
+    return values
 
 
 def check_several_grasps_options(settings, changed: dict) -> None:

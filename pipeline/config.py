@@ -74,9 +74,15 @@ class TrialSettings:
     )
     until_std_mm: float = param(
         0.0,
-        "stop grasping once the plane offset's and the hidden side's posterior stds are both "
-        "at most this (mm); 0: make all the grasps",
+        "stop grasping once the plane offset's and the hidden shape's posterior stds are "
+        "both at most this (mm); 0: make all the grasps",
         at_least=0.0,
+    )
+    symmetry: tuple[float, ...] = param(
+        (),
+        "the true mirror plane of a mesh file given as object, [NX, NY, D]: the points with "
+        "NX x + NY y = D in the file's own frame and units, so the plane errors are scored; "
+        "empty: none",
     )
 
 

@@ -142,7 +142,7 @@ def ground_truth(
     if calibration_error is not None:
         cloud_motion = T @ np.linalg.inv(calibration_error @ pose_seen.transform)
     vertices = np.asarray(obj.mesh.vertices) @ T[:3, :3].T + T[:3, 3]
-    plane = None
+    plane, anchor = None, T[:3, 3]
     if obj.symmetry == "planar" and obj.symmetry_plane is not None:
         normal = T[:3, :3] @ obj.symmetry_plane.normal
         anchor = T[:3, 3] + T[:3, :3] @ (obj.symmetry_plane.normal * obj.symmetry_plane.offset_m)
@@ -153,7 +153,9 @@ def ground_truth(
         faces=np.asarray(obj.mesh.faces),
         symmetry=obj.symmetry,
         plane=plane,
-        axis_xy_m=T[:2, 3].copy(),
+        # The object origin, or the true plane's point nearest it (a mesh's plane given
+        # by the user need not pass through the centre of its bounding box).
+        axis_xy_m=anchor[:2].copy(),
         thickness_m=dims.get("thickness") if obj.kind == "box" else None,
         diameter_m=dims.get("diameter") if obj.kind == "cylinder" else None,
         cloud_motion=cloud_motion,
@@ -275,7 +277,7 @@ def run_trial(
         "config": config.to_dict(),
     }
     stages = {stage: config.create(registry, stage) for stage in config.choices}
-    obj = load_object(settings.object, units=settings.units)
+    obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
     try:
         return _simulate(config, registry, stages, obj, out_dir, timer, document, report)
     except SymfuseError as exc:

@@ -190,6 +190,20 @@ def test_a_user_urdf_goes_through_a_whole_trial(tmp_path):
     assert stages[2]["metrics"]["deviation_m"]["median"] < 0.003
 
 
+@pytest.mark.slow
+def test_a_user_mesh_with_its_true_plane_is_scored_against_it(tmp_path):
+    folder = tmp_path / "012_brick"
+    folder.mkdir()
+    trimesh.creation.box((0.045, 0.08, 0.09)).export(folder / "textured.stl")
+    code = main(["trial", "--mesh", str(folder / "textured.stl"), "--symmetry", "-1,0,0",
+                 "--set", "trial.pictures=false", "--out", str(tmp_path / "o")])  # fmt: skip
+    assert code == 0
+    document = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert document["config"]["trial"]["symmetry"] == [-1.0, 0.0, 0.0]
+    for stage in document["stages"]:
+        assert stage["metrics"]["plane_angle_error_deg"] < 5.0
+
+
 def test_unknown_object_is_one_line_exit_2(tmp_path, capsys):
     code = main(["trial", "--object", "teapot", "--out", str(tmp_path)])
     err = capsys.readouterr().err
