@@ -22,7 +22,7 @@ import logging
 import os
 import tomllib
 import warnings
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -92,7 +92,8 @@ class CatalogueObject:
         mesh: the surface in the object frame (metres; base on z = 0; centred in x, y).
         mass_kg: mass (kg).
         friction: Coulomb friction coefficient (-).
-        symmetry: ``"planar"``, ``"rotational"`` or ``"none"`` (always ``"none"`` for files).
+        symmetry: ``"planar"``, ``"rotational"`` or ``"none"`` (``"none"`` for files unless
+            given their plane).
         symmetry_plane: ground-truth mirror plane in the object frame when planar, else None.
         dimensions_m: catalogue dimensions (m); for files the bounding-box extents
             ``extent_x``, ``extent_y``, ``extent_z``.
@@ -175,7 +176,11 @@ def list_objects() -> list[CatalogueObjectInfo]:
 
 
 def load_object(
-    name_or_path: str | os.PathLike[str], *, recentre: bool = True, units: str = "m"
+    name_or_path: str | os.PathLike[str],
+    *,
+    recentre: bool = True,
+    units: str = "m",
+    symmetry: Sequence[float] = (),
 ) -> CatalogueObject:
     """A catalogue object by name, or a mesh file (OBJ, STL, PLY, ...) or URDF by path.
 
@@ -185,6 +190,9 @@ def load_object(
             centred on x = y = 0 (catalogue meshes always are).
         units: the length unit of a mesh file (``m`` or ``mm``; it is converted to metres).
             A URDF states its own scale in its ``<mesh scale=...>`` elements.
+        symmetry: a mesh file's true vertical mirror plane ``(NX, NY, D)``, the points with
+            ``NX x + NY y = D`` in the file's frame and ``units`` (``trial.symmetry``), or
+            empty: the object is then ``planar`` about it (moved with the recentring).
 
     Raises:
         InputError: unknown name (the message lists the catalogue); a missing, unreadable
@@ -193,6 +201,11 @@ def load_object(
     """
     text = os.fspath(name_or_path)
     catalogue = _specification()
+    is_mesh = text not in catalogue and Path(text).suffix.lower() != ".urdf"
+    if symmetry and not is_mesh:
+        raise InputError(
+            f"'{text}' states its own symmetry; --symmetry (trial.symmetry) applies to mesh files"
+        )
     if text in catalogue:
         if units != "m":
             raise InputError(
@@ -221,7 +234,7 @@ def load_object(
             )
         return _load_urdf(path)
     if path.suffix.lower() in MESH_SUFFIXES or path.exists() or os.sep in text:
-        return _load_mesh_file(path, recentre=recentre, units=units)
+        return _load_mesh_file(path, recentre=recentre, units=units, symmetry=symmetry)
     raise InputError(f"unknown object '{text}'; catalogue objects: {', '.join(catalogue)}")
 
 
@@ -248,7 +261,25 @@ def _checked_mesh(
 FLAT_RATIO = 1e-9
 
 
-def _load_mesh_file(path: Path, *, recentre: bool, units: str = "m") -> CatalogueObject:
+def _user_plane(symmetry: Sequence[float], scale: float, shift_xy: np.ndarray) -> SymmetryPlane:
+    """The plane ``(NX, NY, D)`` of a mesh file (``D`` in its units, ``scale`` metres per
+    unit) in the object frame, the mesh having moved by ``shift_xy`` (m) when placed.
+
+    Raises:
+        InputError: not three numbers, or a zero normal.
+    """
+    if len(symmetry) != 3 or not (symmetry[0] or symmetry[1]):
+        raise InputError(
+            f"--symmetry (trial.symmetry) {list(symmetry)}: expected NX, NY, D with a "
+            "non-zero normal (NX, NY)"
+        )
+    plane = SymmetryPlane.from_normal(np.array(symmetry[:2]), scale * symmetry[2])
+    return SymmetryPlane(plane.theta_rad, plane.offset_m + float(plane.normal[:2] @ shift_xy))
+
+
+def _load_mesh_file(
+    path: Path, *, recentre: bool, units: str = "m", symmetry: Sequence[float] = ()
+) -> CatalogueObject:
     if not path.is_file():
         what = "a folder, not a mesh file" if path.is_dir() else "no such mesh file"
         raise InputError(f"{path}: {what}")
@@ -274,8 +305,10 @@ def _load_mesh_file(path: Path, *, recentre: bool, units: str = "m") -> Catalogu
         mesh.apply_scale(scale)
     mesh = _checked_mesh(mesh, path, "contains no triangles")
     check_not_metres(mesh.extents, units, str(path))
+    lower = mesh.bounds[0]
     if recentre:
         mesh = place_on_table(mesh)
+    plane = _user_plane(symmetry, scale, (mesh.bounds[0] - lower)[:2]) if symmetry else None
     watertight = bool(mesh.is_watertight)
     if not watertight:
         _log.warning("%s: mesh is not watertight; accepted, volumes and inside tests are off", path)
@@ -285,8 +318,8 @@ def _load_mesh_file(path: Path, *, recentre: bool, units: str = "m") -> Catalogu
         mesh=mesh,
         mass_kg=DEFAULT_MASS_KG,
         friction=DEFAULT_FRICTION,
-        symmetry="none",
-        symmetry_plane=None,
+        symmetry="none" if plane is None else "planar",
+        symmetry_plane=plane,
         dimensions_m={f"extent_{axis}": float(v) for axis, v in zip("xyz", extents, strict=True)},
         description=f"mesh loaded from {path}",
         kind="mesh",

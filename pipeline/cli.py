@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from . import __version__
-from .errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, ConfigError, SymfuseError
+from .entry import interrupt_received, report_interrupt
+from .errors import EXIT_BAD_INPUT, EXIT_OK, ConfigError, SymfuseError
 from .stages import STAGES
 from .tables import format_table
 
@@ -66,6 +67,16 @@ def _add_units_option(parser: argparse.ArgumentParser, what: str) -> None:
         choices=["m", "mm"],
         help=f"length unit of {what} (default: metres; data that looks like millimetres "
         "is refused)",
+    )
+
+
+def add_wide_option(parser: argparse.ArgumentParser) -> None:
+    """``--wide``: print every column of the result tables, not only those that fit a
+    terminal (all are in ``result.json`` either way)."""
+    parser.add_argument(
+        "--wide",
+        action="store_true",
+        help="print every column of the tables (default: those that fit 100 columns)",
     )
 
 
@@ -153,6 +164,29 @@ def check_overrides(
             raise ConfigError(
                 f"--set {text}: symfuse {verb} sets {key} from its arguments; drop this --set"
             )
+
+
+def user_settings(config, registry, overrides: Sequence[str]) -> dict[str, Any]:
+    """The settings the user chose: what the ``--config`` files and ``--set`` changed from
+    the shipped defaults, and every key a ``--set`` (or an option, in ``overrides``) names,
+    even to its default value (``--set planner.use=top-parallel`` is a choice the checks
+    of later options must see; a whole resolved ``config.toml`` given to ``--config`` is
+    not, beyond what it changes).
+
+    Args:
+        config: the resolved :class:`~pipeline.config.Config`.
+        overrides: the ``--set`` texts and those the verb's options stand for.
+    """
+    from .config import changed_settings, dotted_value, load_config, parse_override
+
+    chosen = changed_settings(config.to_dict(), load_config(registry).to_dict())
+    for text in overrides:
+        *sections, key = text.partition("=")[0].strip().split(".")
+        node = chosen
+        for section in sections:
+            node = node.setdefault(section, {})
+        node[key] = dotted_value(parse_override(text), ".".join([*sections, key]))
+    return chosen
 
 
 # --- symfuse plugins -------------------------------------------------------------------
@@ -270,7 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Options whose value may start with a minus sign (``--plane -1,0,0.2``).
-SIGNED_VALUE_OPTIONS = ("--plane",)
+SIGNED_VALUE_OPTIONS = ("--plane", "--symmetry")
 
 
 def _join_signed_values(argv: Sequence[str]) -> list[str]:
@@ -286,28 +320,31 @@ def _join_signed_values(argv: Sequence[str]) -> list[str]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; its exit code. Ctrl-C gives 130 whatever error it caused, or none
+    (:mod:`pipeline.entry`, the console script, notes it from the first instant)."""
     parser = build_parser()
     args = parser.parse_args(_join_signed_values(sys.argv[1:] if argv is None else argv))
     try:
-        return args.run(args)
+        code = args.run(args)
     except SymfuseError as exc:
         if args.debug:
             raise
+        if interrupt_received():
+            return report_interrupt()
         print(f"symfuse: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("symfuse: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return report_interrupt()
     except BrokenPipeError:
         # The reader of stdout left (`symfuse objects | head`): nothing more to say, and
         # Python must not fail again flushing stdout at exit.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
     except Exception as exc:
-        if not interrupted(exc):
+        if not (interrupted(exc) or interrupt_received()):
             raise
-        print("symfuse: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return report_interrupt()
+    return report_interrupt() if interrupt_received() else code
 
 
 def interrupted(exc: BaseException) -> bool:
@@ -324,4 +361,6 @@ def interrupted(exc: BaseException) -> bool:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from .entry import main as console_main
+
+    sys.exit(console_main())

@@ -7,12 +7,16 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import __version__
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
 from .completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
+
+if TYPE_CHECKING:
+    from .types import Contacts
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -106,7 +110,14 @@ def run(args: argparse.Namespace) -> int:
             "scan": str(args.scan),
             "contacts": str(args.contacts) if args.contacts else None,
         }
-        write_outputs(staging, scene, config, sources, time.perf_counter() - started)
+        write_outputs(
+            staging,
+            scene,
+            config,
+            sources,
+            time.perf_counter() - started,
+            recorded.contacts if recorded else (),
+        )
     print(scene_table(scene))
     if recorded and (note := one_sided_line(one_sided_grasps(recorded.contacts))):
         print(note)
@@ -150,9 +161,15 @@ def scene_table(scene: SceneCompletion) -> str:
 
 
 def write_outputs(
-    out: Path, scene: SceneCompletion, config, inputs: dict[str, Any], seconds: float
+    out: Path,
+    scene: SceneCompletion,
+    config,
+    inputs: dict[str, Any],
+    seconds: float,
+    grasps: Sequence[Contacts] = (),
 ) -> None:
-    """Every file ``complete`` writes, into ``out`` (created if needed)."""
+    """Every file ``complete`` writes, into ``out`` (created if needed); ``grasps``: the
+    contacts given, fused with the selected object."""
     import numpy as np
 
     from .figures import SceneObjectView, plot_scene
@@ -160,6 +177,7 @@ def write_outputs(
         bias_to_json,
         estimate_to_json,
         plane_to_json,
+        selection_to_json,
         write_cloud,
         write_completed_clouds,
         write_json,
@@ -189,7 +207,15 @@ def write_outputs(
             }
         if completion.result is not None:
             write_completed_clouds(folder, completion.result)
-            document["stages"] = estimate_to_json(completion.result)
+            # As `fuse` writes it: the contacts fused (taxels per grasp), the stage the
+            # evidence supports best and why, and the estimator's time (s).
+            fused = len(completion.result.stages) > 1
+            document.update(
+                grasps=[len(c) for c in grasps] if fused else [],
+                stages=estimate_to_json(completion.result),
+                **selection_to_json(completion.result),
+                seconds=sum(stage.seconds for stage in completion.result.stages),
+            )
         write_json(folder / "result.json", {**document, "config": config.to_dict()})
         final = completion.result.final if completion.result else None
         views.append(

@@ -11,7 +11,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import __version__
-from .cli import _add_config_options, _add_output_options, _add_units_option, _load
+from .cli import (
+    _add_config_options,
+    _add_output_options,
+    _add_units_option,
+    _load,
+    add_wide_option,
+)
 from .cli_summary import one_sided_line, selection_line, stage_summary
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
 from .errors import (
@@ -23,6 +29,7 @@ from .errors import (
     estimate_failed,
 )
 from .outdir import staged_output
+from .tables import wrapped
 
 if TYPE_CHECKING:
     from .config import Config
@@ -72,6 +79,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     _add_config_options(parser)
     _add_output_options(parser, default=None)
     add_rerun_option(parser)
+    add_wide_option(parser)
     return parser
 
 
@@ -204,8 +212,8 @@ def _fuse_into(
         seconds=time.perf_counter() - started,
     )
     write_json(out / "result.json", document)
-    print(stage_summary(run.result))
-    print(selection_line(run.result))
+    print(stage_summary(run.result, args.wide))
+    print(wrapped(selection_line(run.result)))
     if note := one_sided_line(document["one_sided_grasps"]):
-        print(note)
+        print(wrapped(note))
     return run.result.final.status

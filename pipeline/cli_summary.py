@@ -46,8 +46,14 @@ def one_sided_line(numbers: list[int]) -> str:
     )
 
 
-def stage_summary(result) -> str:
-    """A small table of Stage 0/1/2: status, plane, bias, iterations, time, self-diagnosis."""
+#: The columns of :func:`stage_summary` only ``--wide`` shows (the self-diagnosis's numbers;
+#: all are in ``result.json``).
+WIDE_STAGE_COLUMNS = tuple(CONSISTENCY_HEADER[:-1])
+
+
+def stage_summary(result, wide: bool = False) -> str:
+    """A small table of Stage 0/1/2: status, plane, bias, iterations, time, self-diagnosis
+    (less :data:`WIDE_STAGE_COLUMNS` unless ``wide``)."""
     rows = []
     for stage in result.stages:
         rows.append(
@@ -64,4 +70,4 @@ def stage_summary(result) -> str:
             ]
         )
     header = ["stage", "status", "plane θ°", "offset mm", "yaw°", "bias t (mm)", "iter", "ms"]
-    return format_table(header + CONSISTENCY_HEADER, rows)
+    return format_table(header + CONSISTENCY_HEADER, rows, () if wide else WIDE_STAGE_COLUMNS)

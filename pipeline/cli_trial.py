@@ -4,16 +4,26 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
 
-from .cli import _add_config_options, _add_output_options, _add_units_option, _load, counting_number
+from .cli import (
+    _add_config_options,
+    _add_output_options,
+    _add_units_option,
+    _load,
+    add_wide_option,
+    counting_number,
+    user_settings,
+)
 from .cli_summary import CONSISTENCY_HEADER, consistency_cells, selection_line
 from .cli_view import add_rerun_option, check_rerun, record_if_asked
+from .entry import stop_if_interrupted
 from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError, estimate_failed
 from .outdir import fresh_folder, staged_output
-from .tables import format_table
+from .tables import format_table, wrapped
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -59,10 +69,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="MM",
         help="stop once the plane offset and hidden side posterior stds are <= MM",
     )
+    parser.add_argument(
+        "--symmetry",
+        type=three_numbers,
+        metavar="NX,NY,D",
+        help="the --mesh file's true mirror plane, NX x + NY y = D in the file's frame and "
+        "units, so the plane errors are scored",
+    )
     _add_units_option(parser, "the --mesh file")
     _add_config_options(parser)
     _add_output_options(parser, default="runs/trial-OBJECT-seedN[-K]")
     add_rerun_option(parser)
+    add_wide_option(parser)
     return parser
 
 
@@ -85,7 +103,20 @@ def trial_overrides(args: argparse.Namespace) -> list[str]:
         overrides.append(f"trial.next_grasp={args.next_grasp}")
     if args.until_std is not None:
         overrides.append(f"trial.until_std_mm={args.until_std}")
+    if args.symmetry is not None:
+        overrides.append(f"trial.symmetry={list(args.symmetry)}")
     return overrides
+
+
+def three_numbers(text: str) -> tuple[float, float, float]:
+    """An argparse ``type``: ``NX,NY,D``, three finite numbers."""
+    try:
+        values = tuple(float(field) for field in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected three numbers NX,NY,D, got '{text}'")
+    return values
 
 
 def check_several_grasps_options(settings, changed: dict) -> None:
@@ -106,8 +137,24 @@ def check_several_grasps_options(settings, changed: dict) -> None:
             )
 
 
-def trial_summary(record) -> str:
-    """Stage 0/1/2 table with the trial's evaluation next to the estimate."""
+def run_name(obj: str) -> str:
+    """The object's part of a trial's default folder name: a catalogue name as it is, a
+    mesh or URDF file by its folder and its name (``003_cracker_box-textured``), since
+    scans come as one folder per object of files named alike."""
+    path = Path(obj)
+    if not path.suffix:
+        return obj
+    folder = path.resolve().parent.name
+    return f"{folder}-{path.stem}" if folder else path.stem
+
+
+#: The columns of the stage table only ``--wide`` shows (all are in ``result.json``).
+WIDE_STAGE_COLUMNS = ("dev mean mm", "chamfer mm", "F@5mm", "IoU", *CONSISTENCY_HEADER[:-1])
+
+
+def trial_summary(record, wide: bool = False) -> str:
+    """Stage 0/1/2 table with the trial's evaluation next to the estimate; without
+    ``wide`` less :data:`WIDE_STAGE_COLUMNS`, to fit a terminal."""
     rows = []
     for stage, metrics in zip(record.result.stages, record.metrics, strict=True):
         measure = next(
@@ -148,19 +195,27 @@ def trial_summary(record) -> str:
         "F@5mm",
         "IoU",
     ]
-    return format_table(header + CONSISTENCY_HEADER, rows)
+    return format_table(header + CONSISTENCY_HEADER, rows, () if wide else WIDE_STAGE_COLUMNS)
 
 
-def grasps_summary(document: dict) -> str:
+#: The columns of the grasp table only ``--wide`` shows; without it the two stds share one.
+WIDE_GRASP_COLUMNS = ("pads", "consistent", "offset std mm", "hidden std mm", "shape std mm")
+
+
+def grasps_summary(document: dict, wide: bool = False) -> str:
     """One row per grasp of a multi-grasp trial: how it was chosen, where it touched, the
     selected stage after fusing it with its deviation and consistency, and the two
-    uncertainties of the stop rule; the grasp it stopped on unfused, if any; then why the
-    trial stopped."""
+    uncertainties of the stop rule (``stds mm``: the plane offset's, then the hidden
+    shape's; ``--wide`` adds the hidden side's with the object's place); the grasp it
+    stopped on unfused, if any; then why the trial stopped. ``dev mm`` is the median
+    deviation, ``plane °`` and ``offset err`` (mm) the plane's errors. Without ``wide``
+    less :data:`WIDE_GRASP_COLUMNS`."""
     rows = []
     for entry in document["grasps"]:
         stage = entry["stages"][entry["selected_stage"]]
         metrics, consistency = stage["metrics"], stage.get("consistency") or {}
         angle = metrics.get("plane_angle_error_deg")
+        known = entry["uncertainty"]
         rows.append(
             [
                 entry["grasp"],
@@ -174,8 +229,10 @@ def grasps_summary(document: dict) -> str:
                 "-" if angle is None else f"{angle:.1f}",
                 f"{metrics['plane_offset_error_mm']:.1f}",
                 "yes" if consistency.get("consistent") else "NO",
-                f"{entry['uncertainty']['plane_offset_std_mm']:.2f}",
-                f"{entry['uncertainty']['hidden_side_std_mm']:.2f}",
+                f"{known['plane_offset_std_mm']:.2f}",
+                f"{known['hidden_side_std_mm']:.2f}",
+                f"{known['hidden_shape_std_mm']:.2f}",
+                f"{known['plane_offset_std_mm']:.1f} / {known['hidden_shape_std_mm']:.1f}",
             ]
         )
     if unfused := document.get("unfused_grasp"):
@@ -188,7 +245,7 @@ def grasps_summary(document: dict) -> str:
                 unfused.get("taxels_in_contact", 0),
                 "-",
                 "not fused",
-                *["-"] * 6,
+                *["-"] * 8,
             ]
         )
     header = [
@@ -199,23 +256,26 @@ def grasps_summary(document: dict) -> str:
         "taxels",
         "stage",
         "status",
-        "dev median mm",
-        "plane err °",
-        "offset err mm",
+        "dev mm",
+        "plane °",
+        "offset err",
         "consistent",
         "offset std mm",
         "hidden std mm",
+        "shape std mm",
+        "stds mm",
     ]
-    return format_table(header, rows) + f"\nstopped: {document['stop_reason']}"
+    table = format_table(header, rows, ("stds mm",) if wide else WIDE_GRASP_COLUMNS)
+    return table + "\n" + wrapped(f"stopped: {document['stop_reason']}")
 
 
 def _progress(message: str) -> None:
+    stop_if_interrupted()
     print(f"... {message}", flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
-    from .config import changed_settings, load_config
-    from .hand_choice import check_planner_is_read
+    from .hand_choice import check_planner_is_read, next_try
     from .registry import load_registry
     from .trial import run_trial
 
@@ -225,19 +285,19 @@ def run(args: argparse.Namespace) -> int:
     if args.units:
         overrides.append(f"trial.units={args.units}")
     registry, config = _load(args, overrides, registry=registry)
-    changed = changed_settings(config.to_dict(), load_config(registry).to_dict())
+    changed = user_settings(config, registry, [*args.overrides, *overrides])
     check_planner_is_read(config, registry, changed)
     settings = config.trial
     check_several_grasps_options(settings, changed)
     out = args.out or fresh_folder(
-        Path("runs") / f"trial-{Path(settings.object).stem}-seed{settings.seed}"
+        Path("runs") / f"trial-{run_name(settings.object)}-seed{settings.seed}"
     )
     started = time.perf_counter()
     inputs = [*args.config, *([args.mesh] if args.mesh else [])]
     with staged_output(out, overwrite=args.overwrite, inputs=inputs) as staging:
         record = run_trial(config, registry, staging, report=_progress)
-    print(trial_summary(record))
-    print(selection_line(record.result))
+    print(trial_summary(record, args.wide))
+    print(wrapped(selection_line(record.result)))
     grasp = record.document["grasp"]
     moved_aside = (
         f"; the descent met the object and moved aside {grasp['reapproaches']} time(s)"
@@ -245,20 +305,24 @@ def run(args: argparse.Namespace) -> int:
         else ""
     )
     print(
-        f"grasp: {record.document['hand']['reason']}{moved_aside}; the object moved "
-        f"{grasp['object_shift_mm']:.1f} mm, turned {grasp['object_turn_deg']:.1f} deg and "
-        f"tilted {grasp['object_tilt_deg']:.1f} deg"
+        wrapped(
+            f"grasp: {record.document['hand']['reason']}{moved_aside}; the object moved "
+            f"{grasp['object_shift_mm']:.1f} mm, turned {grasp['object_turn_deg']:.1f} deg "
+            f"and tilted {grasp['object_tilt_deg']:.1f} deg"
+        )
     )
     if settings.grasps > 1 or settings.until_std_mm > 0:
-        print(grasps_summary(record.document))
+        print(grasps_summary(record.document, args.wide))
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())
-    print(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s")
+    print(wrapped(f"phases (s): {timings}; total {time.perf_counter() - started:.2f} s"))
     pictures = ", pictures" if settings.pictures else ""
     print(f"wrote {out}/ (result.json, clouds, contacts.json{pictures})")
     record_if_asked(args, out)
     if estimate_failed(record.result.final.status):
+        hands = registry.get("world", config.choices["world"]).cls.hands
         print(
-            f"symfuse: error: estimate {record.result.final.status} (see {out}/result.json)",
+            f"symfuse: error: estimate {record.result.final.status} (see {out}/result.json)"
+            f"{next_try(hands, record.document['gripper'])}",
             file=sys.stderr,
         )
         return EXIT_ESTIMATE_FAILED

@@ -10,6 +10,7 @@ import argparse
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from .errors import ConfigError
@@ -57,7 +58,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--out", type=Path, metavar="FILE", help="write the recording here instead (.rrd)"
     )
     parser.add_argument(
-        "--overwrite", action="store_true", help="replace an existing --out recording"
+        "--overwrite",
+        action="store_true",
+        help="replace an existing recording (--out, or RUN_DIR/recording.rrd)",
     )
     parser.add_argument(
         "--no-open", action="store_true", help="only write the recording, do not open the viewer"
@@ -74,28 +77,41 @@ def has_display() -> bool:
 
 
 def check_recording_target(path: Path, *, overwrite: bool) -> None:
-    """Refuse a ``--out`` recording that is not a ``.rrd`` file in an existing folder, or
-    that exists (another file, perhaps one of the run's own) without ``overwrite``.
+    """Refuse a recording target (``--out``, or the run folder's ``recording.rrd``) that is
+    not a ``.rrd`` file in an existing folder we can write, or that exists (another file,
+    perhaps one of the run's own, or the recording of an earlier ``--rerun``) without
+    ``overwrite``.
 
     Raises:
-        ConfigError: naming ``--out`` and what is wrong with it.
+        ConfigError: naming the target and what is wrong with it.
     """
     if path.suffix.lower() != ".rrd":
         raise ConfigError(f"--out {path}: a Rerun recording is a .rrd file")
     if path.is_dir():
         raise ConfigError(f"--out {path}: is a folder; give a .rrd file")
     if path.exists() and not overwrite:
-        raise ConfigError(f"--out {path}: exists; pass --overwrite to replace it")
+        raise ConfigError(
+            f"{path}: exists; pass --overwrite to replace it, give another --out, or open "
+            f"it with: rerun {path}"
+        )
     if not path.parent.is_dir():
         raise ConfigError(f"--out {path}: the folder {path.parent} does not exist")
+    try:  # a read-only folder, found before the recorder fails in its own words
+        tempfile.TemporaryFile(dir=path.parent).close()
+    except OSError as exc:
+        raise ConfigError(
+            f"{path}: cannot write in {path.parent} ({exc.strerror or exc}); give an --out "
+            "in a folder you can write"
+        ) from None
 
 
 def run(args: argparse.Namespace) -> int:
-    from .viz.recording import write_recording
+    from .viz.recording import RECORDING_NAME, write_recording
 
-    if args.out is not None:
-        check_recording_target(args.out, overwrite=args.overwrite)
-    path = write_recording(args.run_dir, args.out)
+    target = args.out if args.out is not None else Path(args.run_dir) / RECORDING_NAME
+    if args.out is not None or Path(args.run_dir).is_dir():
+        check_recording_target(target, overwrite=args.overwrite)
+    path = write_recording(args.run_dir, target)
     print(f"wrote {path}")
     if args.no_open or not has_display():
         print(f"open it with: rerun {path}")

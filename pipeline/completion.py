@@ -166,7 +166,9 @@ def complete_object(
         return ObjectCompletion(index, cloud, "rejected", init, reason=init.reason)
     if not grasps:
         return ObjectCompletion(index, cloud, "completed", init, initial_estimate(cloud, init))
-    result = estimate(config, registry, cloud, init, grasps)
+    # With the depth image, as in a trial: the camera's free space catches contacts of
+    # another scene, which the taxels alone explain by any plane they pull the model to.
+    result = estimate(config, registry, cloud, init, grasps, observation)
     return ObjectCompletion(index, cloud, result.final.status, init, result)
 
 

@@ -74,8 +74,8 @@ class TrialSettings:
     )
     until_std_mm: float = param(
         0.0,
-        "stop grasping once the plane offset's and the hidden side's posterior stds are both "
-        "at most this (mm); 0: make all the grasps",
+        "stop grasping once the plane offset's and the hidden shape's posterior stds are "
+        "both at most this (mm); 0: make all the grasps",
         at_least=0.0,
     )
     retries: int = param(
@@ -83,6 +83,12 @@ class TrialSettings:
         "after a first grasp whose pads do not touch opposing sides (nothing to fuse): "
         "release, look again and grasp unlike every grasp that missed, up to this many times",
         at_least=0,
+    )
+    symmetry: tuple[float, ...] = param(
+        (),
+        "the true mirror plane of a mesh file given as object, [NX, NY, D]: the points with "
+        "NX x + NY y = D in the file's own frame and units, so the plane errors are scored; "
+        "empty: none",
     )
 
 

@@ -47,7 +47,8 @@ class GroundTruth:
         vertices, faces: the object's mesh in its true pose after the grasp (m).
         symmetry: ``"planar"``, ``"rotational"`` or ``"none"``.
         plane: the true mirror plane after the grasp (planar objects), else None.
-        axis_xy_m: a point on the true symmetry axis/plane (the object origin), frame R.
+        axis_xy_m: a point on the true symmetry axis/plane (the object origin, or the
+            plane's point nearest it for a plane off the origin), frame R.
         thickness_m: true thickness for box-like objects, else None.
         diameter_m: true diameter for cylinders, else None.
         cloud_motion: ``(4, 4)`` the rigid motion that takes the camera's cloud onto the

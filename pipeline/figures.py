@@ -283,11 +283,14 @@ def plot_scene(
 @dataclass(frozen=True)
 class GraspMarks:
     """One grasp's taxels in contact for :func:`grasps_figure`: their ``(M, 3)`` positions
-    (frame R, m), the pad of each, and the legend text (e.g. the deviation after it)."""
+    (frame R, m), the pad of each, and the legend text (e.g. the deviation after it). A
+    grasp that was not fused (``fused`` False: it touched one side only or nothing) is
+    marked where its plan predicted its pads' contacts instead, with crosses."""
 
     label: str
     taxels_m: np.ndarray
     pads: np.ndarray
+    fused: bool = True
 
 
 def grasps_figure(
@@ -299,8 +302,9 @@ def grasps_figure(
 ) -> Path:
     """The object from above: the true footprint (the convex hull of the mesh, grey), the
     final completed model (blue), and each grasp's taxels in contact in its own colour,
-    every pad numbered with its grasp at the centroid of its taxels; the legend carries
-    each grasp's label. Axes in mm, frame R."""
+    every pad numbered with its grasp at the centroid of its taxels (a grasp not fused: its
+    planned contacts, crossed); the legend carries each grasp's label. Axes in mm,
+    frame R."""
     from matplotlib.figure import Figure
     from scipy.spatial import ConvexHull
 
@@ -315,8 +319,9 @@ def grasps_figure(
     colours = ("tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink")
     for number, grasp in enumerate(grasps, start=1):
         colour = colours[(number - 1) % len(colours)]
-        taxels = 1e3 * np.asarray(grasp.taxels_m)[:, :2]
-        axes.scatter(*taxels.T, s=10, c=colour, marker="s", label=f"{number}: {grasp.label}")
+        taxels = 1e3 * np.asarray(grasp.taxels_m).reshape(-1, 3)[:, :2]
+        marker = "s" if grasp.fused else "x"
+        axes.scatter(*taxels.T, s=10, c=colour, marker=marker, label=f"{number}: {grasp.label}")
         for pad in np.unique(grasp.pads):
             centre = taxels[grasp.pads == pad].mean(axis=0)
             axes.annotate(

@@ -50,6 +50,7 @@ from .units import (
     STATED_UNITS_HINT,
     check_distance,
     check_not_metres,
+    check_stated_not_metres,
     scale_of,
 )
 
@@ -247,6 +248,7 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
             f"{path}: grasps[{g}].taxels",
             STATED_UNITS_HINT if document["units"] == "m" else None,
         )
+        check_stated_not_metres(positions_m, document["units"], f"{path}: grasps[{g}].taxels")
         contacts.append(Contacts(positions_m, np.array(normals), pads, indices))
         plan = grasp.get("plan")
         if plan is not None:

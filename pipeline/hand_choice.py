@@ -82,6 +82,16 @@ def check_planner_is_read(
         )
 
 
+def next_try(hands: tuple[str, ...], used: str) -> str:
+    """What to try after a grasp by the hand ``used`` failed (touched too little, was not
+    executed, or left an estimate that failed), as a clause to end the message with: the
+    world's other hands (``hands``) by name, else another pose of the object."""
+    others = [hand for hand in hands if hand != used]
+    if others:
+        return f"; try --gripper {' or --gripper '.join(others)}"
+    return "; try another --yaw"
+
+
 @dataclass(frozen=True)
 class PlannerAnswer:
     """One planner's plan for one hand."""

@@ -20,11 +20,12 @@ hands) is asked for every feasible grasp on that model
   alignment factor, in [0, 1]: how squarely its pads meet the sides and how far it is
   from tipping the object), among the grasps weighted at least half the best
   (:data:`PLANNER_FLOOR`) and not predicted to turn the object further than the
-  estimator follows (:func:`predicted_turn_rad`, :data:`TURN_SIGMAS`). The planners score
-  on one scale, as when the first grasp's hand is chosen (:mod:`pipeline.hand_choice`).
+  estimator follows (:func:`predicted_turn_rad`, :data:`TURN_SIGMAS`), and never a grasp
+  already made (:func:`repeats`) while another of those teaches anything. The planners
+  score on one scale, as when the first grasp's hand is chosen (:mod:`pipeline.hand_choice`).
 
-The stop rule (:func:`stop_reason`) ends the trial once the plane offset and the hidden side
-are known well enough, or when the grasps run out.
+The stop rule (:func:`stop_reason`) ends the trial once the plane offset and the hidden
+side's shape are known well enough, or when the grasps run out.
 """
 
 from __future__ import annotations
@@ -66,6 +67,13 @@ TOUCH_TOLERANCE_M = 0.003
 #: again after the millimetres the object moves between grasps.
 SAME_PLACE_M = 0.005
 
+#: A plan repeats an earlier one of the same hand when its closing direction is within this
+#: angle of the earlier one's (half the planners' 15 deg step between directions; either
+#: way for a parallel gripper, whose jaws swap) and its hand within :data:`SAME_PLACE_M`
+#: (half their 10 mm step between pad heights, and more than the object moves between
+#: grasps): the planner's same grid cell on the object, found again.
+SAME_DIRECTION_RAD = math.radians(7.5)
+
 #: ``information`` chooses among the alternatives whose :func:`delivery` is at least this
 #: fraction of the best. Below it are grasps that meet an edge or hold the object off its
 #: centre, which turn it as the pads close: on the CD drive, third grasps there turned it
@@ -97,18 +105,30 @@ class MeasurementModel:
 
 @dataclass(frozen=True)
 class Uncertainty:
-    """How well the current estimate knows the object (m): the plane's offset std at the
-    object and the hidden side's RMS positional std, both from the plane-and-bias
-    covariance (:mod:`pipeline.estimation.uncertainty`)."""
+    """How well the current estimate knows the object (m), from the plane-and-bias
+    covariance (:mod:`pipeline.estimation.uncertainty`): the plane's offset std at the
+    object, the hidden side's RMS positional std (where the object stands included), and
+    the hidden side's RMS std against the visible side (the shape alone). The stop rule
+    reads the first and the last, which more grasps reduce; the object's place each
+    re-grasp unsettles again."""
 
     plane_offset_std_m: float
     hidden_side_std_m: float
+    hidden_shape_std_m: float
 
     def to_json(self) -> dict[str, float]:
         return {
             "plane_offset_std_mm": 1e3 * self.plane_offset_std_m,
             "hidden_side_std_mm": 1e3 * self.hidden_side_std_m,
+            "hidden_shape_std_mm": 1e3 * self.hidden_shape_std_m,
         }
+
+    def stop_stds(self) -> str:
+        """The stop rule's two stds, as text."""
+        return (
+            f"plane offset std {1e3 * self.plane_offset_std_m:.2f} mm and hidden shape std "
+            f"{1e3 * self.hidden_shape_std_m:.2f} mm"
+        )
 
 
 def state_vector(stage: StageEstimate) -> np.ndarray:
@@ -118,16 +138,23 @@ def state_vector(stage: StageEstimate) -> np.ndarray:
 
 
 def uncertainty(stage: StageEstimate) -> Uncertainty:
-    """The stop rule's two stds of ``stage`` (infinite when it has no covariance)."""
-    from .estimation.uncertainty import hidden_side_gram, hidden_side_std_m, plane_offset_std_m
+    """The stds of ``stage`` (infinite when it has no covariance)."""
+    from .estimation.uncertainty import (
+        hidden_shape_std_m,
+        hidden_side_gram,
+        hidden_side_std_m,
+        plane_offset_std_m,
+    )
 
     covariance = np.asarray(stage.covariance, dtype=float)
     if not np.all(np.isfinite(covariance)):
-        return Uncertainty(math.inf, math.inf)
+        return Uncertainty(math.inf, math.inf, math.inf)
     g, pivot = state_vector(stage), stage.bias.pivot_m
     gram = hidden_side_gram(stage.points, g, pivot)
     return Uncertainty(
-        plane_offset_std_m(covariance, g, pivot), hidden_side_std_m(covariance, gram)
+        plane_offset_std_m(covariance, g, pivot),
+        hidden_side_std_m(covariance, gram),
+        hidden_shape_std_m(covariance, gram),
     )
 
 
@@ -136,20 +163,26 @@ def stop_reason(
 ) -> str:
     """Why the trial stops after ``grasps_done`` grasps, or ``""`` to grasp again.
 
-    It stops when both stds of ``known`` are at most ``until_std_m`` (when given), else
-    when ``grasps_allowed`` grasps were made.
+    It stops when the plane's offset std and the hidden shape std of ``known`` are both at
+    most ``until_std_m`` (when given), else when ``grasps_allowed`` grasps were made (and
+    then says which std stayed above ``until_std_m``).
     """
-    if until_std_m is not None and (
-        known.plane_offset_std_m <= until_std_m and known.hidden_side_std_m <= until_std_m
-    ):
+    reached = until_std_m is not None and (
+        known.plane_offset_std_m <= until_std_m and known.hidden_shape_std_m <= until_std_m
+    )
+    if reached:
         return (
-            f"uncertainty reached: plane offset std {1e3 * known.plane_offset_std_m:.2f} mm and "
-            f"hidden side std {1e3 * known.hidden_side_std_m:.2f} mm <= "
-            f"{1e3 * until_std_m:g} mm after {grasps_done} grasp(s)"
+            f"uncertainty reached: {known.stop_stds()} <= {1e3 * until_std_m:g} mm after "
+            f"{grasps_done} grasp(s)"
         )
-    if grasps_done >= grasps_allowed:
+    if grasps_done < grasps_allowed:
+        return ""
+    if until_std_m is None:
         return f"grasps done: {grasps_done} of {grasps_allowed}"
-    return ""
+    return (
+        f"grasps done: {grasps_done} of {grasps_allowed}, before the uncertainty reached "
+        f"{1e3 * until_std_m:g} mm: {known.stop_stds()}"
+    )
 
 
 def model_for_planning(
@@ -354,6 +387,27 @@ def information_scores(
     return scores
 
 
+def repeats(
+    plan: GraspPlan, earlier: Sequence[GraspPlan], grippers: Mapping[str, GripperSpec]
+) -> bool:
+    """Whether ``plan`` is a grasp already made, one of ``earlier`` again
+    (:data:`SAME_DIRECTION_RAD`, :data:`SAME_PLACE_M`): its taxels would press where that
+    grasp's pressed, whose error they repeat rather than average out (:func:`new_places`).
+    """
+    direction = np.asarray(plan.closing_direction, dtype=float)
+    position = np.asarray(plan.T_robot_hand, dtype=float)[:3, 3]
+    for before in earlier:
+        if before.gripper != plan.gripper:
+            continue
+        cosine = float(direction @ np.asarray(before.closing_direction, dtype=float))
+        if grippers[plan.gripper].fingers == 2:
+            cosine = abs(cosine)
+        moved = np.linalg.norm(position - np.asarray(before.T_robot_hand, dtype=float)[:3, 3])
+        if cosine >= math.cos(SAME_DIRECTION_RAD) and moved <= SAME_PLACE_M:
+            return True
+    return False
+
+
 @dataclass(frozen=True)
 class NextGraspChoice:
     """The next grasp and why.
@@ -370,6 +424,8 @@ class NextGraspChoice:
         turn_limit_rad: the turn beyond which an alternative is left out
             (:data:`TURN_SIGMAS` stds of the re-grasp noise's yaw).
         chosen: index of ``plan`` among ``alternatives`` (None when refused).
+        repeated: whether each alternative :func:`repeats` a grasp already made,
+            ``information`` only.
     """
 
     plan: GraspPlan
@@ -379,6 +435,7 @@ class NextGraspChoice:
     chosen: int | None = None
     turns_rad: tuple[float, ...] = ()
     turn_limit_rad: float = math.inf
+    repeated: tuple[bool, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -393,6 +450,7 @@ class NextGraspChoice:
                 None if math.isinf(self.turn_limit_rad) else math.degrees(self.turn_limit_rad)
             ),
             "grippers": [plan.gripper for plan in self.alternatives],
+            "repeats": list(self.repeated),
         }
 
 
@@ -459,9 +517,21 @@ def choose_next_grasp(
     turn_limit = TURN_SIGMAS * math.sqrt(model.regrasp_noise[0, 0])
     turns = tuple(predicted_turn_rad(touch) for touch in touches)
     followed = np.abs(turns) <= turn_limit
+    # A grasp already made is made again only when no other the estimator can follow
+    # teaches anything: the floor below then compares the new grasps among themselves.
+    repeated = np.array([repeats(plan, earlier, grippers) for plan in alternatives], dtype=bool)
+    if np.any(followed & ~repeated & (np.asarray(scores) > 0.0)):
+        followed &= ~repeated
     rated = np.array([delivery(plan) for plan in alternatives]) * followed
     expected = np.where(rated >= PLANNER_FLOOR * rated.max(), np.multiply(scores, rated), -1.0)
     chosen = int(np.argmax(expected))
     return NextGraspChoice(
-        alternatives[chosen], strategy, alternatives, scores, chosen, turns, turn_limit
+        alternatives[chosen],
+        strategy,
+        alternatives,
+        scores,
+        chosen,
+        turns,
+        turn_limit,
+        tuple(bool(r) for r in repeated),
     )

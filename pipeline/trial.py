@@ -50,7 +50,7 @@ from .formats import (
     write_completed_clouds,
     write_json,
 )
-from .hand_choice import HandChoice, choice_to_json, choose_grasp, create_planner
+from .hand_choice import HandChoice, choice_to_json, choose_grasp, create_planner, next_try
 from .next_grasp import (
     MeasurementModel,
     NextHand,
@@ -142,7 +142,7 @@ def ground_truth(
     if calibration_error is not None:
         cloud_motion = T @ np.linalg.inv(calibration_error @ pose_seen.transform)
     vertices = np.asarray(obj.mesh.vertices) @ T[:3, :3].T + T[:3, 3]
-    plane = None
+    plane, anchor = None, T[:3, 3]
     if obj.symmetry == "planar" and obj.symmetry_plane is not None:
         normal = T[:3, :3] @ obj.symmetry_plane.normal
         anchor = T[:3, 3] + T[:3, :3] @ (obj.symmetry_plane.normal * obj.symmetry_plane.offset_m)
@@ -153,7 +153,9 @@ def ground_truth(
         faces=np.asarray(obj.mesh.faces),
         symmetry=obj.symmetry,
         plane=plane,
-        axis_xy_m=T[:2, 3].copy(),
+        # The object origin, or the true plane's point nearest it (a mesh's plane given
+        # by the user need not pass through the centre of its bounding box).
+        axis_xy_m=anchor[:2].copy(),
         thickness_m=dims.get("thickness") if obj.kind == "box" else None,
         diameter_m=dims.get("diameter") if obj.kind == "cylinder" else None,
         cloud_motion=cloud_motion,
@@ -210,7 +212,8 @@ def draw_grasps(
     document: dict[str, Any],
 ) -> None:
     """``grasps.png``: the object from above with every grasp's pads numbered, how it was
-    chosen and by which hand, and the selected stage's median deviation after it."""
+    chosen and by which hand, and the selected stage's median deviation after it; the grasp
+    the trial stopped on without fusing it, where it was planned to touch."""
     from .figures import GraspMarks, grasps_figure
 
     marks = []
@@ -220,6 +223,15 @@ def draw_grasps(
         chosen = f"{entry['chosen_by']['strategy']} ({entry['gripper']})"
         label = f"{chosen}, then {median_mm:.1f} mm (Stage {stage})"
         marks.append(GraspMarks(label, contacts.positions, contacts.pads))
+    if unfused := document.get("unfused_grasp"):
+        planned = np.asarray(unfused["plan"]["predicted_contacts"]).reshape(-1, 3)
+        touched = ", ".join(unfused.get("pads_in_contact", [])) or "nothing"
+        what = f"touched {touched}" if unfused["executed"] else "not executed"
+        label = (
+            f"{unfused['chosen_by']['strategy']} ({unfused['gripper']}), {what}: not fused "
+            "(planned contacts)"
+        )
+        marks.append(GraspMarks(label, planned, np.full(len(planned), "planned"), fused=False))
     grasps_figure(
         out_path,
         result.selected.completed,
@@ -265,7 +277,7 @@ def run_trial(
         "config": config.to_dict(),
     }
     stages = {stage: config.create(registry, stage) for stage in config.choices}
-    obj = load_object(settings.object, units=settings.units)
+    obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
     try:
         return _simulate(config, registry, stages, obj, out_dir, timer, document, report)
     except SymfuseError as exc:
@@ -329,7 +341,9 @@ def _simulate(
                 break
             except MissedGrasp as miss:
                 if len(missed) >= settings.retries:
-                    raise
+                    raise MissedGrasp(
+                        f"{miss}{next_try(world.hands, miss.plan.gripper)}", miss.plan
+                    ) from None
                 # Release, look again (the pads pushed the object) and grasp unlike this.
                 document["missed_grasps"].append(document.pop("unfused_grasp"))
                 missed.append(miss)
@@ -548,7 +562,9 @@ def _grasp_and_fuse(
             document["grasp"] = executed
             document["object_pose_after"] = pose_to_json(outcome.object_after)
             if not outcome.executed:
-                raise StageFailure(f"grasp not executed: {outcome.reason}")
+                raise StageFailure(
+                    f"grasp not executed: {outcome.reason}{next_try(world.hands, plan.gripper)}"
+                )
         elif not outcome.executed:
             stop = f"grasp {k + 1} not executed: {outcome.reason}"
             document["unfused_grasp"] = attempt_to_json(k, plan, chosen_by, executed)

@@ -101,3 +101,24 @@ def check_not_metres(extents_m: np.ndarray, units: str, source: str) -> None:
             f"{source}: the object is {largest * 1e3:.3g} mm across: looks like metres: "
             "drop --units mm"
         )
+
+
+def check_stated_not_metres(points_m: np.ndarray, units: str, source: str) -> None:
+    """Refuse points (frame R, metres) of a file that says it is in millimetres when every
+    one lies within :data:`FARTHEST_M` x 1e-3 of the robot base: the file was in metres
+    (read as millimetres, a point :data:`FARTHEST_M` away or nearer lands that near), and
+    no tabletop object is touched that near the base.
+
+    Raises:
+        InputError: ``"<source>: every point lies within 0.612 mm of the robot base: looks
+            like metres: set the file's "units" to "m"``.
+    """
+    points_m = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    if units != "mm" or len(points_m) == 0:
+        return
+    farthest = float(np.max(np.linalg.norm(points_m, axis=1)))
+    if farthest < FARTHEST_M * UNIT_SCALE["mm"]:
+        raise InputError(
+            f"{source}: every point lies within {farthest * 1e3:.3g} mm of the robot base: "
+            'looks like metres: set the file\'s "units" to "m"'
+        )

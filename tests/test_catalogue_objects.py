@@ -196,3 +196,36 @@ def test_missing_unreadable_or_unsupported_files_name_the_path(tmp_path):
     notes.write_text("hello")
     with pytest.raises(InputError, match=r"notes\.txt: unsupported mesh format"):
         load_object(str(notes))
+
+
+@pytest.mark.parametrize(("units", "scale"), [("m", 1.0), ("mm", 1e3)])
+def test_a_mesh_s_true_plane_is_given_in_its_own_frame_and_units(tmp_path, units, scale):
+    # A 40 x 60 x 100 mm box whose file puts its centre at (0.2, -0.1) and whose mirror
+    # plane there is turned 30 deg: after placing, the plane turns the same and passes
+    # through the centre, the bounding box's.
+    box = trimesh.creation.box((0.04, 0.06, 0.1))
+    box.apply_translation((0.2, -0.1, 0.05))
+    box.apply_scale(scale)
+    box.export(tmp_path / "box.stl")
+    normal = np.array([np.cos(np.radians(30.0)), np.sin(np.radians(30.0))])
+    offset = normal @ np.array([0.2, -0.1]) * scale
+    obj = load_object(tmp_path / "box.stl", units=units, symmetry=(*(2.0 * normal), 2.0 * offset))
+    assert obj.symmetry == "planar"
+    assert np.degrees(obj.symmetry_plane.theta_rad) == pytest.approx(30.0)
+    assert obj.symmetry_plane.offset_m == pytest.approx(0.0, abs=1e-6)  # STL: float32
+    assert load_object(tmp_path / "box.stl", units=units).symmetry == "none"
+
+
+@pytest.mark.parametrize(
+    ("name", "symmetry", "message"),
+    [
+        ("cd_drive", (1.0, 0.0, 0.0), "states its own symmetry; --symmetry"),
+        ("box.stl", (0.0, 0.0, 0.1), "non-zero normal"),
+        ("box.stl", (1.0, 0.0), "expected NX, NY, D"),
+    ],
+)
+def test_a_plane_that_cannot_be_a_mesh_s_is_refused(tmp_path, name, symmetry, message):
+    trimesh.creation.box((0.04, 0.06, 0.1)).export(tmp_path / "box.stl")
+    target = name if name == "cd_drive" else tmp_path / name
+    with pytest.raises(InputError, match=message):
+        load_object(target, symmetry=symmetry)

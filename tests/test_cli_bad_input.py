@@ -465,3 +465,77 @@ def test_misnamed_paths_say_what_they_are(run, tmp_path):
     assert code == EXIT_BAD_INPUT
     assert "textured.obj: " in one_error_line(err)
     assert not (tmp_path / "s").exists()
+
+
+# ------------------------------------------------------------ found in a new user's first hour
+
+
+def test_view_never_replaces_the_run_s_own_recording(run, tmp_path):
+    (tmp_path / "recording.rrd").write_text("the --rerun recording")
+    code, _, err = run("view", tmp_path, "--no-open")
+    assert code == EXIT_BAD_INPUT
+    assert "recording.rrd: exists; pass --overwrite to replace it" in one_error_line(err)
+    assert (tmp_path / "recording.rrd").read_text() == "the --rerun recording"
+
+
+def test_view_into_a_folder_it_cannot_write_is_one_line(run, tmp_path):
+    # /proc refuses new files to everyone, root included (a chmod'ed folder does not).
+    code, _, err = run("view", tmp_path, "--no-open", "--out", "/proc/recording.rrd")
+    assert code == EXIT_BAD_INPUT
+    assert "cannot write in /proc" in one_error_line(err)
+
+
+@pytest.mark.parametrize("kind", ["file", "read-only"])
+def test_a_cache_that_cannot_be_written_names_the_variable(tmp_path, monkeypatch, kind):
+    from pipeline.sim.collision import convex_decomposition
+
+    if kind == "file":
+        (tmp_path / "cache").write_text("not a folder")
+        monkeypatch.setenv("SYMFUSE_CACHE", str(tmp_path / "cache"))
+    else:
+        monkeypatch.setenv("SYMFUSE_CACHE", "/proc/symfuse-cache")
+    mesh = trimesh.creation.annulus(0.03, 0.05, 0.04)  # non-convex: needs its parts
+    with pytest.raises(ConfigError, match=r"^SYMFUSE_CACHE=.*: cannot keep the convex parts"):
+        convex_decomposition(mesh, resolution=10_000)
+
+
+def test_a_trial_with_an_unwritable_cache_is_exit_2_not_a_plugin_failure(
+    run, tmp_path, monkeypatch
+):
+    trimesh.creation.annulus(0.03, 0.05, 0.04).export(tmp_path / "ring.stl")
+    (tmp_path / "cache").write_text("not a folder")
+    monkeypatch.setenv("SYMFUSE_CACHE", str(tmp_path / "cache"))
+    code, _, err = run("trial", "--mesh", tmp_path / "ring.stl", "--out", tmp_path / "o")
+    assert code == EXIT_BAD_INPUT
+    assert one_error_line(err).startswith(f"symfuse: error: SYMFUSE_CACHE={tmp_path / 'cache'}")
+    assert not (tmp_path / "o").exists()
+
+
+def test_contacts_that_say_mm_over_metre_data_are_refused(recording, tmp_path):
+    folder, _, _ = recording
+    document = json.loads((folder / "contacts.json").read_text())
+    document["units"] = "mm"
+    (tmp_path / "c.json").write_text(json.dumps(document))
+    with pytest.raises(InputError, match=r'looks like metres: set the file\'s "units" to "m"'):
+        read_contacts(tmp_path / "c.json")
+
+
+def test_a_contacts_file_in_millimetres_is_read(recording, tmp_path):
+    folder, _, _ = recording
+    document = json.loads((folder / "contacts.json").read_text())
+    metres = read_contacts(folder / "contacts.json").contacts[0].positions
+    document["units"] = "mm"
+    for grasp in document["grasps"]:
+        for taxel in grasp["taxels"]:
+            taxel["position"] = [1e3 * v for v in taxel["position"]]
+        grasp.pop("plan", None)
+    (tmp_path / "c.json").write_text(json.dumps(document))
+    np.testing.assert_allclose(read_contacts(tmp_path / "c.json").contacts[0].positions, metres)
+
+
+def test_a_planner_set_to_its_default_for_another_hand_is_refused(run, tmp_path):
+    code, _, err = run("trial", "--gripper", "sdh", "--set", "planner.use=top-parallel",
+                       "--out", tmp_path / "o")  # fmt: skip
+    assert code == EXIT_BAD_INPUT
+    assert "planner 'top-parallel' does not plan for the hand 'sdh'" in one_error_line(err)
+    assert not (tmp_path / "o").exists()

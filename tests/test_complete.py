@@ -175,12 +175,19 @@ def test_a_trial_recording_with_its_contacts_fuses_as_the_trial(tmp_path, capsys
     out = tmp_path / "complete"
     argv = ["complete", trial / "depth.npy", "--contacts", trial / "contacts.json"]
     assert main([str(a) for a in [*argv, "--init", "ps", "--out", out]]) == 0
-    expected = json.loads((trial / "result.json").read_text())["stages"]
-    got = json.loads((out / "object_0" / "result.json").read_text())["stages"]
-    for ours, theirs in zip(got, expected, strict=True):
+    expected = json.loads((trial / "result.json").read_text())
+    document = json.loads((out / "object_0" / "result.json").read_text())
+    for ours, theirs in zip(document["stages"], expected["stages"], strict=True):
         assert ours["status"] == theirs["status"]
         assert ours["plane"] == theirs["plane"]
         assert ours["bias"] == theirs["bias"]
+        # The camera's free space is checked, as in the trial.
+        assert ours["consistency"] == theirs["consistency"]
+    # The result document as `fuse` writes it.
+    assert document["selected_stage"] == expected["selected_stage"]
+    assert document["selection_reason"] == expected["selection_reason"]
+    assert document["grasps"] == [expected["taxels_in_contact"]]
+    assert document["seconds"] > 0.0
     for stage in (0, 1, 2):
         np.testing.assert_allclose(
             read_cloud(out / "object_0" / f"completed_stage{stage}.ply").points,
@@ -198,6 +205,21 @@ def test_a_trial_recording_with_its_contacts_fuses_as_the_trial(tmp_path, capsys
     assert "note: grasp 1 touched one side only or nothing: " in capsys.readouterr().out
     fused = json.loads((tmp_path / "one-sided" / "object_0" / "result.json").read_text())
     assert [s["stage"] for s in fused["stages"]] == [0, 1, 2]
+
+
+@pytest.mark.slow
+def test_contacts_of_another_scene_are_flagged_by_the_camera(vc_trial, tmp_path):
+    """The CD drive trial's taxels given with the Kinect capture: the taxels alone are
+    explained by whatever plane they pull the laptop's model to (56 deg from its 19), the
+    space the camera saw empty is not."""
+    out = tmp_path / "foreign"
+    argv = ["complete", KINECT, "--contacts", vc_trial / "contacts.json", "--out", out]
+    assert main([str(a) for a in argv]) == 3
+    document = json.loads((out / "object_0" / "result.json").read_text())
+    final = document["stages"][-1]
+    assert final["status"] == "inconsistent"
+    assert "free_space" in final["consistency"]["checks"]
+    assert not final["consistency"]["consistent"]
 
 
 def bad(run, tmp_path, scan, *extra):

@@ -258,7 +258,11 @@ def test_a_grasp_row_records_the_motion_and_the_hypothesis():
         "chosen_by": {"strategy": "information"},
         "taxels_in_contact": 9,
         "selected_stage": 0,
-        "uncertainty": {"plane_offset_std_mm": 1.0, "hidden_side_std_mm": 2.0},
+        "uncertainty": {
+            "plane_offset_std_mm": 1.0,
+            "hidden_side_std_mm": 2.0,
+            "hidden_shape_std_mm": 0.5,
+        },
         "stages": [stage(0), stage(1), stage(2, {"name": "earlier shape", "step": 0.5})],
     }
     fields = grasp_fields(entry)

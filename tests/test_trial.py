@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 
 import numpy as np
@@ -9,15 +11,67 @@ import pytest
 import trimesh
 
 from pipeline.cli import main
+from pipeline.cli_trial import grasps_summary, run_name
 from pipeline.formats import read_cloud
+from pipeline.tables import TERMINAL_WIDTH
 from pipeline.trial import PICTURE_FILES, TRIAL_FILES
 
 
 @pytest.fixture(scope="module")
 def trial_dir(tmp_path_factory):
+    """The default trial's folder; what it printed is in ``stdout.txt`` beside it."""
     out = tmp_path_factory.mktemp("trial")
-    assert main(["trial", "--out", str(out)]) == 0
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(["trial", "--out", str(out)]) == 0
+    (out.parent / "stdout.txt").write_text(printed.getvalue())
     return out
+
+
+def test_the_output_fits_a_terminal(trial_dir):
+    printed = (trial_dir.parent / "stdout.txt").read_text().splitlines()
+    assert max(len(line) for line in printed) <= TERMINAL_WIDTH
+    assert any(line.startswith("stage  status") for line in printed)
+
+
+def test_the_grasp_table_fits_a_terminal_at_its_widest():
+    # The longest status, two-digit errors and stds, three pads of the SDH-2.
+    stage = {
+        "metrics": {
+            "deviation_m": {"median": 0.0312},
+            "plane_angle_error_deg": 11.2,
+            "plane_offset_error_mm": 10.4,
+        },
+        "status": "no_correspondence",
+        "consistency": {"consistent": True},
+    }
+    grasp = {
+        "grasp": 2,
+        "chosen_by": {"strategy": "information"},
+        "gripper": "sdh",
+        "pads_in_contact": ["finger1_distal", "finger2_distal", "thumb_distal"],
+        "taxels_in_contact": 120,
+        "selected_stage": 2,
+        "stages": [None, None, stage],
+        "uncertainty": {
+            "plane_offset_std_mm": 10.3,
+            "hidden_side_std_mm": 21.7,
+            "hidden_shape_std_mm": 12.4,
+        },
+    }
+    document = {"grasps": [grasp], "stop_reason": "grasps done: 2 of 2"}
+    narrow = grasps_summary(document).splitlines()
+    assert max(len(line) for line in narrow) <= TERMINAL_WIDTH
+    assert "10.3 / 12.4" in narrow[2]
+    wide = grasps_summary(document, wide=True).splitlines()
+    assert "finger1_distal finger2_distal thumb_distal" in wide[2] and "12.40" in wide[2]
+
+
+def test_a_mesh_run_is_named_after_its_folder(tmp_path):
+    assert run_name("cd_drive") == "cd_drive"
+    assert run_name(str(tmp_path / "003_cracker_box" / "textured.obj")) == (
+        "003_cracker_box-textured"
+    )
 
 
 def test_trial_writes_every_file(trial_dir):
@@ -134,6 +188,20 @@ def test_a_user_urdf_goes_through_a_whole_trial(tmp_path):
     assert code == 0
     stages = json.loads((out / "result.json").read_text())["stages"]
     assert stages[2]["metrics"]["deviation_m"]["median"] < 0.003
+
+
+@pytest.mark.slow
+def test_a_user_mesh_with_its_true_plane_is_scored_against_it(tmp_path):
+    folder = tmp_path / "012_brick"
+    folder.mkdir()
+    trimesh.creation.box((0.045, 0.08, 0.09)).export(folder / "textured.stl")
+    code = main(["trial", "--mesh", str(folder / "textured.stl"), "--symmetry", "-1,0,0",
+                 "--set", "trial.pictures=false", "--out", str(tmp_path / "o")])  # fmt: skip
+    assert code == 0
+    document = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert document["config"]["trial"]["symmetry"] == [-1.0, 0.0, 0.0]
+    for stage in document["stages"]:
+        assert stage["metrics"]["plane_angle_error_deg"] < 5.0
 
 
 def test_unknown_object_is_one_line_exit_2(tmp_path, capsys):

@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from pipeline.estimation.correspondences import PointIndex, exclusive_sides, find_correspondences
-from pipeline.estimation.geometry import apply_bias, apply_mirror_bias
+from pipeline.estimation.geometry import apply_bias, apply_mirror_bias, invert_bias
 from pipeline.estimation.measurement import freeze, predict
 from pipeline.estimation.problem import grasp_contacts
 from pipeline.estimation.structured import block_diagonal
 from pipeline.estimation.uncertainty import (
     expected_gain_m2,
+    hidden_shape_std_m,
     hidden_side_gram,
     hidden_side_std_m,
     model_gram,
@@ -257,3 +258,26 @@ def test_plane_offset_std_is_the_distance_from_the_pivot():
     along_rotation[4] = -gradient[5]
     pure = 0.01 * np.outer(along_rotation, along_rotation)
     assert plane_offset_std_m(pure, g, pivot) == pytest.approx(0.0, abs=1e-7)
+
+
+def test_hidden_shape_std_is_the_hidden_side_in_the_object_s_own_frame():
+    """The hidden side moved back by the bias it stands at (finite differences over the
+    whole state, full covariance with bias-plane correlations) has the shape std; a
+    re-grasp's noise on the bias leaves it as it is and grows the hidden side's std."""
+    rng = np.random.default_rng(5)
+    points, g, pivot, _ = _problem(rng)
+    root = rng.normal(size=(6, 6)) * np.array([0.03, 0.004, 0.004, 0.002, 0.01, 0.2])
+    covariance = root.T @ root
+    n = len(points)
+
+    def shape(x):
+        return invert_bias(apply_mirror_bias(points, x, pivot), x, pivot).ravel()
+
+    J = _numeric_jacobian(shape, g).reshape(n, 3, 6)
+    rms = np.sqrt(np.mean([np.trace(J[k] @ covariance @ J[k].T) for k in range(n)]))
+    gram = hidden_side_gram(points, g, pivot)
+    assert hidden_shape_std_m(covariance, gram) == pytest.approx(rms, rel=1e-5)
+    regrasp = np.diag([0.02, 0.01, 0.01, 0.001, 0.0, 0.0]) ** 2
+    grown = covariance + regrasp
+    assert hidden_shape_std_m(grown, gram) == pytest.approx(hidden_shape_std_m(covariance, gram))
+    assert hidden_side_std_m(grown, gram) > hidden_side_std_m(covariance, gram)

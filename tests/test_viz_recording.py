@@ -174,7 +174,7 @@ def test_a_damaged_camera_or_depth_is_one_line_and_leaves_the_recording(
         np.save(run / name, content)
     else:
         (run / name).write_bytes(content.encode() if isinstance(content, str) else content)
-    assert main(["view", str(run), "--no-open"]) == 2
+    assert main(["view", str(run), "--no-open", "--overwrite"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"symfuse: error: {run / name}: ")
     assert re.search(message, err)

@@ -9,7 +9,9 @@ part that comes from ``g``, in metres, with the linearisation ``q_n ~ J_n g``
 
     hidden-side std   sqrt(mean_n tr(J_n P J_n^T)) = sqrt(tr(P M)),  M = mean_n J_n^T J_n
 
-the RMS over the hidden side of each point's positional std (all three axes); and
+the RMS over the hidden side of each point's positional std (all three axes), of which the
+plane's block of ``P`` and ``M`` alone gives the hidden side's std against the visible side
+(the shape, which re-grasping does not unsettle); and
 
     plane offset std  sqrt(j^T P j),  j = d(m_r - n(m_theta) . c) / d g
 
@@ -78,6 +80,17 @@ def hidden_side_std_m(covariance: np.ndarray, gram: np.ndarray) -> float:
     """RMS positional std of the hidden side (m) from the ``(6, 6)`` covariance of ``g`` and
     :func:`hidden_side_gram`."""
     return float(np.sqrt(max(np.trace(covariance @ gram), 0.0)))
+
+
+def hidden_shape_std_m(covariance: np.ndarray, gram: np.ndarray) -> float:
+    """RMS positional std (m) of the hidden side against the visible side, the completed
+    model's shape: :func:`hidden_side_std_m` from the plane's block of the ``(6, 6)``
+    covariance of ``g`` alone, the bias moving both sides together (it rotates the plane's
+    columns of ``J_n``, which leaves their gram unchanged). The re-grasp noise ``Q`` grows
+    the bias only, so this is the part of the hidden side's uncertainty that more grasps
+    reduce; the object's place, where the bias puts it, each re-grasp unsettles again."""
+    plane = slice(4, BIAS_PLANE_DIM)
+    return float(np.sqrt(max(np.trace(covariance[plane, plane] @ gram[plane, plane]), 0.0)))
 
 
 def plane_offset_std_m(covariance: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> float:

@@ -180,7 +180,8 @@ def grasp_fields(entry: Mapping[str, Any]) -> dict[str, Any]:
     """The row fields of one fused grasp of a multi-grasp trial (``grasp{k}_...``): those of
     :func:`attempt_fields`, how it was chosen, its taxels, and Stage 2's and the selected
     stage's deviation, plane errors, status and consistency after fusing it, with the stop
-    rule's two stds (mm), and the alternative hypothesis each stage's model comes from."""
+    rule's two stds and the hidden side's with the object's place (mm), and the alternative
+    hypothesis each stage's model comes from."""
     prefix = f"grasp{entry['grasp']}"
     fields: dict[str, Any] = {
         **attempt_fields(entry, fused=True),
@@ -189,6 +190,7 @@ def grasp_fields(entry: Mapping[str, Any]) -> dict[str, Any]:
         f"{prefix}_selected_stage": entry["selected_stage"],
         f"{prefix}_offset_std_mm": entry["uncertainty"]["plane_offset_std_mm"],
         f"{prefix}_hidden_std_mm": entry["uncertainty"]["hidden_side_std_mm"],
+        f"{prefix}_shape_std_mm": entry["uncertainty"]["hidden_shape_std_mm"],
     }
     for label, stage in (
         ("stage2", entry["stages"][-1]),

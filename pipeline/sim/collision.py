@@ -8,16 +8,18 @@ decomposed once per machine. The parts are one OBJ file, one ``o`` object per pa
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pybullet
 import trimesh
 
-from pipeline.errors import InputError
+from pipeline.errors import ConfigError, InputError
 from pipeline.metrics import mesh_occupancy, point_to_mesh_distances
 
 from . import native_output_silenced
@@ -40,6 +42,31 @@ def cache_dir() -> Path:
     """Directory for cached convex decompositions: ``$SYMFUSE_CACHE`` or ``~/.cache/symfuse``."""
     root = os.environ.get("SYMFUSE_CACHE") or Path.home() / ".cache" / "symfuse"
     return Path(root)
+
+
+@contextlib.contextmanager
+def _scratch_in(directory: Path) -> Iterator[Path]:
+    """A temporary folder inside ``directory`` (created as needed), deleted afterwards.
+
+    Raises:
+        ConfigError: ``directory`` cannot be created or written: an environment problem,
+            named by its variable (or the default folder and the variable that moves it).
+    """
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        scratch = tempfile.TemporaryDirectory(dir=directory)
+    except OSError as exc:
+        where = (
+            f"SYMFUSE_CACHE={os.environ['SYMFUSE_CACHE']}"
+            if os.environ.get("SYMFUSE_CACHE")
+            else f"the cache folder {cache_dir()}"
+        )
+        raise ConfigError(
+            f"{where}: cannot keep the convex parts of the mesh in {directory} "
+            f"({exc.strerror or exc}); set SYMFUSE_CACHE to a folder you can write"
+        ) from None
+    with scratch as folder:
+        yield Path(folder)
 
 
 def mesh_hash(mesh: trimesh.Trimesh) -> str:
@@ -74,8 +101,7 @@ def convex_decomposition(mesh: trimesh.Trimesh, resolution: int) -> Path:
     path = directory / f"{key}.obj"
     if path.is_file():
         return path
-    directory.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=directory) as scratch:
+    with _scratch_in(directory) as scratch:
         source = Path(scratch) / "source.obj"
         result = Path(scratch) / "parts.obj"
         mesh.export(source)
