@@ -45,6 +45,7 @@ class Mujoco(World):
     """
 
     name = "mujoco"
+    #: The hands in ``robots/``, as for the ``pybullet`` world (a test keeps them equal).
     hands = ("pg70", "sdh")
     changes_hands = True
 

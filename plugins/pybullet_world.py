@@ -46,8 +46,8 @@ class Pybullet(World):
     """
 
     name = "pybullet"
-    #: The hands in ``robots/`` (:data:`pipeline.sim.hands.HAND_MODELS`, which imports
-    #: PyBullet; a test keeps the two equal).
+    #: The hands in ``robots/`` (:data:`pipeline.sim.hand_models.HAND_MODELS`; importing
+    #: :mod:`pipeline.sim` loads PyBullet, so they are named here; a test keeps the two equal).
     hands = ("pg70", "sdh")
     changes_hands = True
 

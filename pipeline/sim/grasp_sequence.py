@@ -7,8 +7,8 @@ Sequence (:func:`execute_grasp`):
 2. release the object if the hand still holds it from an earlier grasp (open, back off);
 3. teleport the open hand to the pre-grasp pose, ``plan.pregrasp_height_m`` above
    ``plan.T_robot_hand`` along +z of frame R; refuse if the hand overlaps the object there;
-4. descend to ``plan.T_robot_hand`` at ``descent_speed_m_s`` (the base constraint's target is
-   moved every step), guarded: once the hand bears down on the object with
+4. descend to ``plan.T_robot_hand`` at ``descent_speed_m_s`` (the palm's target is moved
+   every step), guarded: once the hand bears down on the object with
    ``descent_guard_N`` (the upward part of the contact forces, what a wrist force sensor
    feels; a finger brushing a side does not count), it stops. A finger landing on the
    object means the object reaches further that side than the cloud said (a calibration
