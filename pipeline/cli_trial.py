@@ -45,8 +45,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument(
         "--gripper",
         metavar="NAME",
-        help="hand, one the world offers (pybullet: pg70, sdh), planned by planner.use when "
-        "it plans for that hand, else by the best-scored installed planner that does; auto "
+        help="hand, one the world offers (pybullet, mujoco: pg70, sdh), planned by planner.use "
+        "when it plans for that hand, else by the best-scored installed planner that does; auto "
         "(the default): the hand with the best feasible grasp of any installed planner",
     )
     parser.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")

@@ -44,8 +44,8 @@ class TrialSettings:
     )
     gripper: str = param(
         "auto",
-        "hand, one the world offers (pybullet: pg70, the Schunk PG-70, or sdh, the SDH-2), "
-        "or auto: the hand whose planner finds the best feasible grasp on this object",
+        "hand, one the world offers (pybullet, mujoco: pg70, the Schunk PG-70, or sdh, the "
+        "SDH-2), or auto: the hand whose planner finds the best feasible grasp on this object",
     )
     seed: int = param(0, "seed of every random choice in the trial", at_least=0)
     # The table is 2 m x 2 m about the robot origin: an object placed beyond it falls.

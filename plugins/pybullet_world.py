@@ -46,8 +46,8 @@ class Pybullet(World):
     """
 
     name = "pybullet"
-    #: The hands in ``robots/`` (:data:`pipeline.sim.hands.HAND_MODELS`, which imports
-    #: PyBullet; a test keeps the two equal).
+    #: The hands in ``robots/`` (:data:`pipeline.sim.hand_models.HAND_MODELS`; importing
+    #: :mod:`pipeline.sim` loads PyBullet, so they are named here; a test keeps the two equal).
     hands = ("pg70", "sdh")
     changes_hands = True
 
@@ -173,38 +173,11 @@ class Pybullet(World):
         T_robot_hand: np.ndarray,
         plan: GraspPlan,
     ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Each link of a shipped hand from its URDF's forward kinematics; each face gets
-        its own vertices, so the boxes and cylinders of the URDF shade flat."""
-        import trimesh
-        import yourdfpy
+        """Each link of a shipped hand from its URDF
+        (:func:`pipeline.sim.hand_models.hand_link_meshes`)."""
+        from pipeline.sim.hand_models import hand_link_meshes
 
-        from pipeline.sim.hands import HAND_MODELS
-        from robots import ROOT
-
-        model = HAND_MODELS.get(gripper)
-        if model is None:
-            return {}
-        urdf = yourdfpy.URDF.load(str(ROOT / model.urdf))
-        if joint_positions is None:
-            joint_positions = model.open_configuration(plan.opening_m, plan.spread_rad)
-        urdf.update_cfg(
-            {k: v for k, v in joint_positions.items() if k in urdf.actuated_joint_names}
-        )
-        scene = urdf.scene
-        shapes: dict[str, list[trimesh.Trimesh]] = {}
-        for node in scene.graph.nodes_geometry:
-            T_hand_shape, geometry = scene.graph[node]
-            link = scene.graph.transforms.parents[node]
-            shape = trimesh.Trimesh(
-                scene.geometry[geometry].vertices, scene.geometry[geometry].faces
-            )
-            shapes.setdefault(link, []).append(shape.apply_transform(T_robot_hand @ T_hand_shape))
-        meshes = {}
-        for link, parts in shapes.items():
-            mesh = trimesh.util.concatenate(parts)
-            mesh.unmerge_vertices()
-            meshes[link] = (np.asarray(mesh.vertices), np.asarray(mesh.faces), mesh.vertex_normals)
-        return meshes
+        return hand_link_meshes(gripper, joint_positions, T_robot_hand, plan)
 
     def _hand(self):
         if self.sim.hand is None:

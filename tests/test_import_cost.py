@@ -57,3 +57,10 @@ def test_a_trial_without_pictures_loads_no_plotting_or_statistics(tmp_path):
         "'--set', 'trial.pictures=false']) == 0"
     )
     assert loaded_after(code, ("matplotlib", "scipy.stats", "plotly", "dash")) == []
+
+
+def test_the_trial_core_imports_no_physics_engine():
+    """The world is a plugin: the trial, its runner and the CLI load neither engine (the
+    configured world imports its own when it loads a scene)."""
+    code = "import pipeline.trial, pipeline.runner, pipeline.cli, pipeline.stages"
+    assert loaded_after(code, ("pybullet", "mujoco")) == []

@@ -1,4 +1,6 @@
-"""PyBullet simulation: the scene, the world, cameras and depth-sensor models, and hands.
+"""Simulation: the PyBullet world (scene, world, cameras and depth-sensor models, hands),
+the MuJoCo world (:mod:`.mujoco`), and what both engines share (the hands' models and the
+grasp sequence, the table and object bodies, taxel geometry, convex collision parts).
 
 pybullet prints its build time on stderr when imported, and V-HACD its progress on stdout
 from C++; :func:`native_output_silenced` keeps both out of the user's terminal. The package

@@ -1,40 +1,11 @@
-"""The simulated hands: gripper specs, and a PyBullet hand that opens, moves and closes.
-
-Two hands ship with symfuse, described by ``robots/pg70.urdf`` and ``robots/sdh2.urdf``
-(numbers from the datasheets; the URDF headers explain each one):
-
-* ``"pg70"`` - Schunk PG-70 parallel gripper, pads ``"left"`` and ``"right"`` (6 x 14).
-* ``"sdh"`` - Schunk SDH-2 three-finger hand, pads ``"<finger>_<link>"`` for fingers
-  ``f1``, ``f2``, ``thumb`` and links ``proximal`` (6 x 14) and ``distal`` (6 x 13, the
-  9 rows nearest the tip curved).
-
-Hand frame (the URDF base link ``palm``): origin at the mounting flange on the palm axis,
-``z`` along the approach direction toward the fingertips, ``x`` the closing direction. A
-:class:`pipeline.types.GraspPlan`'s ``T_robot_hand`` is this frame's pose. The PG-70's pad
-centres are 125 mm and its fingertips 154 mm down ``z``; the SDH-2's straight fingertips
-246 mm (``GripperSpec.finger_length_m`` holds the fingertip depth).
-
-Opening: for the PG-70 ``opening_m`` is the distance between the pad surfaces. For the
-SDH-2 it is twice the distance from the palm axis of the distal pads' flat surfaces when
-each proximal link is tilted by ``alpha`` and the distal link held parallel to the palm
-axis (distal joint ``-alpha``): ``opening = 2 (r_base - 14.8 mm - 86.5 mm sin(alpha))``
-with ``r_base = 38.1 mm`` (:mod:`pipeline.perception.sdh_geometry`); at spread 60 deg that
-is the diameter of the circle the three distal pads touch. Openings below 46.6 mm flex the
-proximal links inward (``alpha > 0``), for narrow objects.
+"""The PyBullet hand: a shipped hand (:mod:`pipeline.sim.hand_models`) loaded from its URDF
+into a PyBullet client, opened, moved and closed.
 
 The hand's base floats freely in PyBullet and is held by a fixed constraint whose target
 :meth:`Hand.move_to` sets (PyBullet's world frame is the robot frame ``R``).
-
-One module because the two hands' models (:class:`HandModel`: pads, finger drives, opening
-and aperture functions of a :class:`Hand`) are the data the :class:`Hand` drives, and the
-:class:`Hand` itself, one PyBullet body opened, moved and closed, is most of it.
 """
 
 from __future__ import annotations
-
-import math
-from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 import pybullet as pb
@@ -43,29 +14,23 @@ from scipy.spatial.transform import Rotation
 from robots import ROOT as ROBOTS_ROOT
 
 from ..errors import ConfigError
-from ..pad_layout import pad_grid
-from ..perception import sdh_geometry
-from ..types import GripperSpec, PadLayout, TaxelState
+from .hand_models import (
+    GRIPPERS,
+    HAND_MODELS,
+    PARK_POSITION_M,
+    HandModel,
+    SimHand,
+    TaxelFrames,
+)
 from .taxels import (
     ray_segments,
     rotations_from_quaternions,
     segments_near_box,
     surface_gaps,
-    taxels_to_robot,
 )
 
-TAXEL_PITCH_M = 0.0034
+__all__ = ["GRIPPERS", "HAND_MODELS", "PARK_POSITION_M", "Hand"]
 
-SDH_FINGERS = sdh_geometry.FINGERS
-#: How far (rad, each bending joint) an SDH-2 finger's targets move past the contact to press.
-#: Fingers 1 and 2 together overpower the thumb and push the object toward it until they
-#: reach their targets, so theirs is small (about 4 mm at the distal pad); the thumb's is
-#: large so that it presses with its full force cap.
-SDH_FINGER_SQUEEZE_RAD = 0.03
-SDH_THUMB_SQUEEZE_RAD = 0.1
-
-#: Where an unused hand waits: high above the table, out of the camera's view (m).
-PARK_POSITION_M = (0.0, 0.0, 2.0)
 #: Force of the constraint that holds the hand's base at its target pose (N).
 BASE_HOLD_FORCE_N = 2000.0
 #: Proportional gain of PyBullet's joint position servo (dimensionless, 0..1).
@@ -73,156 +38,6 @@ POSITION_GAIN = 0.3
 #: Collision-filter group of every hand link. The hand still collides with everything;
 #: taxel probe rays leave this group out of their mask so they never stop on the hand.
 HAND_COLLISION_GROUP = 1 << 5
-
-
-@dataclass(frozen=True)
-class PadGeometry:
-    """A pad's layout plus the shape of its surface (see :func:`pipeline.pad_layout.pad_grid`)."""
-
-    layout: PadLayout
-    curved_rows: int = 0
-    curve_radius_m: float = math.inf
-
-
-@dataclass(frozen=True)
-class FingerDrive:
-    """How one finger closes: each joint's target is its open value + ``ratio * closure``.
-
-    ``closure`` grows from 0 (the open configuration) as the finger closes, at ``speed``
-    closure units per second (metres for a prismatic jaw, radians for a bending finger).
-    Once the finger touches, each joint's target moves ``squeeze`` (m or rad) further
-    toward the object, so that the blocked motors press with their force caps.
-    """
-
-    name: str
-    pads: tuple[str, ...]
-    joints: tuple[str, ...]
-    ratios: tuple[float, ...]
-    speed: float
-    squeeze: tuple[float, ...]
-
-
-@dataclass(frozen=True)
-class TaxelFrames:
-    """Every taxel of a hand in frame R, from forward kinematics of its current state.
-
-    Attributes:
-        positions: ``(N, 3)`` taxel centres on the pad surfaces, metres.
-        normals: ``(N, 3)`` unit normals pointing out of the pads.
-        pads: ``(N,)`` pad id of each taxel (str).
-        taxel_indices: ``(N,)`` row-major index of each taxel within its pad.
-    """
-
-    positions: np.ndarray
-    normals: np.ndarray
-    pads: np.ndarray
-    taxel_indices: np.ndarray
-
-
-@dataclass(frozen=True)
-class HandModel:
-    """Everything symfuse knows about one hand type."""
-
-    spec: GripperSpec
-    urdf: str
-    pads: tuple[PadGeometry, ...]
-    fingers: tuple[FingerDrive, ...]
-    open_configuration: Callable[[float, float], dict[str, float]]
-    aperture: Callable[[Hand], float]
-    #: ``(F, 2)`` unit directions each finger closes along in the palm's xy plane, for a
-    #: spread (:attr:`fingers` order).
-    facings: Callable[[float], np.ndarray]
-
-
-def _pg70_open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
-    half_m = opening_m / 2.0
-    return {"left_jaw": half_m, "right_jaw": half_m}
-
-
-def _pg70_aperture(hand: Hand) -> float:
-    joints = hand.joint_positions()
-    return joints["left_jaw"] + joints["right_jaw"]
-
-
-def _sdh_open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
-    alpha = sdh_geometry.alpha_for_opening(opening_m)
-    configuration = {"f1_base": spread_rad, "f2_base": spread_rad}
-    for finger in SDH_FINGERS:
-        configuration[f"{finger}_proximal"] = alpha
-        configuration[f"{finger}_distal"] = -alpha
-    return configuration
-
-
-def _sdh_aperture(hand: Hand) -> float:
-    """Twice the mean distance of the distal pad frames from the palm axis."""
-    T_robot_hand = hand.pose()
-    origins_robot = hand.pad_poses()[1]
-    radii = []
-    for finger in SDH_FINGERS:
-        offset_robot = origins_robot[hand.pad_ids.index(f"{finger}_distal")] - T_robot_hand[:3, 3]
-        offset_hand = T_robot_hand[:3, :3].T @ offset_robot
-        radii.append(math.hypot(offset_hand[0], offset_hand[1]))
-    return 2.0 * float(np.mean(radii))
-
-
-def _pg70_model() -> HandModel:
-    pads = tuple(
-        PadGeometry(PadLayout(side, f"{side}_pad", 14, 6, TAXEL_PITCH_M))
-        for side in ("left", "right")
-    )
-    fingers = tuple(
-        FingerDrive(side, (side,), (f"{side}_jaw",), (-1.0,), 0.041, (-0.002,))
-        for side in ("left", "right")
-    )
-    spec = GripperSpec("pg70", 2, 0.065, tuple(p.layout for p in pads), 0.154)
-    return HandModel(
-        spec,
-        "pg70.urdf",
-        pads,
-        fingers,
-        _pg70_open_configuration,
-        _pg70_aperture,
-        lambda spread_rad: np.array([[1.0, 0.0], [-1.0, 0.0]]),  # left jaw at -x, right at +x
-    )
-
-
-def _sdh_model() -> HandModel:
-    pads: list[PadGeometry] = []
-    fingers: list[FingerDrive] = []
-    for finger in SDH_FINGERS:
-        proximal = f"{finger}_proximal"
-        distal = f"{finger}_distal"
-        pads.append(PadGeometry(PadLayout(proximal, f"{proximal}_pad", 14, 6, TAXEL_PITCH_M)))
-        pads.append(
-            PadGeometry(
-                PadLayout(distal, f"{distal}_pad", 13, 6, TAXEL_PITCH_M),
-                sdh_geometry.DISTAL_PAD_CURVED_ROWS,
-                sdh_geometry.DISTAL_PAD_CURVE_RADIUS_M,
-            )
-        )
-        squeeze = SDH_THUMB_SQUEEZE_RAD if finger == "thumb" else SDH_FINGER_SQUEEZE_RAD
-        fingers.append(
-            FingerDrive(
-                finger, (proximal, distal), (proximal, distal), (1.0, -1.0), 1.0, (squeeze,) * 2
-            )
-        )
-    max_aperture_m = sdh_geometry.opening_for_alpha(-sdh_geometry.JOINT_LIMIT_RAD)
-    spec = GripperSpec("sdh", 3, max_aperture_m, tuple(p.layout for p in pads), 0.246)
-    return HandModel(
-        spec,
-        "sdh2.urdf",
-        tuple(pads),
-        tuple(fingers),
-        _sdh_open_configuration,
-        _sdh_aperture,
-        sdh_geometry.finger_facings,
-    )
-
-
-HAND_MODELS: dict[str, HandModel] = {"pg70": _pg70_model(), "sdh": _sdh_model()}
-
-#: What grasp planners need to know about each shipped hand, by name.
-GRIPPERS: dict[str, GripperSpec] = {name: model.spec for name, model in HAND_MODELS.items()}
 
 
 def _transform(position: np.ndarray, quaternion_xyzw: np.ndarray) -> np.ndarray:
@@ -236,28 +51,22 @@ def _quaternion(rotation: np.ndarray) -> tuple[float, ...]:
     return tuple(Rotation.from_matrix(rotation).as_quat())
 
 
-class Hand:
+class Hand(SimHand):
     """A hand loaded into a PyBullet client.
 
     Attributes:
         client: the PyBullet physics client id.
-        model: the hand's :class:`HandModel`.
-        spec: its :class:`GripperSpec`.
         body_id: the PyBullet body.
-        pad_ids: pad ids, in the order of :attr:`HandModel.pads`.
     """
 
     def __init__(self, client: int, model: HandModel, body_id: int, constraint_id: int) -> None:
         self.client = client
-        self.model = model
-        self.spec = model.spec
         self.body_id = body_id
         self._constraint_id = constraint_id
-        self.pad_ids = [pad.layout.name for pad in model.pads]
 
         self._joint_index: dict[str, int] = {}
-        self._joint_limits: dict[str, tuple[float, float]] = {}
-        self._joint_effort: dict[str, float] = {}
+        joint_limits: dict[str, tuple[float, float]] = {}
+        joint_effort: dict[str, float] = {}
         link_index: dict[str, int] = {}
         for index in range(pb.getNumJoints(body_id, physicsClientId=client)):
             info = pb.getJointInfo(body_id, index, physicsClientId=client)
@@ -265,8 +74,9 @@ class Hand:
             if info[2] in (pb.JOINT_REVOLUTE, pb.JOINT_PRISMATIC):
                 name = info[1].decode()
                 self._joint_index[name] = index
-                self._joint_limits[name] = (info[8], info[9])
-                self._joint_effort[name] = info[10]
+                joint_limits[name] = (info[8], info[9])
+                joint_effort[name] = info[10]
+        self._setup(model, joint_limits, joint_effort)
         self._pad_links = [link_index[pad.layout.link] for pad in model.pads]
         # Each finger's links: those named after it (f1_knuckle, f1_proximal_pad, left_jaw...).
         self._finger_of_link = {
@@ -276,20 +86,6 @@ class Hand:
             if name.startswith(f"{finger.name}_")
         }
         self._links = [-1, *link_index.values()]
-
-        grids = [
-            pad_grid(
-                p.layout.rows, p.layout.cols, p.layout.pitch_m, p.curved_rows, p.curve_radius_m
-            )
-            for p in model.pads
-        ]
-        self._taxel_positions_pad = np.concatenate([g[0] for g in grids])
-        self._taxel_normals_pad = np.concatenate([g[1] for g in grids])
-        self._pad_of_taxel = np.concatenate(
-            [np.full(len(g[0]), i, dtype=np.int64) for i, g in enumerate(grids)]
-        )
-        self._taxel_pads = np.asarray(self.pad_ids)[self._pad_of_taxel]
-        self._taxel_indices = np.concatenate([np.arange(len(g[0])) for g in grids])
 
         inertial = pb.getDynamicsInfo(body_id, -1, physicsClientId=client)
         self._T_com_palm = np.linalg.inv(_transform(np.array(inertial[3]), np.array(inertial[4])))
@@ -347,14 +143,6 @@ class Hand:
         hand.park(park_position_m)
         return hand
 
-    def park(self, park_position_m: tuple[float, float, float] = PARK_POSITION_M) -> None:
-        """Teleport the hand, fully open and pointing down, to ``park_position_m``."""
-        T_park = np.eye(4)
-        T_park[:3, :3] = np.diag([1.0, -1.0, -1.0])
-        T_park[:3, 3] = park_position_m
-        self.reset_pose(T_park)
-        self.set_opening(self.spec.max_aperture_m, 0.0)
-
     # ------------------------------------------------------------------ base pose
     def pose(self) -> np.ndarray:
         """``T_robot_hand``: the palm frame's current pose in frame R."""
@@ -394,35 +182,11 @@ class Hand:
         )
         return {name: state[0] for name, state in zip(self._joint_index, states, strict=True)}
 
-    def open_configuration(self, opening_m: float, spread_rad: float = 0.0) -> dict[str, float]:
-        """Joint positions for an opening (see the module docstring) and an SDH spread.
-
-        Raises:
-            ValueError: the opening or spread is outside what the hand can do.
-        """
-        if not 0.0 <= opening_m <= self.spec.max_aperture_m + 1e-9:
-            raise ValueError(
-                f"opening {opening_m * 1e3:.1f} mm outside 0..{self.spec.max_aperture_m * 1e3:.1f}"
-                f" mm of the {self.spec.name}"
-            )
-        configuration = self.model.open_configuration(
-            min(opening_m, self.spec.max_aperture_m), spread_rad
-        )
-        for name, value in configuration.items():
-            lower, upper = self._joint_limits[name]
-            if not lower - 1e-6 <= value <= upper + 1e-6:
-                raise ValueError(f"joint {name} = {value:.4f} outside [{lower:.4f}, {upper:.4f}]")
-            configuration[name] = min(max(value, lower), upper)
-        return configuration
-
-    def set_opening(self, opening_m: float, spread_rad: float = 0.0) -> None:
-        """Teleport the fingers to an opening (no dynamics) and hold them there."""
-        configuration = self.open_configuration(opening_m, spread_rad)
+    def _reset_joints(self, configuration: dict[str, float]) -> None:
         for name, value in configuration.items():
             pb.resetJointState(
                 self.body_id, self._joint_index[name], value, 0.0, physicsClientId=self.client
             )
-        self.command(configuration)
 
     def command(self, targets: dict[str, float], force_fraction: float = 1.0) -> None:
         """Position-control joints toward ``targets`` (clipped to their limits), each with
@@ -439,19 +203,6 @@ class Hand:
             physicsClientId=self.client,
         )
 
-    def closure_limit(self, finger: FingerDrive, open_targets: dict[str, float]) -> float:
-        """Largest closure before one of the finger's joints reaches its limit."""
-        room = []
-        for joint, ratio in zip(finger.joints, finger.ratios, strict=True):
-            lower, upper = self._joint_limits[joint]
-            bound = upper if ratio > 0 else lower
-            room.append((bound - open_targets[joint]) / ratio)
-        return max(0.0, min(room))
-
-    def aperture(self) -> float:
-        """The current opening, measured the way ``opening_m`` is defined (module doc)."""
-        return self.model.aperture(self)
-
     # ------------------------------------------------------------------ pads and taxels
     def pad_poses(self) -> tuple[np.ndarray, np.ndarray]:
         """``(rotations (P, 3, 3), origins (P, 3))`` of the pad frames in frame R."""
@@ -464,18 +215,6 @@ class Hand:
         origins = np.array([s[4] for s in states])
         rotations = rotations_from_quaternions(np.array([s[5] for s in states]))
         return rotations, origins
-
-    def taxel_frames(self) -> TaxelFrames:
-        """Every taxel's centre and outward normal in frame R, for the current state."""
-        rotations, origins = self.pad_poses()
-        positions, normals = taxels_to_robot(
-            self._taxel_positions_pad,
-            self._taxel_normals_pad,
-            self._pad_of_taxel,
-            rotations,
-            origins,
-        )
-        return TaxelFrames(positions, normals, self._taxel_pads, self._taxel_indices)
 
     def taxel_gaps(
         self, object_id: int, behind_m: float, beyond_m: float
@@ -509,21 +248,6 @@ class Hand:
             hit_fractions = np.fromiter((h[2] for h in hits), dtype=np.float64, count=len(hits))
             fractions[candidates] = np.where(bodies == object_id, hit_fractions, 1.0)
         return frames, surface_gaps(fractions, behind_m, beyond_m)
-
-    def taxel_state(self, object_id: int, behind_m: float, beyond_m: float) -> TaxelState:
-        """:meth:`taxel_gaps` with each taxel's pad force (:meth:`pad_contact_forces`), as
-        the :class:`pipeline.stages.World` contract hands them to tactile models."""
-        frames, gaps = self.taxel_gaps(object_id, behind_m, beyond_m)
-        pad_row = {pad: i for i, pad in enumerate(self.pad_ids)}
-        forces = self.pad_contact_forces(object_id)
-        return TaxelState(
-            positions=frames.positions,
-            normals=frames.normals,
-            pads=frames.pads,
-            taxel_indices=frames.taxel_indices,
-            gaps_m=gaps,
-            pad_forces_N=forces[[pad_row[pad] for pad in frames.pads]],
-        )
 
     def _object_aabb(self, object_id: int) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounds of all of a body's links in frame R."""

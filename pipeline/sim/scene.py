@@ -22,17 +22,17 @@ from scipy.spatial.transform import Rotation
 from pipeline.errors import InputError
 from pipeline.types import ObjectPose
 
+from .bodies import (
+    MAX_SETTLE_STEPS,
+    OBJECT_RGBA,
+    REST_SPEED_M_S,
+    REST_SPIN_RAD_S,
+    SETTLE_STEPS,
+    TABLE_HALF_EXTENTS_M,
+    TABLE_RGBA,
+    mass_properties,
+)
 from .collision import convex_decomposition
-
-#: Half-extents of the table box (m): 2 m x 2 m, 5 cm thick.
-TABLE_HALF_EXTENTS_M = (1.0, 1.0, 0.025)
-
-
-TABLE_RGBA = (0.55, 0.45, 0.35, 1.0)
-
-
-OBJECT_RGBA = (0.2, 0.45, 0.8, 1.0)
-
 
 #: Bullet collision margin of the table and objects (m). Bullet's default (about 1 mm on
 #: convex hulls) would leave objects floating that high above the table.
@@ -45,37 +45,15 @@ COLLISION_MARGIN_M = 1e-4
 #: and the solver keeps adding speed: a lying 56 mm cylinder went 120 mm in 2 s.
 ROLLING_FRICTION_M = 1e-4
 
-#: Physics steps (1/240 s each) an object is left to settle after being placed, and how
-#: many more it is given at most while it still moves (a mesh placed where it topples):
-#: the camera looks once it is still.
-SETTLE_STEPS = 24
-MAX_SETTLE_STEPS = 480
-#: Speeds below which an object counts as still (m/s, rad/s).
 #: PyBullet's limits on a mesh handed over as arrays: the vertices of a convex collision
 #: shape, and the triangles of a visual shape (524,288 indices). A mesh over them is
 #: simplified for the simulator (:func:`within_faces`); the ground truth keeps every face.
 MAX_CONVEX_VERTICES = 131_072
 MAX_VISUAL_FACES = 174_762
 
-REST_SPEED_M_S = 1e-3
-REST_SPIN_RAD_S = 1e-2
-
 
 def _quaternion_yaw(yaw_rad: float) -> list[float]:
     return Rotation.from_euler("z", yaw_rad).as_quat().tolist()
-
-
-def _inertia(mesh: trimesh.Trimesh, mass_kg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centre of mass, principal-axes orientation (quaternion xyzw) and principal moments
-    (kg m^2) of a uniform solid ``mesh`` of ``mass_kg``; its bounding box stands in for a
-    mesh that does not enclose a volume."""
-    solid = mesh if mesh.is_volume else mesh.bounding_box
-    solid = solid.copy()
-    solid.density = mass_kg / solid.volume
-    moments, axes = np.linalg.eigh(solid.moment_inertia)
-    if np.linalg.det(axes) < 0:
-        axes[:, 0] = -axes[:, 0]
-    return solid.center_mass, Rotation.from_matrix(axes).as_quat(), moments
 
 
 class Scene:
@@ -196,7 +174,7 @@ class Scene:
             rgbaColor=rgba,
             physicsClientId=self.client,
         )
-        center_mass, principal_axes, moments = _inertia(mesh, mass_kg)
+        center_mass, principal_axes, moments = mass_properties(mesh, mass_kg)
         z_base = self.table_height_m - float(mesh.bounds[0][2])
         body = pybullet.createMultiBody(
             baseMass=mass_kg,
