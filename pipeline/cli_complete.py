@@ -27,7 +27,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             "in mm or NPY in m with camera.json, or a ROS 1/2 bag), find the support plane "
             "and every object standing on it, initialise each one's symmetry plane and "
             "complete it; with --contacts, fuse them with one object. Writes objects.json, "
-            "object_K/ (cloud.ply, completed_stage*.ply, result.json) and scene.png."
+            "object_K/ (cloud.ply, completed_stage*.ply, model.*, result.json) and scene.png."
         ),
     )
     parser.add_argument("scan", type=Path, metavar="SCAN", help="the capture file or bag")
@@ -60,7 +60,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 #: The config sections ``complete`` reads.
-READS = ("sensor", "segmenter", "initialiser", "estimator")
+READS = ("sensor", "segmenter", "initialiser", "estimator", "model")
 
 
 def overrides(args: argparse.Namespace) -> list[str]:
@@ -150,6 +150,7 @@ def write_outputs(
     """Every file ``complete`` writes, into ``out`` (created if needed)."""
     import numpy as np
 
+    from .asset.files import write_model
     from .figures import SceneObjectView, plot_scene
     from .formats import (
         bias_to_json,
@@ -185,6 +186,9 @@ def write_outputs(
         if completion.result is not None:
             write_completed_clouds(folder, completion.result)
             document["stages"] = estimate_to_json(completion.result)
+            _, document["model"] = write_model(
+                folder, completion.result, config.model, observation.table_height_m
+            )
         write_json(folder / "result.json", {**document, "config": config.to_dict()})
         final = completion.result.final if completion.result else None
         views.append(
