@@ -40,6 +40,8 @@ SPARSE_SHARE = 0.25
 GAP_CELLS = 5
 #: Blur of the occupancy, in cells (a Gaussian's standard deviation).
 BLUR_CELLS = 1.0
+#: Smallest distance from the surface a grid value keeps (cells).
+NEAR_LEVEL = 2e-3
 #: Decimals of a metre the model files keep (a micrometre).
 OBJ_DECIMALS = 6
 #: Empty cells around the object: room for the blur.
@@ -133,6 +135,10 @@ def surface(solid: HalfWidths) -> trimesh.Trimesh:
     centres_x = (np.arange(2 * half) - half + 0.5) * cell
     walls = (smooth[None, :, :] - np.abs(centres_x)[:, None, None]) / cell
     field = np.minimum(walls, outline[None, :, :]).astype(np.float32)
+    # Values at the level make marching cubes put vertices of several edges on one grid
+    # node; kept NEAR_LEVEL away from it, no two vertices come within a micrometre, and
+    # the file's rounding merges none (the surface moves by less than 0.01 mm).
+    field[np.abs(field) < NEAR_LEVEL] = -NEAR_LEVEL
     vertices, faces, _, _ = marching_cubes(field, 0.0)
     origin = np.array([-half * cell, *solid.corner_m]) + 0.5 * cell
     vertices = origin + cell * vertices
@@ -142,9 +148,9 @@ def surface(solid: HalfWidths) -> trimesh.Trimesh:
 
 
 def _welded(vertices: np.ndarray, faces: np.ndarray) -> trimesh.Trimesh:
-    """The mesh with its vertices rounded to the micrometre an OBJ file keeps, the ones
-    that then coincide merged and the triangles that lose a corner to that dropped (the
-    file reads back as the same closed mesh); outward-oriented."""
+    """The mesh with its vertices rounded to the micrometre an OBJ file keeps, any that then
+    coincide merged and triangles that lose a corner to that dropped (the file reads back
+    as the same mesh); outward-oriented."""
     steps = np.round(vertices * 10.0**OBJ_DECIMALS).astype(np.int64)
     # One integer per vertex (21 bits a coordinate: +-1 m in micrometres) sorts 5x faster
     # than rows.
