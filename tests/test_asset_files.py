@@ -139,3 +139,17 @@ def test_a_model_too_small_for_a_surface_writes_nothing(tmp_path):
     assert asset is None and document["status"] == "failed"
     assert "at least 4" in document["reason"]
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_trial_runs_on_the_model_urdf(model_dir, tmp_path):
+    """`symfuse trial --mesh RUN/model.urdf`: the model is an object symfuse can grasp."""
+    from pipeline.cli import main
+
+    out = tmp_path / "again"
+    code = main(["trial", "--mesh", str(model_dir / "model.urdf"),
+                 "--set", "trial.pictures=false", "--out", str(out)])  # fmt: skip
+    assert code == 0
+    document = json.loads((out / "result.json").read_text())
+    assert document["stages"][2]["metrics"]["deviation_m"]["median"] < 0.003
+    assert document["model"]["status"] == "ok"
