@@ -187,7 +187,11 @@ def write_outputs(
             write_completed_clouds(folder, completion.result)
             document["stages"] = estimate_to_json(completion.result)
             _, document["model"] = write_model(
-                folder, completion.result, config.model, observation.table_height_m
+                folder,
+                completion.result,
+                config.model,
+                observation.table_height_m,
+                completion.cloud.viewpoint_m,
             )
         write_json(folder / "result.json", {**document, "config": config.to_dict()})
         final = completion.result.final if completion.result else None

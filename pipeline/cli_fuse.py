@@ -194,7 +194,7 @@ def _fuse_into(
         raise
     write_completed_clouds(out, run.result)
     table_z = view.table_height_m if view is not None else None
-    _, document["model"] = write_model(out, run.result, config.model, table_z)
+    _, document["model"] = write_model(out, run.result, config.model, table_z, cloud.viewpoint_m)
     document.update(
         init={
             "source": "--plane" if plane is not None else config.choices["initialiser"],

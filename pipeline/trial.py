@@ -376,7 +376,7 @@ def _simulate(
         truth_mesh.export(out_dir / "object_final.ply")
     with timer.phase("model"):
         model, document["model"] = write_model(
-            out_dir, result, config.model, observation.table_height_m
+            out_dir, result, config.model, observation.table_height_m, cloud.viewpoint_m
         )
     if model is not None:
         with timer.phase("evaluation"):

@@ -9,7 +9,7 @@ import trimesh
 
 from pipeline.asset.collision import convex_parts
 from pipeline.asset.mass import is_closed, mass_properties, signed_volume
-from pipeline.asset.meshing import close_model, half_widths, surface
+from pipeline.asset.meshing import View, close_model, half_widths, surface
 from pipeline.asset.symmetry import export_symmetry, object_frame, plane_jacobian, reflection
 from pipeline.metrics.fits import plane_after_bias
 from pipeline.types import Bias, SymmetryPlane
@@ -206,3 +206,45 @@ def test_the_closed_mesh_check_agrees_with_trimesh():
     assert not is_closed(flipped) and not flipped.is_winding_consistent
     two = trimesh.util.concatenate([box, box.copy().apply_translation([1.0, 0.0, 0.0])])
     assert is_closed(two) and two.is_watertight
+
+
+def _camera_view(mesh: trimesh.Trimesh, camera: np.ndarray, seed: int) -> np.ndarray:
+    """The points of ``mesh`` a camera at ``camera`` sees (the first surface along each
+    line of sight), above the segmenter's cut."""
+    points, _ = trimesh.sample.sample_surface(mesh, 60_000, seed=seed)
+    directions = points - camera
+    distances = np.linalg.norm(directions, axis=1)
+    hits, rays, _ = mesh.ray.intersects_location(
+        np.tile(camera, (len(points), 1)), directions / distances[:, None]
+    )
+    first = np.full(len(points), np.inf)
+    np.minimum.at(first, rays, np.linalg.norm(hits - camera, axis=1))
+    seen = points[(distances <= first + 1e-6) & (points[:, 2] > 0.012)]
+    return seen
+
+
+def test_a_box_seen_along_its_plane_is_closed_under_its_top_with_the_view():
+    """Looking along the plane the camera sees the top and the near end, no side wall: the
+    region under the top is hidden, and the camera's view says so."""
+    box = _standing(trimesh.creation.box((0.10, 0.20, 0.08)))
+    camera = np.array([0.0, 0.6, 0.5])
+    seen = _camera_view(box, camera, seed=7)
+    completed = np.concatenate([seen, seen * [-1.0, 1.0, 1.0]])
+    # Without the view only the top and the near end are solid: layers a cell thin.
+    with pytest.raises(ValueError, match="encloses no solid"):
+        close_model(completed)
+    with_view = close_model(completed, view=View(camera, seen))
+    assert with_view.is_watertight
+    assert signed_volume(with_view) == pytest.approx(box.volume, rel=0.06)
+
+
+def test_an_overhang_the_camera_sees_under_stays_open():
+    union, _ = _l_shape()
+    camera = np.array([-0.6, 0.0, 0.45])
+    seen = _camera_view(union, camera, seed=8)
+    completed = np.concatenate([seen, seen * [-1.0, 1.0, 1.0]])
+    mesh = close_model(completed, view=View(camera, seen))
+    assert mesh.is_watertight
+    assert signed_volume(mesh) == pytest.approx(union.volume, rel=0.08)
+    # Under the body, beyond the post, the table is free.
+    assert not mesh.contains([[0.0, 0.1, 0.05]])[0]

@@ -101,10 +101,12 @@ def _pooled(solid: HalfWidths) -> _Boxes:
         axis=-1,
     )
     # Where the solid ends its surface passes through the centres of its outermost cells
-    # (:func:`~pipeline.asset.meshing.surface`), and never below the table.
+    # (:func:`~pipeline.asset.meshing.surface`), and never below the table: the boxes end
+    # a quarter of a cell out, half way there (a box one cell across keeps half a cell: a
+    # hull of flat boxes has no volume).
     present = width > 0.0
     edge = np.pad(~present, 1, constant_values=True)
-    half = 0.5 * cell
+    half = 0.25 * cell
     low[..., 0] += half * edge[:-2, 1:-1]
     high[..., 0] -= half * edge[2:, 1:-1]
     low[..., 1] = np.maximum(low[..., 1] + half * edge[1:-1, :-2], 0.0)

@@ -48,6 +48,7 @@ def write_model(
     result: EstimateResult,
     settings: ModelSettings,
     table_z_m: float | None,
+    viewpoint_m: np.ndarray | None = None,
     name: str = "model",
 ) -> tuple[ModelAsset | None, dict[str, Any]]:
     """Build the asset of ``result`` (:func:`~pipeline.asset.model.build_model`), write its
@@ -56,12 +57,13 @@ def write_model(
     Args:
         settings: the config's ``[model]`` (density, or mass when above 0).
         table_z_m: the table's height in frame R; None: the model's lowest point.
+        viewpoint_m: the camera's optical centre in frame R, when known.
 
     A model too small for a surface writes nothing: the entry says why, and the asset is
     None."""
     mass = settings.mass_kg if settings.mass_kg > 0.0 else None
     try:
-        asset = build_model(result, settings.density_kg_m3, mass, table_z_m)
+        asset = build_model(result, settings.density_kg_m3, mass, table_z_m, viewpoint_m)
     except ValueError as exc:
         return None, {"status": "failed", "reason": str(exc)}
     out_dir = Path(out_dir)

@@ -66,13 +66,28 @@ class HalfWidths:
     corner_m: np.ndarray
 
 
-def close_model(points: np.ndarray, cell_m: float = CELL_M) -> trimesh.Trimesh:
+def close_model(
+    points: np.ndarray, cell_m: float = CELL_M, view: View | None = None
+) -> trimesh.Trimesh:
     """The watertight, outward-oriented surface of a completed model in its object frame
     (:func:`half_widths`, then :func:`surface`)."""
-    return surface(half_widths(points, cell_m))
+    return surface(half_widths(points, cell_m, view))
 
 
-def half_widths(points: np.ndarray, cell_m: float = CELL_M) -> HalfWidths:
+@dataclass(frozen=True)
+class View:
+    """What the camera saw of the model, object frame (metres).
+
+    Attributes:
+        viewpoint_m: ``(3,)`` the camera's optical centre.
+        seen: ``(M, 3)`` the points it saw (the completed model's unmirrored half).
+    """
+
+    viewpoint_m: np.ndarray
+    seen: np.ndarray
+
+
+def half_widths(points: np.ndarray, cell_m: float = CELL_M, view: View | None = None) -> HalfWidths:
     """The solid a completed model bounds, as half-widths about its plane.
 
     Args:
@@ -80,6 +95,9 @@ def half_widths(points: np.ndarray, cell_m: float = CELL_M) -> HalfWidths:
             about x = 0, standing on the table z = 0.
         cell_m: the cells' edge (grown when the object would need more than
             :data:`MAX_CELLS` cells in 3-D).
+        view: the camera's view; with it, columns the object itself hid from the camera
+            below their lowest point are carried down to the table too
+            (:func:`_hidden_below`).
 
     Raises:
         ValueError: fewer than 4 finite points above the table.
@@ -97,11 +115,15 @@ def half_widths(points: np.ndarray, cell_m: float = CELL_M) -> HalfWidths:
     lower[1] -= 0.5 * cell
     rows = np.floor((points[:, 1:] - lower[1:]) / cell).astype(int) + MARGIN_CELLS
     shape = tuple(rows.max(axis=0) + MARGIN_CELLS + 1)
-    width = _fill_gaps(_half_widths(rows, np.abs(points[:, 0]), shape))
+    width = _fill_gaps(_half_widths(rows, np.abs(points[:, 0]), shape, cell))
+    corner = np.array([lower[1], 0.0]) - MARGIN_CELLS * cell
     # One row below the table: the surface, half a cell inside, then lies below it and is
     # flattened onto it.
     width = _extend_base(width, MARGIN_CELLS - 1, int(np.ceil(BASE_BAND_M / cell)))
-    corner = np.array([lower[1], 0.0]) - MARGIN_CELLS * cell
+    if view is not None:
+        # Lines of sight through gaps between the seen points stop single columns: close
+        # those slits too.
+        width = _fill_gaps(_hidden_below(width, cell, corner, view, MARGIN_CELLS))
     return HalfWidths(width, cell, corner)
 
 
@@ -139,6 +161,10 @@ def surface(solid: HalfWidths) -> trimesh.Trimesh:
     # node; kept NEAR_LEVEL away from it, no two vertices come within a micrometre, and
     # the file's rounding merges none (the surface moves by less than 0.01 mm).
     field[np.abs(field) < NEAR_LEVEL] = -NEAR_LEVEL
+    if not field.max() > 0.0:
+        raise ValueError(
+            "the model encloses no solid: its points lie in layers thinner than a cell"
+        )
     vertices, faces, _, _ = marching_cubes(field, 0.0)
     origin = np.array([-half * cell, *solid.corner_m]) + 0.5 * cell
     vertices = origin + cell * vertices
@@ -168,10 +194,13 @@ def _welded(vertices: np.ndarray, faces: np.ndarray) -> trimesh.Trimesh:
     return mesh
 
 
-def _half_widths(rows: np.ndarray, reach: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Per cell of the (y, z) map, the median ``reach`` of its points with at least half
-    the cell's largest reach; 0 where no point falls, or so few that they are the noise
-    scattered past the object's outline (:data:`SPARSE_SHARE`)."""
+def _half_widths(
+    rows: np.ndarray, reach: np.ndarray, shape: tuple[int, int], cell_m: float
+) -> np.ndarray:
+    """Per cell of the (y, z) map, of its points with at least half the cell's largest
+    reach, the median reach, or where their interquartile range exceeds ``cell_m`` the
+    95th percentile; 0 where no point falls, or so few that they are the noise scattered
+    past the object's outline (:data:`SPARSE_SHARE`)."""
     cells = np.ravel_multi_index((rows[:, 0], rows[:, 1]), shape)
     counts = np.bincount(cells, minlength=int(np.prod(shape)))
     dense = counts >= SPARSE_SHARE * np.median(counts[counts > 0])
@@ -184,10 +213,15 @@ def _half_widths(rows: np.ndarray, reach: np.ndarray, shape: tuple[int, int]) ->
     cells, reach = cells[order], reach[order]
     starts = np.flatnonzero(np.r_[True, cells[1:] != cells[:-1]])
     counts = np.diff(np.r_[starts, len(cells)])
-    low = reach[starts + (counts - 1) // 2]
-    high = reach[starts + counts // 2]
+
+    def quantile(q: float) -> np.ndarray:
+        return reach[starts + np.floor(q * (counts - 1)).astype(int)]
+
+    # A wall's points lie within the noise of one reach; a face crossing the cell (a top
+    # seen from above) spreads them from the plane to its edge, whose reach is their top.
+    crossing = quantile(0.75) - quantile(0.25) > cell_m
     width = np.zeros(int(np.prod(shape)))
-    width[cells[starts]] = 0.5 * (low + high)
+    width[cells[starts]] = np.where(crossing, quantile(0.95), quantile(0.5))
     return width.reshape(shape)
 
 
@@ -206,6 +240,82 @@ def _fill_gaps(width: np.ndarray) -> np.ndarray:
     mask = ndimage.binary_fill_holes(mask)
     nearest = ndimage.distance_transform_edt(~seen, return_distances=False, return_indices=True)
     return np.where(mask, width[nearest[0], nearest[1]], 0.0)
+
+
+def _hidden_below(
+    width: np.ndarray, cell: float, corner: np.ndarray, view: View, table_row: int
+) -> np.ndarray:
+    """Carry each column left hanging by :func:`_extend_base` down from its lowest filled
+    cell, with that cell's width, as far as the camera could not have seen the solid there:
+    where the seen points lie nearer to the camera along the same line of sight (by more
+    than two cells). A view along the plane sees the top face and the near end and none of
+    the side walls, so the region under the top is hidden, not empty; under a drill's body
+    the camera sees through to what lies behind, and the column stays open."""
+    camera = np.asarray(view.viewpoint_m, dtype=float)
+    seen = np.asarray(view.seen, dtype=float) - camera
+    if len(seen) == 0:
+        return width
+    distance = np.linalg.norm(seen, axis=1)
+    axis = seen.mean(axis=0) / np.linalg.norm(seen.mean(axis=0))
+    # Lines of sight binned by angle: a cell's width at the object's distance.
+    step = cell / float(np.median(distance))
+    bins = _angles(seen, axis) / step
+    origin = np.floor(bins.min(axis=0)).astype(int) - 1
+    shape = np.floor(bins.max(axis=0)).astype(int) - origin + 2
+    nearest = np.full(shape, np.inf)
+    index = np.floor(bins).astype(int) - origin
+    np.minimum.at(nearest, (index[:, 0], index[:, 1]), distance)
+    # Every line of sight is also blocked by the points of its neighbouring bins.
+    nearest = ndimage.minimum_filter(nearest, size=3, mode="nearest")
+    filled = width > 0.0
+    occupied = filled.any(axis=1)
+    lowest = np.where(occupied, np.argmax(filled, axis=1), 0)
+    rows, columns = np.nonzero(
+        (np.arange(width.shape[1])[None, :] < lowest[:, None])
+        & (np.arange(width.shape[1])[None, :] >= table_row)
+        & occupied[:, None]
+    )
+    if len(rows) == 0:
+        return width
+    w = width[rows, lowest[rows]]
+    # The solid there would show the camera its near wall.
+    near_x = np.sign(camera[0]) * w
+    candidates = np.column_stack(
+        [near_x, corner[0] + (rows + 0.5) * cell, corner[1] + (columns + 0.5) * cell]
+    )
+    sight = candidates - camera
+    at = np.floor(_angles(sight, axis) / step).astype(int) - origin
+    inside = np.all((at >= 0) & (at < shape), axis=1) & (sight @ axis > 0.0)
+    blocked = np.zeros(len(rows), dtype=bool)
+    blocked[inside] = nearest[at[inside, 0], at[inside, 1]] < (
+        np.linalg.norm(sight[inside], axis=1) - 2.0 * cell
+    )
+    hidden = np.zeros(width.shape, dtype=bool)
+    hidden[rows, columns] = blocked
+    # From the lowest filled cell down, as long as every cell on the way is hidden.
+    below = np.zeros(width.shape, dtype=bool)
+    run = np.ones(width.shape[0], dtype=bool)
+    for row in range(width.shape[1] - 1, table_row - 1, -1):
+        active = occupied & (row < lowest)
+        run &= ~active | hidden[:, row]
+        below[:, row] = active & run
+    # A column carried down to the table takes the row below it too, as the base does.
+    below[:, table_row - 1] = below[:, table_row]
+    extended = width.copy()
+    extended[below] = np.broadcast_to(
+        width[np.arange(width.shape[0]), lowest][:, None], width.shape
+    )[below]
+    return extended
+
+
+def _angles(directions: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """``(N, 2)`` where directions meet the plane one unit along ``axis`` (a unit vector),
+    in two axes of that plane: about their angles from ``axis`` (rad) near it."""
+    side = np.cross(axis, [0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0])
+    side /= np.linalg.norm(side)
+    up = np.cross(side, axis)
+    depth = directions @ axis
+    return np.column_stack([directions @ side, directions @ up]) / depth[:, None]
 
 
 def _extend_base(width: np.ndarray, table_row: int, band_cells: int) -> np.ndarray:

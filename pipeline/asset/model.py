@@ -9,10 +9,10 @@ import numpy as np
 import trimesh
 
 from ..metrics.fits import plane_after_bias
-from ..types import EstimateResult
+from ..types import EstimateResult, StageEstimate
 from .collision import convex_parts
 from .mass import MassProperties, mass_properties
-from .meshing import half_widths, surface
+from .meshing import View, half_widths, surface
 from .symmetry import SymmetryExport, export_symmetry, object_frame
 
 
@@ -46,12 +46,16 @@ def build_model(
     density_kg_m3: float,
     mass_kg: float | None = None,
     table_z_m: float | None = None,
+    viewpoint_m: np.ndarray | None = None,
 ) -> ModelAsset:
     """The asset of an estimate (frame R in, object frame out).
 
     Args:
         density_kg_m3, mass_kg: the solid's uniform density, or its mass when given.
         table_z_m: the table's height in frame R; None: the selected model's lowest point.
+        viewpoint_m: the camera's optical centre in frame R (the cloud's
+            ``viewpoint_m``), when known: regions the object hid from it are filled
+            (:class:`~pipeline.asset.meshing.View`).
 
     Raises:
         ValueError: a stage's model has too few points above the table for a surface.
@@ -62,8 +66,9 @@ def build_model(
     for stage in result.stages:
         plane = plane_after_bias(stage.plane, stage.bias)
         frames[stage.stage] = object_frame(plane, stage.completed.mean(axis=0), table)
-        local = (stage.completed - frames[stage.stage][:3, 3]) @ frames[stage.stage][:3, :3]
-        solids[stage.stage] = half_widths(local)
+        origin, axes = frames[stage.stage][:3, 3], frames[stage.stage][:3, :3]
+        local = (stage.completed - origin) @ axes
+        solids[stage.stage] = half_widths(local, view=_view(stage, viewpoint_m, origin, axes))
     T_robot_object = frames[selected.stage]
     to_selected = np.linalg.inv(T_robot_object)
     meshes = {}
@@ -82,3 +87,16 @@ def build_model(
         mass=mass,
         symmetry=symmetry,
     )
+
+
+def _view(
+    stage: StageEstimate, viewpoint_m: np.ndarray | None, origin: np.ndarray, axes: np.ndarray
+) -> View | None:
+    """The camera's view of a stage's model in its object frame: the camera moved by the
+    stage's bias like the points it saw, the completed model's first half
+    (``{f_b(p_n)}``); None without a viewpoint."""
+    if viewpoint_m is None or len(stage.completed) != 2 * len(stage.points):
+        return None
+    camera = stage.bias.apply(np.asarray(viewpoint_m, dtype=float).reshape(1, 3))[0]
+    seen = stage.completed[: len(stage.points)]
+    return View((camera - origin) @ axes, (seen - origin) @ axes)
