@@ -25,7 +25,7 @@ from summary import SUMMARY_FILE
 from pipeline.tables import format_table
 
 HERE = Path(__file__).resolve().parent
-DEFAULT = ("commands", "trial", "estimator", "vc", "tactile", "sweep_overhead")
+DEFAULT = ("commands", "trial", "model", "estimator", "vc", "tactile", "sweep_overhead")
 NOT_BENCHMARKS = {"run_all", "summary"}
 
 

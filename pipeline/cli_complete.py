@@ -31,7 +31,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             "in mm or NPY in m with camera.json, or a ROS 1/2 bag), find the support plane "
             "and every object standing on it, initialise each one's symmetry plane and "
             "complete it; with --contacts, fuse them with one object. Writes objects.json, "
-            "object_K/ (cloud.ply, completed_stage*.ply, result.json) and scene.png."
+            "object_K/ (cloud.ply, completed_stage*.ply, model.*, result.json) and scene.png."
         ),
     )
     parser.add_argument("scan", type=Path, metavar="SCAN", help="the capture file or bag")
@@ -64,7 +64,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 #: The config sections ``complete`` reads.
-READS = ("sensor", "segmenter", "initialiser", "estimator")
+READS = ("sensor", "segmenter", "initialiser", "estimator", "model")
 
 
 def overrides(args: argparse.Namespace) -> list[str]:
@@ -172,6 +172,7 @@ def write_outputs(
     contacts given, fused with the selected object."""
     import numpy as np
 
+    from .asset.files import write_model
     from .figures import SceneObjectView, plot_scene
     from .formats import (
         bias_to_json,
@@ -215,6 +216,13 @@ def write_outputs(
                 stages=estimate_to_json(completion.result),
                 **selection_to_json(completion.result),
                 seconds=sum(stage.seconds for stage in completion.result.stages),
+            )
+            _, document["model"] = write_model(
+                folder,
+                completion.result,
+                config.model,
+                observation.table_height_m,
+                completion.cloud.viewpoint_m,
             )
         write_json(folder / "result.json", {**document, "config": config.to_dict()})
         final = completion.result.final if completion.result else None

@@ -45,7 +45,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="run the estimator on a recorded cloud and contacts",
         description="Fuse a recorded object cloud (robot frame, metres) with recorded taxel "
         "contacts, and the depth image the cloud came from when given; writes result.json, "
-        "config.toml and completed_stage{0,1,2}.ply to --out.",
+        "config.toml, completed_stage{0,1,2}.ply and the model's mesh and URDF to --out.",
     )
     parser.add_argument("--cloud", type=Path, required=True, help="PLY, PCD or NPY (N x 3)")
     parser.add_argument("--contacts", type=Path, required=True, help="contacts JSON (README)")
@@ -109,7 +109,7 @@ def parse_plane(text: str):
 
 
 #: The config sections ``fuse`` reads.
-FUSE_READS = ("initialiser", "estimator")
+FUSE_READS = ("initialiser", "estimator", "model")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         recorded = read_contacts(args.contacts, units=args.units)
         view = read_view(args.depth, args.camera) if args.depth else None
         status = _fuse_into(staging, args, config, registry, cloud, recorded, plane, view)
-    print(f"wrote {args.out}/ (result.json, config.toml, completed_stage{{0,1,2}}.ply)")
+    print(f"wrote {args.out}/ (result.json, config.toml, completed_stage{{0,1,2}}.ply, model.*)")
     record_if_asked(args, args.out)
     if estimate_failed(status):
         print(f"symfuse: error: estimate {status} (see {args.out}/result.json)", file=sys.stderr)
@@ -167,6 +167,7 @@ def _fuse_into(
 
     A :class:`StageFailure` is recorded in ``result.json`` (status ``failed``) and re-raised.
     """
+    from .asset.files import write_model
     from .evaluation import one_sided_grasps
     from .formats import (
         bias_to_json,
@@ -200,6 +201,8 @@ def _fuse_into(
         write_json(out / "result.json", document)
         raise
     write_completed_clouds(out, run.result)
+    table_z = view.table_height_m if view is not None else None
+    _, document["model"] = write_model(out, run.result, config.model, table_z, cloud.viewpoint_m)
     document.update(
         init={
             "source": "--plane" if plane is not None else config.choices["initialiser"],

@@ -92,11 +92,30 @@ class TrialSettings:
     )
 
 
+@dataclasses.dataclass(frozen=True)
+class ModelSettings:
+    """The ``[model]`` section: the solid the model files describe (:mod:`pipeline.asset`)."""
+
+    # Denser than any solid element (osmium, 22.6 t/m^3) is a typo.
+    density_kg_m3: float = param(
+        500.0,
+        "uniform density of the model's solid (kg/m^3), for its mass and inertia",
+        above=0.0,
+        at_most=25_000.0,
+    )
+    mass_kg: float = param(
+        0.0,
+        "the model's mass (kg), which sets the density instead; 0: density x volume",
+        at_least=0.0,
+        at_most=1_000.0,
+    )
+
+
 #: How the grasps after a trial's first may be chosen (:mod:`pipeline.next_grasp`).
 NEXT_GRASP_STRATEGIES: tuple[str, ...] = get_args(get_type_hints(TrialSettings)["next_grasp"])
 
 #: Sections that are not stages, and the dataclass each one is validated against.
-SETTINGS_SECTIONS: dict[str, type] = {"trial": TrialSettings}
+SETTINGS_SECTIONS: dict[str, type] = {"trial": TrialSettings, "model": ModelSettings}
 
 
 def default_config_text() -> str:
@@ -165,6 +184,10 @@ class Config:
     @property
     def trial(self) -> TrialSettings:
         return self.settings["trial"]
+
+    @property
+    def model(self) -> ModelSettings:
+        return self.settings["model"]
 
     def stage_params(self, stage: str) -> Any:
         """The ``Params`` of the implementation selected for ``stage``."""

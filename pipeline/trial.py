@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
+from .asset.files import write_model
 from .camera_file import camera_to_json
 from .catalogue import CatalogueObject, load_object
 from .config import Config
@@ -35,6 +36,7 @@ from .estimation.map_params import regrasp_noise
 from .evaluation import (
     GroundTruth,
     evaluate_stage,
+    model_scores,
     object_motion,
     object_turn,
     opposing_contacts,
@@ -86,6 +88,12 @@ TRIAL_FILES = (
     "completed_stage1.ply",
     "completed_stage2.ply",
     "object_final.ply",
+    "model.obj",
+    "model_stage0.obj",
+    "model_stage1.obj",
+    "model_stage2.obj",
+    "model_collision.obj",
+    "model.urdf",
     "result.json",
     "config.toml",
 )
@@ -359,6 +367,14 @@ def _simulate(
         write_completed_clouds(out_dir, result)
         truth_mesh = obj.mesh.copy().apply_transform(fused.object_after.transform)
         truth_mesh.export(out_dir / "object_final.ply")
+    with timer.phase("model"):
+        model, document["model"] = write_model(
+            out_dir, result, config.model, observation.table_height_m, cloud.viewpoint_m
+        )
+    if model is not None:
+        with timer.phase("evaluation"):
+            scores = model_scores(model, truth)
+        metrics = [{**m, **scores[s.stage]} for m, s in zip(metrics, result.stages, strict=True)]
     if settings.pictures:
         with timer.phase("pictures"):
             draw_pictures(out_dir, config, cloud.points, fused.init, result, evaluated, truth)
