@@ -8,11 +8,11 @@ from typing import Literal
 import numpy as np
 
 from pipeline import hookimpl
-from pipeline.errors import StageFailure
+from pipeline.errors import ConfigError, StageFailure
 from pipeline.params import check_ordered, param
 from pipeline.perception.depth import backproject_depth
 from pipeline.perception.segmentation import segment_image, segment_points
-from pipeline.perception.table import resolve_table
+from pipeline.perception.table import TablePlane, measure_table, resolve_table
 from pipeline.stages import Segmenter
 from pipeline.types import DepthObservation, PointCloud
 
@@ -20,11 +20,18 @@ from pipeline.types import DepthObservation, PointCloud
 class TableCluster(Segmenter):
     """Table plane (RANSAC or known height), drop points near it, keep the largest cluster.
 
-    The paper's segmentation (section 6.2.1): every point less than ``min_height_m`` above
-    the table is removed, the rest is clustered (DBSCAN, or Euclidean clustering) and the
+    The paper's segmentation (section 6.2.1): every point too close to the table is
+    removed, the rest is clustered (DBSCAN, or Euclidean clustering) and the
     largest cluster is the object (``segment_objects`` also keeps every other cluster of at
     least ``min_object_points`` points and ``min_object_area_m2`` of visible surface).
     Output points are in the robot frame with their pixels and the camera's position.
+
+    Too close to the table (``cut``): with ``"fit"``, the table plane is refitted to the
+    scene's own table points (:func:`~pipeline.perception.table.measure_table`) and a
+    point is cut when it is less than ``cut_sigmas`` times the table's height scatter at
+    its distance from the camera (and ``min_cut_m``) above that plane: objects a
+    centimetre tall stay, and completed models reach down to the table. ``"fixed"`` cuts
+    at ``min_height_m`` above the given plane, the paper's rule.
     """
 
     name = "table-cluster"
@@ -36,8 +43,25 @@ class TableCluster(Segmenter):
             "table plane: 'known' = observation.table_height_m, 'ransac' = fit it, "
             "'auto' = known when the observation has it, else RANSAC",
         )
+        cut: Literal["fit", "fixed"] = param(
+            "fit",
+            "which points are the table's: 'fit' = closer to the plane refitted to the "
+            "table's points than cut_sigmas times their scatter at that distance from the "
+            "camera, 'fixed' = closer than min_height_m to the table plane",
+        )
+        cut_sigmas: float = param(
+            3.0,
+            "cut = 'fit': the cut in robust standard deviations of the table's heights",
+            above=0.0,
+        )
+        min_cut_m: float = param(
+            0.002,
+            "cut = 'fit': never cut lower than this (m): the table of a noise-free view "
+            "scatters by rounding errors only, less than anything stands on it",
+            at_least=0.0,
+        )
         min_height_m: float = param(
-            0.02, "drop points closer than this to the table (m)", at_least=0.0
+            0.02, "cut = 'fixed': drop points closer than this to the table (m)", at_least=0.0
         )
         max_height_m: float = param(
             1.0, "drop points higher than this above the table (m)", above=0.0
@@ -75,6 +99,12 @@ class TableCluster(Segmenter):
     def __init__(self, params: Params | None = None) -> None:
         super().__init__(params)
         check_ordered(self.params, f"segmenter.{self.name}", "min_height_m", "max_height_m")
+        if self.params.cut == "fit" and self.params.min_height_m != self.Params().min_height_m:
+            raise ConfigError(
+                f"config key 'segmenter.{self.name}.min_height_m' is read with cut = 'fixed' "
+                f"only (the cut follows the table's fit): set segmenter.{self.name}.cut = "
+                "'fixed' as well"
+            )
 
     def segment(self, observation: DepthObservation) -> PointCloud:
         method = "dbscan" if self.params.method == "auto" else self.params.method
@@ -103,6 +133,7 @@ class TableCluster(Segmenter):
             )
         except ValueError as error:
             raise StageFailure(f"segmenter 'table-cluster': no table plane: {error}") from error
+        table, min_height_m, cut_text = self._cut(points, observation, table)
         if method == "convex":
             result = segment_image(
                 observation.depth_m,
@@ -110,7 +141,7 @@ class TableCluster(Segmenter):
                 observation.T_robot_camera,
                 table,
                 backprojected=(points, pixels),
-                min_height_m=p.min_height_m,
+                min_height_m=min_height_m,
                 max_height_m=p.max_height_m,
                 eps_m=p.eps_m,
                 min_points=p.min_points,
@@ -119,7 +150,7 @@ class TableCluster(Segmenter):
             result = segment_points(
                 points,
                 table,
-                min_height_m=p.min_height_m,
+                min_height_m=min_height_m,
                 max_height_m=p.max_height_m,
                 eps_m=p.eps_m,
                 min_points=1 if method == "euclidean" else p.min_points,
@@ -129,8 +160,8 @@ class TableCluster(Segmenter):
             raise StageFailure(
                 f"segmenter 'table-cluster': largest cluster has {len(result.indices)} points "
                 f"(< min_object_points = {p.min_object_points}); {result.above_table} points "
-                f"were {p.min_height_m * 1000:.0f}-{p.max_height_m * 1000:.0f} mm above the "
-                f"table, in {result.clusters} clusters"
+                f"were {cut_text}-{p.max_height_m * 1000:.0f} mm above the table, in "
+                f"{result.clusters} clusters"
             )
         depth = observation.depth_m[pixels[:, 0], pixels[:, 1]].astype(np.float64)
         k = observation.intrinsics
@@ -142,6 +173,26 @@ class TableCluster(Segmenter):
             if len(indices) >= p.min_object_points
             and (rank == 0 or pixel_area_m2[indices].sum() >= p.min_object_area_m2)
         )
+
+    def _cut(
+        self, points: np.ndarray, observation: DepthObservation, table: TablePlane
+    ) -> tuple[TablePlane, float | np.ndarray, str]:
+        """The plane heights are measured from, the cut (m; one, or one per point) and
+        the cut's words for an error message."""
+        p = self.params
+        if p.cut == "fixed":
+            return table, p.min_height_m, f"{p.min_height_m * 1000:.0f}"
+        viewpoint = observation.T_robot_camera[:3, 3]
+        try:
+            fit = measure_table(points, viewpoint, table, p.ransac_inlier_m)
+        except ValueError as error:
+            raise StageFailure(
+                f"segmenter 'table-cluster': cannot measure the table ({error}); "
+                "cut = 'fixed' cuts at min_height_m instead"
+            ) from error
+        scatter = fit.sigma_at(np.linalg.norm(points - viewpoint, axis=1))
+        cut = np.maximum(p.cut_sigmas * scatter, p.min_cut_m)
+        return fit.plane, cut, f"{cut.min() * 1000:.1f}..{cut.max() * 1000:.1f}"
 
 
 @hookimpl

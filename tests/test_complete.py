@@ -85,8 +85,11 @@ def test_kinect_capture_finds_the_laptop_and_the_box(kinect_run):
     document = json.loads((kinect_run / "objects.json").read_text())
     assert document["frame"] == "support plane"
     objects = document["objects"]
-    assert [o["status"] for o in objects] == ["completed", "completed"]
-    laptop, box = objects
+    # The two largest; beyond them, at the back of the room, the foot of a chair on the
+    # floor (its lowest few centimetres show above the floor's noise).
+    assert [o["status"] for o in objects[:2]] == ["completed", "completed"]
+    assert all(o["points"] < 0.05 * objects[1]["points"] for o in objects[2:])
+    laptop, box = objects[:2]
     # The laptop stands on its side, leaning: tall and long; the box is a low carton.
     assert laptop["height_m"] == pytest.approx(0.24, abs=0.02)
     assert box["height_m"] == pytest.approx(0.094, abs=0.01)
@@ -124,8 +127,8 @@ def test_kinect_box_completes_to_its_true_rectangle(kinect_run):
 
 def test_an_unorganised_cloud_completes_like_the_organised_one(kinect_run, tmp_path):
     """The capture's valid points, shuffled into one row, lose their pixel grid: they are
-    re-projected into a virtual camera and must give the same two objects, with the box's
-    completed footprint within 5 % of the organised capture's."""
+    re-projected into a virtual camera and must give the same objects, the laptop's and the
+    box's completed footprints within 5 % of the organised capture's."""
     capture = read_pcd(KINECT)
     depth, k = capture.depth_m, capture.intrinsics
     rows, cols = np.nonzero(np.isfinite(depth))
@@ -138,8 +141,8 @@ def test_an_unorganised_cloud_completes_like_the_organised_one(kinect_run, tmp_p
     assert main(["complete", str(path), "--out", str(out)]) == 0
     ours = json.loads((out / "objects.json").read_text())["objects"]
     theirs = json.loads((kinect_run / "objects.json").read_text())["objects"]
-    assert len(ours) == len(theirs) == 2
-    for mine, reference in zip(ours, theirs, strict=True):
+    assert len(ours) == len(theirs) >= 2
+    for mine, reference in zip(ours[:2], theirs[:2], strict=True):
         assert mine["points"] == pytest.approx(reference["points"], rel=0.1)
         assert mine["completed_extents_m"] == pytest.approx(
             reference["completed_extents_m"], rel=0.05

@@ -214,7 +214,7 @@ def test_a_bag_completes_as_the_files_it_was_made_from(
     expected = references["framed" if with_tf else "plain"]
     assert got["frame"] == expected["frame"]
     np.testing.assert_allclose(got["T_robot_camera"], expected["T_robot_camera"], atol=1e-12)
-    assert len(got["objects"]) == len(expected["objects"]) == 2
+    assert len(got["objects"]) == len(expected["objects"]) >= 2  # laptop, box, a chair foot
     for ours, theirs in zip(got["objects"], expected["objects"], strict=True):
         assert ours["points"] == theirs["points"]
         np.testing.assert_allclose(ours["centroid"], theirs["centroid"], atol=1e-9)

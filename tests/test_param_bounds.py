@@ -46,6 +46,8 @@ BAD_VALUES = [
     ("segmenter.table-cluster.ransac_seed", "-1"),
     ("segmenter.table-cluster.min_object_points", "0"),
     ("segmenter.table-cluster.min_height_m", "2"),  # above max_height_m 1
+    ("segmenter.table-cluster.min_height_m", "0.01"),  # read with cut = "fixed" only
+    ("segmenter.table-cluster.cut_sigmas", "0"),
     ("segmenter.ground-truth-mask.ransac_inlier_m", "0"),
     ("initialiser.vc.orientations", "0"),
     ("initialiser.vc.offsets", "-1"),

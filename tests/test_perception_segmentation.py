@@ -147,13 +147,16 @@ def test_table_cluster_recovers_object_points(box_scene, table):
     reachable = int((points[:, 2] >= 0.7 + 0.025).sum())
     assert precision > 0.99
     assert on_object.sum() >= 0.97 * reachable
-    assert cloud.frame == "robot" and cloud.points[:, 2].min() >= 0.7 + 0.015
+    # The cut follows the table's noise: the box reaches down to the table, and no further.
+    lowest = np.sort(cloud.points[:, 2])[:5]
+    assert cloud.frame == "robot" and lowest.min() >= 0.7 and lowest.max() < 0.7 + 0.006
     np.testing.assert_array_equal(cloud.viewpoint_m, box_scene.T_robot_camera[:3, 3])
 
 
 def test_table_cluster_fails_clearly_on_an_empty_table():
     T = look_at(np.array([0.6, 0.0, 0.7]), 1.0, np.deg2rad(45.0), np.pi)
-    depth, _ = render_depth(box_object(0.04, 0.04, 0.01), (0.6, 0.0, 0.0), 0.7, KINECT, T)
+    sheet = box_object(0.04, 0.04, 0.001)  # a sheet of paper: thinner than any cut
+    depth, _ = render_depth(sheet, (0.6, 0.0, 0.0), 0.7, KINECT, T)
     observation = DepthObservation(
         depth, np.zeros((480, 640, 3), np.uint8), KINECT, T, table_height_m=0.7
     )

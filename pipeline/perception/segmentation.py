@@ -1,11 +1,11 @@
 """Cutting objects out of a scene cloud (paper section 6.2.1).
 
 Drop everything lower than ``min_height_m`` above the table (the table itself and what lies
-on it flat), optionally thin the rest on a voxel grid and cluster it: every cluster is an
-object, the largest one is *the* object of the paper. Clusters whose footprints on the
-table overlap are one object: objects standing on a table do not overlap, but the parts of
-one object can be apart in space, such as a mug's near wall and the inside of its far wall
-seen over the rim.
+on it flat; one cut for the scene, or one per point), optionally thin the rest on a voxel
+grid and cluster it: every cluster is an object, the largest one is *the* object of the
+paper. Clusters whose footprints on the table overlap are one object: objects standing on a
+table do not overlap, but the parts of one object can be apart in space, such as a mug's
+near wall and the inside of its far wall seen over the rim.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def segment_points(
     points_robot: np.ndarray,
     table: TablePlane,
     *,
-    min_height_m: float = 0.02,
+    min_height_m: float | np.ndarray = 0.02,
     max_height_m: float = np.inf,
     eps_m: float = 0.01,
     min_points: int = 10,
@@ -54,7 +54,8 @@ def segment_points(
     Args:
         points_robot: ``(N, 3)`` scene points in the robot frame, metres.
         table: the supporting plane.
-        min_height_m: points lower than this above the table are dropped.
+        min_height_m: points lower than this above the table are dropped (m; one for
+            every point, or ``(N,)``, each point's own).
         max_height_m: points higher than this above the table are dropped.
         eps_m: DBSCAN neighbourhood radius.
         min_points: DBSCAN core-point threshold (self included); 1 = Euclidean clustering.
@@ -206,7 +207,7 @@ def segment_image(
     table: TablePlane,
     *,
     backprojected: tuple[np.ndarray, np.ndarray] | None = None,
-    min_height_m: float = 0.02,
+    min_height_m: float | np.ndarray = 0.02,
     max_height_m: float = np.inf,
     eps_m: float = 0.01,
     min_points: int = 10,
@@ -225,7 +226,8 @@ def segment_image(
         depth_m, intrinsics, T_robot_camera: the view (:func:`backproject_depth`).
         table: the supporting plane, frame R.
         backprojected: the view's points and pixels when the caller has them already.
-        min_height_m, max_height_m: the band of heights above the table kept.
+        min_height_m, max_height_m: the band of heights above the table kept (m;
+            ``min_height_m`` may be ``(N,)``, one for each of the view's points).
         eps_m: largest gap between neighbouring pixels' points of one region at 1 m depth
             (scaled with the depth, as the pixels' spacing is).
         min_points: smallest region that stands on its own.
@@ -250,8 +252,10 @@ def segment_image(
     flat_index[pixels[:, 0], pixels[:, 1]] = np.arange(len(pixels))
     height = np.full(shape, np.nan)
     height[pixels[:, 0], pixels[:, 1]] = table.height_m(points_list)
+    cut = np.full(shape, np.nan)
+    cut[pixels[:, 0], pixels[:, 1]] = min_height_m
     with np.errstate(invalid="ignore"):
-        above = (height >= min_height_m) & (height <= max_height_m)
+        above = (height >= cut) & (height <= max_height_m)
     normals = image_normals(points, above, window_px)
     viewpoint = np.asarray(T_robot_camera, dtype=np.float64)[:3, 3]
     crease = concave_creases(points, normals, viewpoint, step_px, min_turn) & above
