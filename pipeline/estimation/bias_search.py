@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from ..poses import rotation_z
 
@@ -84,7 +84,9 @@ class SearchSettings:
     voxel_m: float = 0.002
     distance_std_m: float = 0.0025
     truncation_sigmas: float = 3.0
-    keep_margin: float = float(chi2.ppf(0.99, len(_SEARCHED)))
+    # The 99 % quantile of chi-square with len(_SEARCHED) degrees of freedom, through the
+    # incomplete gamma function: scipy.stats is too heavy to import in every trial.
+    keep_margin: float = float(2.0 * gammaincinv(len(_SEARCHED) / 2.0, 0.99))
 
 
 #: Most voxels along an axis of the distance field (a large object gets coarser voxels).
