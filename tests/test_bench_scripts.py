@@ -38,6 +38,7 @@ def test_every_benchmark_script_imports():
     run_in_bench(imports)
 
 
+@pytest.mark.slow
 def test_the_estimator_benchmark_times_both_covariance_models():
     out = run_in_bench(
         """
@@ -52,6 +53,7 @@ def test_the_estimator_benchmark_times_both_covariance_models():
     assert out.split() == ["converged/converged", "True"] * 4 + ["True", "2"]
 
 
+@pytest.mark.slow
 def test_the_sweep_overhead_benchmark_runs_a_real_sweep(tmp_path):
     out = run_in_bench(
         f"""
@@ -94,6 +96,7 @@ def test_overhead_shares_of_two_workers_by_hand():
     assert shares["per_minute"] == pytest.approx(60.0 * 6 / 7.0)
 
 
+@pytest.mark.slow
 def test_the_scan_benchmark_runs_a_trial_on_a_folder_of_scans(tmp_path):
     # A catalogue mesh stands in for a scan: the script needs only DIR/<name>/textured.obj.
     from pipeline.catalogue import load_object

@@ -95,6 +95,7 @@ def test_npy_cloud_gives_the_same_estimate(recording, tmp_path, run):
 @pytest.mark.parametrize(
     ("schedule", "status"), [("standard", "no_correspondence"), ("hybrid", "diverged")]
 )
+@pytest.mark.slow
 def test_failed_estimate_still_writes_result_and_exits_3(
     recording, tmp_path, run, schedule, status
 ):

@@ -258,6 +258,7 @@ def test_a_trial_failing_before_any_result_leaves_nothing(tmp_path, run):
     assert not out.exists() and leftovers(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_without_out_every_trial_gets_a_fresh_folder(tmp_path, run, monkeypatch):
     """The README's command typed twice: two folders, the first untouched."""
     monkeypatch.chdir(tmp_path)

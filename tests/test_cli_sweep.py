@@ -47,6 +47,7 @@ def test_parameters_a_stage_refuses_together_stop_the_sweep_before_any_trial(tmp
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_rows_are_reused_only_when_made_with_the_same_config(tmp_path, run):
     out = tmp_path / "sweep"
     code, _, err = run(*QUICK, "--out", out)
@@ -78,6 +79,7 @@ def test_rows_are_reused_only_when_made_with_the_same_config(tmp_path, run):
     assert "The trials read only [estimator]." in report
 
 
+@pytest.mark.slow
 def test_a_folder_of_something_else_is_refused_and_an_earlier_run_replaced(tmp_path, run):
     out = tmp_path / "sweep"
     out.mkdir()

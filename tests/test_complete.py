@@ -125,6 +125,7 @@ def test_kinect_box_completes_to_its_true_rectangle(kinect_run):
     assert footprint.convex_hull.area / footprint.minimum_rotated_rectangle.area > 0.9
 
 
+@pytest.mark.slow
 def test_an_unorganised_cloud_completes_like_the_organised_one(kinect_run, tmp_path):
     """The capture's valid points, shuffled into one row, lose their pixel grid: they are
     re-projected into a virtual camera and must give the same objects, the laptop's and the
@@ -157,6 +158,7 @@ def vc_trial(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_a_trial_recording_completes_to_the_trials_stage_0(vc_trial, tmp_path):
     out = tmp_path / "complete"
     assert main(["complete", str(vc_trial / "depth.npy"), "--out", str(out)]) == 0
@@ -172,6 +174,7 @@ def test_a_trial_recording_completes_to_the_trials_stage_0(vc_trial, tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_a_trial_recording_with_its_contacts_fuses_as_the_trial(tmp_path, capsys):
     trial = tmp_path / "trial"
     argv = ["trial", "--init", "ps", "--set", "trial.pictures=false", "--out", str(trial)]
@@ -255,6 +258,7 @@ def test_bad_captures_are_one_line_exit_2(tmp_path, run):
     assert "unknown capture format" in bad(run, tmp_path, tmp_path / "camera.json")
 
 
+@pytest.mark.slow
 def test_complete_keeps_an_earlier_run_unless_told_to_overwrite(tmp_path, run):
     out = tmp_path / "out"
     assert main(["complete", str(KINECT), "--out", str(out)]) == 0

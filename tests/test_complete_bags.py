@@ -179,6 +179,7 @@ def references(source, tmp_path_factory):
         (False, "cloud", True),
     ],
 )
+@pytest.mark.slow
 def test_a_bag_completes_as_the_files_it_was_made_from(
     source, references, tmp_path, ros1, kind, with_tf
 ):

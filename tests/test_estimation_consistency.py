@@ -251,6 +251,7 @@ def test_contacts_of_a_larger_object_end_inconsistent():
     ("gripper", "phi_deg", "theta_deg", "r_mm"),
     [("parallel", 0, 80, 40), ("parallel", 0, 67.5, 50)],
 )
+@pytest.mark.slow
 def test_a_far_off_initial_plane_that_is_not_corrected_is_never_converged(
     gripper, phi_deg, theta_deg, r_mm
 ):
@@ -271,6 +272,7 @@ def test_a_far_off_initial_plane_that_is_not_corrected_is_never_converged(
     assert error < 0.004 or searched.status in ("inconsistent", "diverged", "no_correspondence")
 
 
+@pytest.mark.slow
 def test_a_far_off_start_that_one_pad_misled_is_corrected_without_it():
     """Three fingers, the plane 67.5 deg and 50 mm off: the plain fusion stays inconsistent,
     one pad alone contradicts Stage 0, and fused again without it the filter finds the

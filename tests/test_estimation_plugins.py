@@ -48,6 +48,7 @@ def _error(scene, stage):
 
 
 @pytest.mark.parametrize("estimator", [IekfEstimator(), IcpEstimator()])
+@pytest.mark.slow
 def test_fusing_estimators_improve_on_the_initial_model(scene, estimator):
     result = estimator.estimate(_problem(scene))
     assert [s.stage for s in result.stages] == [0, 1, 2]

@@ -58,6 +58,7 @@ def installed():
         yield
 
 
+@pytest.mark.slow
 def test_listed_selectable_and_working(installed):
     listing = symfuse("plugins")
     assert listing.returncode == 0, listing.stderr
@@ -91,6 +92,7 @@ def test_listed_selectable_and_working(installed):
     assert np.all(cloud.points[:, 2] > 0.02)
 
 
+@pytest.mark.slow
 def test_uninstalling_removes_it():
     assert "voxel-grid" not in listing_after_uninstalling(EXAMPLE, DIST)
     chosen = symfuse("config", "--set", "segmenter.use=voxel-grid")

@@ -22,6 +22,7 @@ def installed():
         yield
 
 
+@pytest.mark.slow
 def test_listed_and_selectable(installed):
     listing = symfuse("plugins")
     assert listing.returncode == 0, listing.stderr
@@ -38,6 +39,7 @@ def test_listed_and_selectable(installed):
     assert "dead_fraction = 0.1" in config.stdout
 
 
+@pytest.mark.slow
 def test_its_own_tests_pass_against_the_installed_symfuse(installed):
     done = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(EXAMPLE / "tests")],
@@ -73,5 +75,6 @@ def test_a_whole_trial_runs_with_it_in_the_analytic_world(installed, tmp_path):
     assert document["status"] in ("converged", "max_iterations")
 
 
+@pytest.mark.slow
 def test_uninstalling_removes_it():
     assert "threshold-taxels" not in listing_after_uninstalling(EXAMPLE, DIST)

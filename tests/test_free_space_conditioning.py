@@ -192,6 +192,7 @@ def estimates(case, fusion, settings, checks, astray):
     return plain, estimate_result(fusion, astray, started, view, checks, refuse)
 
 
+@pytest.mark.slow
 def test_a_drift_the_camera_rules_out_is_conditioned_away():
     """The offset known to 4 mm and 12 mm off: the camera accepts the model once the plane
     is moved back by less than a millimetre."""
@@ -234,6 +235,7 @@ def test_a_marginal_drift_is_conditioned_away_however_wide_the_posterior():
     assert 0.0 < astray[-1].g[4] - final.plane.offset_m <= checks.surface_std_m / 2
 
 
+@pytest.mark.slow
 def test_a_drift_beyond_the_model_noise_is_not_conditioned_away():
     """The offset known to 8 mm and 20 mm off: the nearest plane the camera accepts lies
     about 8 mm back, within the posterior but further than the model's own noise; conditioning
@@ -259,6 +261,7 @@ def test_a_stage_whose_taxels_fail_is_not_conditioned():
     assert all(s.hypothesis is None or s.hypothesis.name != CONDITIONED for s in result.stages)
 
 
+@pytest.mark.slow
 def test_a_stage_zero_the_taxels_accept_is_held_not_the_fusion_conditioned():
     """The object moved 3 mm: the taxels accept Stage 0, so the flagged fusion goes to the
     hypotheses that stay near it (docs/method.md §9), not to conditioning."""

@@ -57,6 +57,7 @@ def _auto_grasp(registry, obj, yaw_deg: float, seed: int = 0, hand: str = "auto"
 
 
 @pytest.mark.parametrize("yaw_deg", [0.0, 70.0])
+@pytest.mark.slow
 def test_a_tall_bottle_is_held_from_opposing_sides_without_tipping(registry, yaw_deg):
     """250 mm tall, 70 mm across, 0.4 kg: wider than the PG-70 opens, so the SDH-2 grasps
     it, low enough and guarded so that it does not tip."""

@@ -58,6 +58,7 @@ def _diagnosed(problem):
     return stages, refuse, settings, tree
 
 
+@pytest.mark.slow
 def test_the_earlier_shape_located_by_the_last_grasp_replaces_an_inconsistent_last_stage():
     problem, second = _two_grasps()
     stages, refuse, settings, tree = _diagnosed(problem)
@@ -78,6 +79,7 @@ def test_the_earlier_shape_located_by_the_last_grasp_replaces_an_inconsistent_la
     assert all(a is b for a, b in zip(revised[:-1], stages[:-1], strict=True))
 
 
+@pytest.mark.slow
 def test_a_location_the_taxels_fit_worse_than_a_shorter_step_is_not_taken():
     """The filter's location is put 6 mm past the object's second pose along the grasp (as a
     misfit at a part the mirror image completes wrongly drags it): the estimate takes the
@@ -104,6 +106,7 @@ def test_a_location_the_taxels_fit_worse_than_a_shorter_step_is_not_taken():
     assert plain.hypothesis.step == 1.0
 
 
+@pytest.mark.slow
 def test_a_last_grasp_on_another_object_is_not_explained_away():
     problem, _ = _two_grasps(scale=1.4)
     stages, refuse, settings, tree = _diagnosed(problem)
@@ -158,6 +161,7 @@ def _seen_through(stage):
     return replace(stage, status="inconsistent", consistency=seen)
 
 
+@pytest.mark.slow
 def test_an_earlier_shape_the_last_grasp_contradicts_is_kept_when_it_is_best_supported():
     """The second grasp's taxels lie 12 mm outside the earlier shape (as where a later grasp
     meets a part the mirror image completes wrongly) and the joint fusion contradicts the

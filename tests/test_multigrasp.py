@@ -53,6 +53,7 @@ def two_grasps(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_two_grasp_trial_records_each_grasp(two_grasps):
     document = json.loads((two_grasps / "result.json").read_text())
     grasps = document["grasps"]
@@ -112,6 +113,7 @@ def test_fuse_on_a_multi_grasp_contacts_file_reproduces_the_final_estimate(two_g
         assert np.allclose(a["covariance"], b["covariance"], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_a_trial_that_stops_early_says_so_with_the_grasp_it_stopped_on(
     tmp_path, monkeypatch, capsys
 ):
@@ -716,6 +718,7 @@ def spray_head_three_times(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_a_trial_changes_hands_when_another_reaches_new_surface(spray_head_three_times):
     grasps = json.loads((spray_head_three_times / "result.json").read_text())["grasps"]
     hands = [g["gripper"] for g in grasps]
@@ -729,6 +732,7 @@ def test_a_trial_changes_hands_when_another_reaches_new_surface(spray_head_three
     assert [g["plan"]["gripper"] for g in contacts] == hands
 
 
+@pytest.mark.slow
 def test_fuse_with_the_depth_image_reproduces_an_estimate_that_needed_the_camera(
     spray_head_three_times, tmp_path
 ):

@@ -118,6 +118,7 @@ def test_mass_and_inertia_of_a_uniform_box():
     np.testing.assert_allclose(info[3], [0.0, 0.0, c / 2], atol=1e-9)  # centre of mass
 
 
+@pytest.mark.slow
 def test_non_convex_mesh_keeps_its_hole_and_is_cached(tmp_path, monkeypatch):
     monkeypatch.setenv("SYMFUSE_CACHE", str(tmp_path))  # empty: V-HACD must run here
     ring = ring_mesh()
@@ -145,6 +146,7 @@ def test_non_convex_mesh_keeps_its_hole_and_is_cached(tmp_path, monkeypatch):
         scene.add_object(ring_mesh(), 0.2, 0.5)
 
 
+@pytest.mark.slow
 def test_an_open_scan_gets_parts_on_its_surface(tmp_path, monkeypatch):
     # A scan with holes has no inside; its parts are hulls of surface samples, so the hand
     # stops on the surface the camera sees, not a voxel outside it.

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import pybullet
+import pytest
 
 from pipeline.config import load_config
 from pipeline.registry import load_registry
@@ -25,6 +26,7 @@ def _without_timings(document: dict) -> str:
     return json.dumps(strip(document), sort_keys=True)
 
 
+@pytest.mark.slow
 def test_a_reused_client_gives_the_same_trial_as_a_new_one(tmp_path, monkeypatch):
     registry = load_registry()
     config = load_config(registry, overrides=["trial.pictures=false"])

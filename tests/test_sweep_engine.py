@@ -212,6 +212,7 @@ def test_a_dying_worker_keeps_finished_rows_and_a_rerun_completes(tmp_path):
     assert len(file_lines(results)) == 6
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_a_pool_run_keeps_finished_rows_and_reraises(tmp_path):
     results = tmp_path / "results.jsonl"
     # 3 s of work on two workers, interrupted once the first row is written: the interrupt

@@ -162,6 +162,7 @@ def test_refused_grasp_is_a_clear_failure(tmp_path, capsys):
     assert (tmp_path / "depth.png").is_file()  # what was done before the failure is kept
 
 
+@pytest.mark.slow
 def test_pictures_can_be_left_out(tmp_path):
     code = main(["trial", "--set", "trial.pictures=false", "--out", str(tmp_path)])
     assert code == 0
@@ -169,6 +170,7 @@ def test_pictures_can_be_left_out(tmp_path):
     assert not any((tmp_path / name).exists() for name in PICTURE_FILES)
 
 
+@pytest.mark.slow
 def test_a_user_urdf_goes_through_a_whole_trial(tmp_path):
     """A URDF whose visual mesh sits off the base frame (like a scan's): the world loads the
     URDF, the ground truth is its visual mesh in the base frame."""

@@ -47,6 +47,7 @@ def trial(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_a_trial_recording_holds_every_entity_with_the_runs_sizes(trial):
     rrd = read_rrd(trial / "recording.rrd")
     document = json.loads((trial / "result.json").read_text())
