@@ -10,17 +10,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import __version__
-from .cli import (
-    _add_config_options,
-    _add_output_options,
-    _add_units_option,
-    _load,
-    add_wide_option,
-)
-from .cli_summary import one_sided_line, selection_line, stage_summary
-from .cli_view import add_rerun_option, check_rerun, record_if_asked
-from .errors import (
+from .. import __version__
+from ..errors import (
     EXIT_ESTIMATE_FAILED,
     EXIT_OK,
     ConfigError,
@@ -28,14 +19,23 @@ from .errors import (
     StageFailure,
     estimate_failed,
 )
-from .outdir import staged_output
-from .tables import wrapped
+from ..outdir import staged_output
+from ..tables import wrapped
+from . import (
+    _add_config_options,
+    _add_output_options,
+    _add_units_option,
+    _load,
+    add_wide_option,
+)
+from .summary import one_sided_line, selection_line, stage_summary
+from .view import add_rerun_option, check_rerun, record_if_asked
 
 if TYPE_CHECKING:
-    from .config import Config
-    from .formats import RecordedGrasps
-    from .registry import StageRegistry
-    from .types import DepthObservation, PointCloud, SymmetryPlane
+    from ..config import Config
+    from ..formats import RecordedGrasps
+    from ..registry import StageRegistry
+    from ..types import DepthObservation, PointCloud, SymmetryPlane
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -85,8 +85,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def parse_plane(text: str):
     """``NX,NY,D`` as a :class:`~pipeline.types.SymmetryPlane` (``NX x + NY y = D``)."""
-    from .types import SymmetryPlane
-    from .units import FARTHEST_M
+    from ..types import SymmetryPlane
+    from ..units import FARTHEST_M
 
     fields = [field.strip() for field in text.split(",")]
     if len(fields) != 3:
@@ -113,7 +113,7 @@ FUSE_READS = ("initialiser", "estimator", "model")
 
 
 def run(args: argparse.Namespace) -> int:
-    from .formats import read_cloud, read_contacts
+    from ..formats import read_cloud, read_contacts
 
     check_rerun(args)
     overrides = [f"initialiser.use={args.init}"] if args.init else []
@@ -142,7 +142,7 @@ def read_view(depth: Path, camera: Path | None) -> DepthObservation:
         InputError: unreadable, or its camera has no pose in the robot frame (the cloud and
             the contacts are in that frame).
     """
-    from .captures import depth_camera_path, read_depth_image
+    from ..captures import depth_camera_path, read_depth_image
 
     capture = read_depth_image(depth, camera, None)
     if capture.T_robot_camera is None:
@@ -167,9 +167,9 @@ def _fuse_into(
 
     A :class:`StageFailure` is recorded in ``result.json`` (status ``failed``) and re-raised.
     """
-    from .asset.files import write_model
-    from .evaluation import one_sided_grasps
-    from .formats import (
+    from ..asset.files import write_model
+    from ..evaluation import one_sided_grasps
+    from ..formats import (
         bias_to_json,
         estimate_to_json,
         plane_to_json,
@@ -177,7 +177,7 @@ def _fuse_into(
         write_completed_clouds,
         write_json,
     )
-    from .runner import fuse
+    from ..runner import fuse
 
     config.write(out / "config.toml")
     started = time.perf_counter()

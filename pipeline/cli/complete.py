@@ -11,17 +11,17 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from . import __version__
-from .cli_view import add_rerun_option, check_rerun, record_if_asked
-from .completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
+from .. import __version__
+from ..completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
+from .view import add_rerun_option, check_rerun, record_if_asked
 
 if TYPE_CHECKING:
-    from .types import Contacts
+    from ..types import Contacts
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``complete`` verb to the CLI's subparsers and return its parser."""
-    from .cli import _add_config_options, _add_output_options
+    from . import _add_config_options, _add_output_options
 
     parser = subparsers.add_parser(
         "complete",
@@ -84,13 +84,13 @@ def overrides(args: argparse.Namespace) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Complete the capture's objects, write the results, print a table."""
-    from .cli import _load
-    from .cli_summary import one_sided_line
-    from .completion import complete_scene
-    from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, FAILED_STATUSES
-    from .evaluation import one_sided_grasps
-    from .formats import read_contacts
-    from .outdir import staged_output
+    from ..completion import complete_scene
+    from ..errors import EXIT_ESTIMATE_FAILED, EXIT_OK, FAILED_STATUSES
+    from ..evaluation import one_sided_grasps
+    from ..formats import read_contacts
+    from ..outdir import staged_output
+    from . import _load
+    from .summary import one_sided_line
 
     check_rerun(args)
     registry, config = _load(args, overrides(args), reads=READS)
@@ -135,7 +135,7 @@ def scene_table(scene: SceneCompletion) -> str:
     set aside at the edge of the view."""
     import numpy as np
 
-    from .tables import format_table
+    from ..tables import format_table
 
     rows = []
     for completion in scene.objects:
@@ -172,9 +172,9 @@ def write_outputs(
     contacts given, fused with the selected object."""
     import numpy as np
 
-    from .asset.files import write_model
-    from .figures import SceneObjectView, plot_scene
-    from .formats import (
+    from ..asset.files import write_model
+    from ..figures import SceneObjectView, plot_scene
+    from ..formats import (
         bias_to_json,
         estimate_to_json,
         plane_to_json,

@@ -9,7 +9,11 @@ import sys
 import time
 from pathlib import Path
 
-from .cli import (
+from ..entry import stop_if_interrupted
+from ..errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError, estimate_failed
+from ..outdir import fresh_folder, staged_output
+from ..tables import format_table, wrapped
+from . import (
     _add_config_options,
     _add_output_options,
     _add_units_option,
@@ -18,17 +22,13 @@ from .cli import (
     counting_number,
     user_settings,
 )
-from .cli_summary import CONSISTENCY_HEADER, consistency_cells, selection_line
-from .cli_view import add_rerun_option, check_rerun, record_if_asked
-from .entry import stop_if_interrupted
-from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError, estimate_failed
-from .outdir import fresh_folder, staged_output
-from .tables import format_table, wrapped
+from .summary import CONSISTENCY_HEADER, consistency_cells, selection_line
+from .view import add_rerun_option, check_rerun, record_if_asked
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """The ``trial`` verb's options."""
-    from .config import NEXT_GRASP_STRATEGIES
+    from ..config import NEXT_GRASP_STRATEGIES
 
     parser = subparsers.add_parser(
         "trial",
@@ -275,9 +275,9 @@ def _progress(message: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .hand_choice import check_planner_is_read, next_try
-    from .registry import load_registry
-    from .trial import run_trial
+    from ..hand_choice import check_planner_is_read, next_try
+    from ..registry import load_registry
+    from ..trial import run_trial
 
     check_rerun(args)
     registry = load_registry()

@@ -7,8 +7,8 @@ import json
 import sys
 from pathlib import Path
 
-from .cli import _add_config_options, _load, counting_number
-from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError
+from ..errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError
+from . import _add_config_options, _load, counting_number
 
 
 def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
@@ -20,7 +20,7 @@ def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
             ``*/textured.obj``.
         InputError: a scan cannot be read as an object (named).
     """
-    from .catalogue import load_object
+    from ..catalogue import load_object
 
     if args.scans is None:
         return None
@@ -54,11 +54,11 @@ def _captures_folder(args: argparse.Namespace, experiment) -> Path | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .config import changed_settings, load_config
-    from .experiments import EXPERIMENTS, ExperimentOptions
-    from .outdir import SWEEP_ROWS_FILE
-    from .stages import STAGES
-    from .sweep import prepare_sweep_folder, run_sweep, settings_section
+    from ..config import changed_settings, load_config
+    from ..experiments import EXPERIMENTS, ExperimentOptions
+    from ..outdir import SWEEP_ROWS_FILE
+    from ..stages import STAGES
+    from ..sweep import prepare_sweep_folder, run_sweep, settings_section
 
     if args.scheduler and args.executor != "dask":
         raise ConfigError("--scheduler applies to --executor dask")
@@ -98,8 +98,8 @@ def run(args: argparse.Namespace) -> int:
     )
     tasks = experiment.tasks(options)
     if "use" in user.get("planner", {}):
-        from .experiments.paper_tasks import trial_config
-        from .hand_choice import check_planner_is_read
+        from ..experiments.paper_tasks import trial_config
+        from ..hand_choice import check_planner_is_read
 
         # The trials of one hand read planner.use alike: the first of each stands for all.
         by_hand = {task.params["gripper"]: task for task in tasks if "gripper" in task.params}
@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """The ``sweep`` verb's options."""
-    from .experiments import EXPERIMENTS, experiment_descriptions
+    from ..experiments import EXPERIMENTS, experiment_descriptions
 
     parser = subparsers.add_parser(
         "sweep",
