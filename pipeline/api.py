@@ -164,6 +164,7 @@ def stage_estimate(
     seconds: float = 0.0,
     active_points: int = 0,
 ) -> StageEstimate:
+    # Nine parameters: a plugin's estimator reports every field of a stage in one call.
     """One stage of an estimate, with its completed model.
 
     Args:

@@ -22,7 +22,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from types import TracebackType
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
@@ -44,6 +44,9 @@ from .types import (
     SymmetryInit,
     TaxelState,
 )
+
+if TYPE_CHECKING:
+    from .next_grasp import MeasurementModel
 
 #: The stage kinds, in pipeline order; these are also the config section names.
 STAGES = ("world", "sensor", "segmenter", "initialiser", "planner", "tactile", "estimator")
@@ -312,6 +315,13 @@ class Estimator(StageImplementation):
     @abstractmethod
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         """Return the three stage estimates (0: initial, 1: bias + plane, 2: + points)."""
+
+    def measurement_model(self) -> MeasurementModel | None:
+        """How this estimator weighs taxels, for the next-grasp information score to predict
+        its fusion with (:class:`pipeline.next_grasp.MeasurementModel`); None when it has
+        no taxel model of its own (the score then takes an installed estimator's that
+        has, :func:`pipeline.trial.measurement_model`)."""
+        return None
 
 
 CONTRACTS: dict[str, type[StageImplementation]] = {

@@ -95,14 +95,9 @@ def counting_number(least: int) -> Callable[[str], int]:
     return parse
 
 
-def _load(
-    args: argparse.Namespace,
-    extra_overrides: Sequence[str] = (),
-    reads: Sequence[str] | None = None,
-    registry=None,
-):
-    """The registry and the config of ``--config``, ``--set`` and ``extra_overrides`` (what
-    the verb's own options stand for, applied last).
+def _load(args: argparse.Namespace, reads: Sequence[str] | None = None, registry=None):
+    """The registry and the config of ``--config``, ``--set`` and the verb's own options
+    that stand for config keys (:mod:`pipeline.cli.options`, applied last).
 
     Args:
         reads: the config sections the verb reads (None: all); see :func:`check_overrides`.
@@ -110,25 +105,23 @@ def _load(
     """
     from ..config import load_config
     from ..registry import load_registry
+    from .options import option_overrides
 
     registry = registry or load_registry()
-    config = load_config(registry, args.config, [*args.overrides, *extra_overrides])
-    check_overrides(args.verb, args.overrides, extra_overrides, reads)
+    options = option_overrides(args)
+    config = load_config(registry, args.config, args.overrides, options=options)
+    check_overrides(args.verb, args.overrides, [text for text, _ in options], reads)
     if args.config and reads is not None:
-        note_unread_sections(args.verb, args.config, registry, reads)
+        note_unread_sections(args.verb, args.config, config, reads)
     return registry, config
 
 
-def note_unread_sections(verb: str, files: Sequence[Path], registry, reads: Sequence[str]) -> None:
+def note_unread_sections(verb: str, files: Sequence[Path], config, reads: Sequence[str]) -> None:
     """Say which sections of the ``--config`` files ``verb`` does not read, where they
     differ from the defaults. A note, not an error (a ``--set`` there is one): a config
     written by another command, a trial's ``config.toml`` say, is a whole resolved config
     and is meant to be reusable."""
-    from ..config import changed_settings, load_config
-
-    changed = changed_settings(
-        load_config(registry, files).to_dict(), load_config(registry).to_dict()
-    )
+    changed = config.changed_sections([str(path) for path in files])
     unread = sorted(set(changed) - set(reads))
     if unread:
         print(
@@ -164,29 +157,6 @@ def check_overrides(
             raise ConfigError(
                 f"--set {text}: symfuse {verb} sets {key} from its arguments; drop this --set"
             )
-
-
-def user_settings(config, registry, overrides: Sequence[str]) -> dict[str, Any]:
-    """The settings the user chose: what the ``--config`` files and ``--set`` changed from
-    the shipped defaults, and every key a ``--set`` (or an option, in ``overrides``) names,
-    even to its default value (``--set planner.use=top-parallel`` is a choice the checks
-    of later options must see; a whole resolved ``config.toml`` given to ``--config`` is
-    not, beyond what it changes).
-
-    Args:
-        config: the resolved :class:`~pipeline.config.Config`.
-        overrides: the ``--set`` texts and those the verb's options stand for.
-    """
-    from ..config import changed_settings, dotted_value, load_config, parse_override
-
-    chosen = changed_settings(config.to_dict(), load_config(registry).to_dict())
-    for text in overrides:
-        *sections, key = text.partition("=")[0].strip().split(".")
-        node = chosen
-        for section in sections:
-            node = node.setdefault(section, {})
-        node[key] = dotted_value(parse_override(text), ".".join([*sections, key]))
-    return chosen
 
 
 # --- symfuse plugins -------------------------------------------------------------------

@@ -53,23 +53,21 @@ def _captures_folder(args: argparse.Namespace, experiment) -> Path | None:
     return Path(args.captures).resolve()
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..config import changed_settings, load_config
-    from ..experiments import EXPERIMENTS, ExperimentOptions
-    from ..outdir import SWEEP_ROWS_FILE
-    from ..stages import STAGES
-    from ..sweep import prepare_sweep_folder, run_sweep, settings_section
+def _planned_tasks(args: argparse.Namespace, registry, config, experiment):
+    """The sweep's output folder, its trials and the config sections they read, once the
+    config is checked for them.
 
-    if args.scheduler and args.executor != "dask":
-        raise ConfigError("--scheduler applies to --executor dask")
-    registry, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
-    experiment = EXPERIMENTS[args.experiment]
-    if args.grid and not experiment.randomised:
-        randomised = ", ".join(name for name, row in sorted(EXPERIMENTS.items()) if row.randomised)
-        raise ConfigError(f"sweep {args.experiment}: --grid applies to {randomised} only")
+    Raises:
+        ConfigError: the user set a section the trials do not read, a stage's parameters
+            do not go together, or a chosen ``planner.use`` would not plan.
+    """
+    from ..config import leaf_keys
+    from ..experiments import ExperimentOptions
+    from ..stages import STAGES
+
     estimator = config.choices["estimator"]
     resolved = config.to_dict()
-    user = changed_settings(resolved, load_config(registry).to_dict())
+    user = config.differing()
     sections = experiment.config_sections or tuple(resolved)
     unread = sorted(set(user) - set(sections))
     if unread:
@@ -104,7 +102,24 @@ def run(args: argparse.Namespace) -> int:
         # The trials of one hand read planner.use alike: the first of each stands for all.
         by_hand = {task.params["gripper"]: task for task in tasks if "gripper" in task.params}
         for task in by_hand.values():
-            check_planner_is_read(trial_config(task.params), registry, user)
+            check_planner_is_read(trial_config(task.params), registry, leaf_keys(user))
+    return out, tasks, sections
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..experiments import EXPERIMENTS
+    from ..outdir import SWEEP_ROWS_FILE
+    from ..sweep import prepare_sweep_folder, run_sweep, settings_section
+
+    if args.scheduler and args.executor != "dask":
+        raise ConfigError("--scheduler applies to --executor dask")
+    registry, config = _load(args)
+    experiment = EXPERIMENTS[args.experiment]
+    if args.grid and not experiment.randomised:
+        randomised = ", ".join(name for name, row in sorted(EXPERIMENTS.items()) if row.randomised)
+        raise ConfigError(f"sweep {args.experiment}: --grid applies to {randomised} only")
+    out, tasks, sections = _planned_tasks(args, registry, config, experiment)
+    resolved, user = config.to_dict(), config.differing()
     read = {section: resolved[section] for section in sections}
     fingerprint = json.dumps(read, sort_keys=True)
     keys = [task.key for task in tasks]
