@@ -36,7 +36,7 @@ import tomli_w
 from .errors import ConfigError
 from .params import build, param, to_toml
 from .registry import StageRegistry
-from .stages import STAGES
+from .stages import STAGES, StageImplementation
 
 
 @dataclasses.dataclass(frozen=True)
@@ -241,6 +241,22 @@ class Config:
         """The values that differ from the shipped defaults, as a sparse nested dict that,
         merged over them (``load_config(settings=...)``), gives this config back."""
         return changed_settings(self.to_dict(), self.shipped)
+
+    def check_stages(self, registry: StageRegistry, stages: Iterable[str] = STAGES) -> None:
+        """Check the parameters of the implementations selected for ``stages`` as they go
+        together (:meth:`~pipeline.stages.StageImplementation.check_params`), without
+        building them; an implementation with its own ``__init__``, which may check more,
+        is built and dropped.
+
+        Raises:
+            ConfigError: naming the key at fault.
+        """
+        for stage in stages:
+            cls = registry.get(stage, self.choices[stage]).cls
+            if cls.__init__ is not StageImplementation.__init__:
+                self.create(registry, stage)
+            else:
+                cls.check_params(self.stage_params(stage))
 
     def check_trial(self, registry: StageRegistry) -> None:
         """The checks across keys a trial makes before it runs: a ``planner.use`` the user

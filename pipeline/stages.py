@@ -66,7 +66,19 @@ class StageImplementation(ABC):
         if params is None or isinstance(params, Mapping):
             params = build(self.Params, params or {}, section)
         self.params = params
-        check_bounds(self.params, section)
+        self.check_params(self.params)
+
+    @classmethod
+    def check_params(cls, params: object) -> None:
+        """Refuse parameters that do not go together: each within its declared bounds,
+        and (an implementation overrides this, calling it first) any pair that makes no
+        sense, named by its dotted key. Runs as the implementation is built, and when a
+        config is checked without building it (:meth:`pipeline.config.Config.check_stages`).
+
+        Raises:
+            ConfigError: naming the key at fault.
+        """
+        check_bounds(params, f"{cls.stage}.{cls.name}")
 
     @classmethod
     def description(cls) -> str:

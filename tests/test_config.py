@@ -216,3 +216,17 @@ def test_a_trial_refuses_strategies_for_one_grasp_whoever_set_them(registry):
         load_config(registry, overrides=["trial.next_grasp=random"]).check_trial(registry)
     several = load_config(registry, overrides=["trial.grasps=2", "trial.until_std_mm=1"])
     several.check_trial(registry)
+
+
+def test_stages_are_checked_without_being_built(registry, monkeypatch):
+    """A pair of parameters that does not go together is refused by the config, naming
+    the key; the implementation is not built for it (a sensor's check needs no scene)."""
+    bad = load_config(registry, overrides=["segmenter.table-cluster.min_height_m=0.05"])
+    built = []
+    monkeypatch.setattr(registry, "create", lambda *args: built.append(args))
+    with pytest.raises(ConfigError, match=r"'segmenter.table-cluster.min_height_m' is read with"):
+        bad.check_stages(registry, ["segmenter"])
+    load_config(registry).check_stages(registry, ["sensor", "segmenter", "tactile"])
+    assert built == []
+    load_config(registry).check_stages(registry, ["world"])  # its own __init__: built
+    assert [args[:2] for args in built] == [("world", "pybullet")]

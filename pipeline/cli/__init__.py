@@ -197,11 +197,8 @@ def _cmd_plugins(args: argparse.Namespace) -> int:
 
 
 def _cmd_config(args: argparse.Namespace) -> int:
-    from ..stages import STAGES
-
     registry, config = _load(args)
-    for stage in STAGES:  # a selected stage's own checks of its parameters run as it is built
-        config.create(registry, stage)
+    config.check_stages(registry)
     print(config.to_toml(), end="")
     return 0
 

@@ -75,11 +75,8 @@ def _planned_tasks(args: argparse.Namespace, registry, config, experiment):
             f"sweep {args.experiment}: its trials read only [{'], ['.join(sections)}] of the "
             f"config, not [{'], ['.join(unread)}]; remove those from --config/--set"
         )
-    # A stage checks how its parameters go together as it is built: a bad pair fails here,
-    # once, rather than in every trial.
-    for stage in STAGES:
-        if stage in sections:
-            config.create(registry, stage)
+    # A bad pair of a stage's parameters fails here, once, rather than in every trial.
+    config.check_stages(registry, [stage for stage in STAGES if stage in sections])
     # The default folder is fixed, not fresh: typing the command again resumes the sweep.
     out = args.out or Path("runs") / f"sweep-{args.experiment}-{estimator}"
     options = ExperimentOptions(
