@@ -90,11 +90,12 @@ TURN_SIGMAS = 2.0
 
 @dataclass(frozen=True)
 class MeasurementModel:
-    """The estimator's model the information score predicts with (``estimator.iekf``'s
-    parameters): ``C_t`` and ``R`` as (along, across) the taxel normal (m), each point's
-    prior std (m), whether the correspondences filter by facing, and the re-grasp noise
-    ``Q`` (``(6, 6)`` over ``g``) the object's motion adds before every grasp after the
-    first."""
+    """The estimator's model the information score predicts with (what the estimator's
+    :meth:`~pipeline.stages.Estimator.measurement_model` gives; the built-in ``iekf``'s
+    from its parameters): ``C_t`` and ``R`` as (along, across) the taxel normal (m), each
+    point's prior std (m), whether the correspondences filter by facing, and the re-grasp
+    noise ``Q`` (``(6, 6)`` over ``g``) the object's motion adds before every grasp after
+    the first."""
 
     window_std_m: tuple[float, float]
     noise_std_m: tuple[float, float]
