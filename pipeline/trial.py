@@ -45,7 +45,7 @@ from .formats import (
     write_cloud,
     write_json,
 )
-from .hand_choice import HandChoice, Planners, choice_to_json, choose_grasp, next_try
+from .hand_choice import HandChoice, Planners, choose_grasp, next_try
 from .next_grasp import (
     MeasurementModel,
     NextHand,
@@ -56,14 +56,7 @@ from .next_grasp import (
 )
 from .params import to_toml
 from .registry import StageRegistry
-from .result_document import (
-    estimate_entries,
-    init_to_json,
-    record_failure,
-    start_document,
-    write_document,
-    write_estimate_files,
-)
+from .result_document import estimate_entries, write_estimate_files
 from .runner import estimate_with
 from .stages import (
     STAGES,
@@ -74,6 +67,7 @@ from .stages import (
     TactileModel,
     World,
 )
+from .trial_document import TrialDocument, pose_to_json
 from .types import (
     Contacts,
     DepthObservation,
@@ -134,13 +128,6 @@ class TrialRecord:
     metrics: list[dict[str, Any]]
     timings: dict[str, float]
     document: dict[str, Any]
-
-
-def pose_to_json(pose: ObjectPose) -> dict[str, Any]:
-    return {
-        "position": [float(v) for v in pose.position_m],
-        "quaternion_xyzw": [float(v) for v in pose.quaternion_xyzw],
-    }
 
 
 def ground_truth(
@@ -302,7 +289,7 @@ class Trial:
     obj: CatalogueObject
     out_dir: Path
     timer: PhaseTimer
-    record: dict[str, Any]
+    record: TrialDocument
     report: Callable[[str], None]
 
     @property
@@ -355,15 +342,7 @@ def run_trial(
     out_dir.mkdir(parents=True, exist_ok=True)
     config.write(out_dir / "config.toml")
     settings = config.trial
-    record = start_document(
-        "trial",
-        object=settings.object,
-        gripper=settings.gripper,
-        seed=settings.seed,
-        stages_used=dict(config.choices),
-        status="running",
-        config=config.to_dict(),
-    )
+    record = TrialDocument(config)
     stages = TrialStages.build(config, registry)
     obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
     trial = Trial(config, registry, stages, obj, out_dir, PhaseTimer(), record, report)
@@ -372,7 +351,7 @@ def run_trial(
     except SymfuseError as exc:
         # A failure after the first data file is a result: record how far the trial got.
         if any(path.name != "config.toml" for path in out_dir.iterdir()):
-            record_failure(out_dir, record, str(exc), timings=trial.timer.seconds)
+            record.fail(out_dir, str(exc), trial.timer.seconds)
         raise
 
 
@@ -403,7 +382,7 @@ def _grasp_until_held(trial: Trial) -> tuple[Look, Fused]:
     ``trial.retries`` times. The last look and what its grasps fused."""
     settings, world, record = trial.settings, trial.world, trial.record
     missed: list[MissedGrasp] = []
-    record["missed_grasps"] = []
+    record.start_looking()
     while True:
         look = _look_and_plan(trial, missed)
         try:
@@ -414,7 +393,7 @@ def _grasp_until_held(trial: Trial) -> tuple[Look, Fused]:
                     f"{miss}{next_try(world.hands, miss.plan.gripper)}", miss.plan
                 ) from None
             # Release, look again (the pads pushed the object) and grasp unlike this.
-            record["missed_grasps"].append(record.pop("unfused_grasp"))
+            record.missed()
             missed.append(miss)
             trial.report(f"{miss}; grasping again ({len(missed)} of {settings.retries})")
             with trial.phase("grasp"):
@@ -430,13 +409,14 @@ def _write_results(trial: Trial, look: Look, fused: Fused) -> TrialRecord:
         truth_mesh = trial.obj.mesh.copy().apply_transform(fused.object_after.transform)
         truth_mesh.export(out_dir / "object_final.ply")
     with trial.phase("model"):
-        model, record["model"] = write_estimate_files(
+        model, entry = write_estimate_files(
             out_dir,
             result,
             trial.config.model,
             look.observation.table_height_m,
             look.cloud.viewpoint_m,
         )
+        record.model(entry)
     if model is not None:
         with trial.phase("evaluation"):
             scores = model_scores(model, truth)
@@ -446,12 +426,11 @@ def _write_results(trial: Trial, look: Look, fused: Fused) -> TrialRecord:
             draw_pictures(
                 out_dir, trial.config, look.cloud.points, fused.init, result, evaluated, truth
             )
-            draw_grasps(out_dir / "grasps.png", trial.settings.object, result, truth, fused, record)
-    record.update(
-        status=result.final.status, **estimate_entries(result, metrics), timings=trial.timer.seconds
-    )
-    write_document(out_dir, record)
-    return TrialRecord(out_dir, result, metrics, dict(trial.timer.seconds), record)
+            draw_grasps(
+                out_dir / "grasps.png", trial.settings.object, result, truth, fused, record.data
+            )
+    record.finish(out_dir, result, metrics, trial.timer.seconds)
+    return TrialRecord(out_dir, result, metrics, dict(trial.timer.seconds), record.data)
 
 
 class MissedGrasp(StageFailure):
@@ -476,7 +455,7 @@ def _look_and_plan(trial: Trial, missed: list[MissedGrasp]) -> Look:
     """
     from .images import save_depth, save_rgb
 
-    stages, world, out_dir, record = trial.stages, trial.world, trial.out_dir, trial.record
+    stages, world, out_dir = trial.stages, trial.world, trial.out_dir
     pose_seen = world.object_pose()
     trial.report("sensing")
     with trial.phase("sensor"):
@@ -493,8 +472,7 @@ def _look_and_plan(trial: Trial, missed: list[MissedGrasp]) -> Look:
         cloud = stages.segmenter.segment(observation)
     with trial.phase("write"):
         write_cloud(out_dir / "cloud.ply", cloud.points)
-    record["object_pose_before"] = pose_to_json(pose_seen)
-    record["points"] = len(cloud)
+    trial.record.view(pose_seen, len(cloud))
     trial.report("initialising and planning")
     with trial.phase("initialiser"):
         proposal = stages.initialiser.propose(cloud, observation)
@@ -523,14 +501,10 @@ def _take_choice(trial: Trial, choice: HandChoice, missed: list[MissedGrasp]) ->
         StageFailure: no hand can grasp the object (after a miss: no grasp unlike those that
             missed; the miss is then the trial's failure).
     """
-    plan, record, world = choice.plan, trial.record, trial.world
+    plan, world = choice.plan, trial.world
     if plan.status != "ok" and missed:
         raise MissedGrasp(f"{missed[-1]}; no grasp unlike it: {plan.reason}", missed[-1].plan)
-    record["gripper"] = choice.answer.gripper
-    record["hand"] = choice_to_json(choice)
-    if choice.answer.planner:
-        record["stages_used"]["planner"] = choice.answer.planner
-    record["plan"] = plan_to_json(plan)
+    trial.record.choice(choice)
     if plan.status != "ok":
         if not choice.answer.planner:
             raise StageFailure(plan.reason)
@@ -595,8 +569,7 @@ def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
     rng = np.random.default_rng([settings.seed, 15])
     grasps: list[Contacts] = []
     plans: list[GraspPlan] = []
-    record["grasps"] = []
-    record["next_grasp"] = settings.next_grasp if settings.grasps > 1 else None
+    record.start_grasping(settings.next_grasp if settings.grasps > 1 else None)
     plan, chosen_by, fused, stop = look.choice.plan, {"strategy": "first"}, None, ""
     for k in range(settings.grasps):
         if k > 0:
@@ -627,13 +600,11 @@ def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
         fused = _fuse(trial, look, attempt, init, tuple(grasps))
         known = uncertainty(fused.result.selected)
         planner = hands[plan.gripper].planner.name
-        record["grasps"].append(grasp_to_json(attempt, planner, contacts, fused, known))
-        record["object_pose_after"] = pose_to_json(attempt.outcome.object_after)
+        record.fused(grasp_to_json(attempt, planner, contacts, fused, known), fused.object_after)
         stop = stop_reason(known, k + 1, settings.grasps, until_m)
         if stop:
             break
-    record["taxels_in_contact"] = sum(len(c) for c in grasps)
-    record["stop_reason"] = stop
+    record.stopped(sum(len(c) for c in grasps), stop)
     return fused
 
 
@@ -670,8 +641,7 @@ def _execute(trial: Trial, k: int, plan: GraspPlan, chosen_by: dict[str, Any]) -
         ),
     }
     if k == 0:
-        trial.record["grasp"] = executed
-        trial.record["object_pose_after"] = pose_to_json(outcome.object_after)
+        trial.record.first_grasp(executed, outcome.object_after)
         if not outcome.executed:
             raise StageFailure(
                 f"grasp not executed: {outcome.reason}{next_try(world.hands, plan.gripper)}"
@@ -691,13 +661,13 @@ def _read_taxels(
     """
     k, plan = attempt.k, attempt.plan
     if not attempt.outcome.executed:
-        trial.record["unfused_grasp"] = attempt.to_json()
+        trial.record.unfused(attempt.to_json())
         return None, f"grasp {k + 1} not executed: {attempt.outcome.reason}"
     with trial.phase("tactile"):
         contacts = trial.stages.tactile.read(trial.world, attempt.outcome)
     stop = unfused_reason(k, contacts, attempt.shift_m, attempt.tilt_rad)
     if stop:
-        trial.record["unfused_grasp"] = attempt.to_json(contacts)
+        trial.record.unfused(attempt.to_json(contacts))
         if k == 0:
             if len(contacts):
                 with trial.phase("write"):
@@ -795,7 +765,7 @@ def _initial_state(trial: Trial, look: Look, plan: GraspPlan, contacts: Contacts
     """
     with trial.phase("initialiser"):
         init = trial.stages.initialiser.refine(look.proposal, look.cloud, plan, contacts)
-    trial.record["init"] = init_to_json(init, status=True, hypotheses=20)
+    trial.record.initial_state(init)
     if init.status != "ok":
         name = trial.config.choices["initialiser"]
         raise StageFailure(f"initialiser '{name}' rejected: {init.reason}")
