@@ -200,7 +200,7 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
     check_keys(document, ("frame", "units", "grasps"), "", path)
     for key in ("frame", "units"):
         if key not in document:
-            raise InputError(f"{path}: no '{key}' key (see the README's contacts format)")
+            raise InputError(f"{path}: no '{key}' key (see the contacts format in docs/formats.md)")
     if document["frame"] != "robot":
         raise InputError(f'{path}: frame must be "robot", got {document["frame"]!r}')
     if document["units"] not in ("m", "mm"):
