@@ -1,5 +1,5 @@
-"""The file formats symfuse reads or writes (about 450 lines: clouds, contacts and results
-share the validators and JSON helpers here).
+"""The file formats symfuse reads or writes (one module: clouds, contacts and results share
+the validators and JSON helpers here).
 
 * Point clouds: PLY and PCD (via open3d) or ``.npy`` (an ``(N, 3)`` array); frame R, in
   metres unless the reader is told ``units="mm"``.
