@@ -45,8 +45,8 @@ from .types import (
     TaxelState,
 )
 
-#: The stage kinds, in pipeline order; these are also the config section names.
 STAGES = ("world", "sensor", "segmenter", "initialiser", "planner", "tactile", "estimator")
+"""The stage kinds, in pipeline order; these are also the config section names."""
 
 
 class StageImplementation(ABC):
