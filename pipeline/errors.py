@@ -5,7 +5,7 @@ of these with a one-line message that names the file, key or plugin at fault. Th
 prints ``symfuse: error: <message>`` and exits with :attr:`SymfuseError.exit_code`;
 anything else reaching the CLI is a bug in symfuse and keeps its traceback.
 
-Exit codes (the README's "Errors" paragraph states them too):
+Exit codes (the command line reference, ``docs/cli.md``, states them too):
 
 ==== ================================================================================
 0    the run finished and its estimate is usable
@@ -21,9 +21,14 @@ Exit codes (the README's "Errors" paragraph states them too):
 from __future__ import annotations
 
 EXIT_OK = 0
+"""Exit code: the run finished."""
 EXIT_BAD_INPUT = 2
+"""Exit code: bad input or configuration; nothing ran."""
 EXIT_ESTIMATE_FAILED = 3
+"""Exit code: the estimate failed or is inconsistent, or a stage produced no result; the
+results are written."""
 EXIT_PLUGIN_RAISED = 4
+"""Exit code: a plugin raised an unexpected exception."""
 EXIT_INTERRUPTED = 130
 
 #: Final estimate statuses that make a run exit with :data:`EXIT_ESTIMATE_FAILED`.

@@ -1,5 +1,5 @@
-"""The file formats symfuse reads or writes (about 450 lines: clouds, contacts and results
-share the validators and JSON helpers here).
+"""The file formats symfuse reads or writes (one module: clouds, contacts and results share
+the validators and JSON helpers here).
 
 * Point clouds: PLY and PCD (via open3d) or ``.npy`` (an ``(N, 3)`` array); frame R, in
   metres unless the reader is told ``units="mm"``.
@@ -200,7 +200,7 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
     check_keys(document, ("frame", "units", "grasps"), "", path)
     for key in ("frame", "units"):
         if key not in document:
-            raise InputError(f"{path}: no '{key}' key (see the README's contacts format)")
+            raise InputError(f"{path}: no '{key}' key (see the contacts format in docs/formats.md)")
     if document["frame"] != "robot":
         raise InputError(f'{path}: frame must be "robot", got {document["frame"]!r}')
     if document["units"] not in ("m", "mm"):

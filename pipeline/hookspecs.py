@@ -17,6 +17,7 @@ if TYPE_CHECKING:
 PROJECT = "symfuse"
 hookspec = pluggy.HookspecMarker(PROJECT)
 hookimpl = pluggy.HookimplMarker(PROJECT)
+"""Decorates a plugin module's ``symfuse_register_stages`` hook implementation."""
 
 
 @hookspec

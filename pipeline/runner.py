@@ -129,8 +129,8 @@ def run_estimator(estimator: Estimator, problem: EstimationProblem) -> EstimateR
     """``estimator.estimate(problem)`` on a single-threaded BLAS.
 
     The estimators' matrices are small (hundreds of rows): a multi-threaded BLAS only
-    contends with itself and with sweep workers (a 336-row Cholesky is 3.5x slower with two
-    threads than with one on a loaded 2-core machine).
+    contends with itself and with sweep workers (a Cholesky of that size runs slower with two
+    threads than with one on a loaded machine).
     """
     with threadpool_limits(limits=1, user_api="blas"):
         return estimator.estimate(problem)

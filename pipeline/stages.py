@@ -48,8 +48,8 @@ from .types import (
 if TYPE_CHECKING:
     from .next_grasp import MeasurementModel
 
-#: The stage kinds, in pipeline order; these are also the config section names.
 STAGES = ("world", "sensor", "segmenter", "initialiser", "planner", "tactile", "estimator")
+"""The stage kinds, in pipeline order; these are also the config section names."""
 
 
 class StageImplementation(ABC):

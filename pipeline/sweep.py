@@ -1,5 +1,5 @@
 """The sweep engine: run an experiment's tasks locally or on Dask, one JSONL row per task
-(about 475 lines: the results file, resuming and the executors are one contract).
+(one module: the results file, resuming and the executors are one contract).
 
 Every finished task is appended to the results file at once (written, flushed and fsynced),
 so an interrupted or crashed sweep loses nothing it finished, and a re-run skips every task

@@ -28,13 +28,16 @@ import numpy as np
 
 from .poses import rotation_z
 
-#: Parameter names of the 6x6 bias-and-plane covariance, in order.
 BIAS_PLANE_PARAMETERS = ("b_theta", "b_x", "b_y", "b_z", "m_r", "m_theta")
+"""Parameter names of the 6x6 bias-and-plane covariance, in order."""
 
 EstimateStatus = Literal[
     "initial", "converged", "max_iterations", "no_correspondence", "diverged", "inconsistent"
 ]
+"""A stage's status: ``initial`` (Stage 0), ``converged`` (and consistent with the
+evidence), ``max_iterations``, ``no_correspondence``, ``diverged``, ``inconsistent``."""
 PlanStatus = Literal["ok", "refused"]
+"""A grasp plan's status: ``ok``, or ``refused`` with the planner's reason."""
 
 
 def _as_points(array: np.ndarray, what: str) -> np.ndarray:

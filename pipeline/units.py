@@ -18,8 +18,9 @@ import numpy as np
 from .errors import InputError
 
 Units = Literal["m", "mm"]
-#: Metres per unit.
+"""The length units a file or an option may be given in."""
 UNIT_SCALE: dict[str, float] = {"m": 1.0, "mm": 1e-3}
+"""Metres per unit."""
 #: Farther from the robot base than this (m), a point is not on a tabletop object.
 FARTHEST_M = 10.0
 #: Larger than this (m, the largest bounding-box extent), an object is not graspable.

@@ -60,9 +60,8 @@ class VcInitialiser(SymmetryInitialiser):
         round_axis_ratio: float = param(
             0.0,
             "footprint PCA axis ratio below which all orientations (+-90 deg) are searched "
-            "(0 = never); round objects' single views measure 1.0-1.4, boxes and cars "
-            "2.2-2.8. 1.5 fixes the mug's plane angle (60-73 -> <3 deg on 4 of 8 kth views) "
-            "but not its deviation, and costs the salt cylinder 2.4 mm of plane offset",
+            "(0 = never); a round object's single view has a ratio near 1, a box's or a car's "
+            "above 2 (docs/results.md: the code's own choices)",
             at_least=0.0,
         )
         orientations: int = param(

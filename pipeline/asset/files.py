@@ -1,5 +1,5 @@
 """The files of the completed model a run writes: ``model.obj``, ``model_stage{k}.obj``,
-``model_collision.obj`` and ``model.urdf`` (README, "What a trial does and writes")."""
+``model_collision.obj`` and ``model.urdf`` (``docs/formats.md``, "A trial's folder")."""
 
 from __future__ import annotations
 

@@ -45,7 +45,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--contacts",
         type=Path,
         metavar="FILE",
-        help="contacts JSON in the capture's robot frame (README): fuse them with one object",
+        help="contacts JSON in the capture's robot frame (docs/formats.md): fuse them with one "
+        "object",
     )
     parser.add_argument(
         "--object",

@@ -47,7 +47,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "config.toml, completed_stage{0,1,2}.ply and the model's mesh and URDF to --out.",
     )
     parser.add_argument("--cloud", type=Path, required=True, help="PLY, PCD or NPY (N x 3)")
-    parser.add_argument("--contacts", type=Path, required=True, help="contacts JSON (README)")
+    parser.add_argument(
+        "--contacts", type=Path, required=True, help="contacts JSON (docs/formats.md)"
+    )
     start = parser.add_mutually_exclusive_group()
     start.add_argument(
         "--plane",

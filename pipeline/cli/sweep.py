@@ -197,7 +197,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument(
         "--workers", type=counting_number(1), help="local processes (default: all cores)"
     )
-    parser.add_argument("--executor", choices=["local", "dask"], default="local")
+    parser.add_argument(
+        "--executor",
+        choices=["local", "dask"],
+        default="local",
+        help="where the trials run: local processes, or a Dask cluster at --scheduler",
+    )
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (tcp://...)")
     _add_config_options(parser)
     parser.add_argument("--out", type=Path, metavar="DIR", help=SWEEP_OUT_HELP)

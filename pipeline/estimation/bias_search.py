@@ -4,11 +4,11 @@
 The IEKF is a local method: its correspondences are found around the taxels mapped through
 the current state, so a bias of several prior standard deviations puts every pad's gate on
 the wrong part of the model, and the filter explains the misfit by whatever moves the model
-cheapest under the prior (measured on three pads at 35 mm bias: the bias yaw ran to ten
-prior stds within seven iterations while the translation stayed near zero). Started at the
-true translation, with the prior unchanged, the same cases converge. So before the first
-grasp's Stage 1 the estimator scores a grid of states and starts the iteration (not the
-prior, which stays Stage 0's) at the best:
+cheapest under the prior (with three pads, the bias yaw runs off to its divergence bound
+while the translation stays near zero). Started at the true translation, with the prior
+unchanged, the same cases converge (docs/results.md, "The code's own choices"). So before
+the first grasp's Stage 1 the estimator scores a grid of states and starts the iteration
+(not the prior, which stays Stage 0's) at the best:
 
 * the horizontal translation on a square grid of :attr:`SearchSettings.step_m` inside the
   prior's ellipse of :attr:`SearchSettings.translation_sigmas` standard deviations;
@@ -19,9 +19,8 @@ prior, which stays Stage 0's) at the best:
 
 Stage 0 stays the start unless the best state scores clearly lower
 (:attr:`SearchSettings.keep_margin`): where Stage 0 explains the taxels about as well as
-anything on the grid, the paper's iteration runs unchanged (and the easy start of
-``bench/estimator.py`` is not moved to a grid point that needs more iterations: 12 instead
-of 7 before this rule).
+anything on the grid, the paper's iteration runs unchanged (and an easy start is not moved
+to a grid point that needs more iterations).
 
 A state's score is the prior's Mahalanobis distance plus, over a few taxels of every pad,
 their squared distance to the completed model (the nearer of the front cloud and its mirror
@@ -31,9 +30,8 @@ so a pad off the model costs a fixed amount however far off it is (a pad on a pa
 camera never saw is not forced onto the cloud). Every pad counts as
 :attr:`SearchSettings.taxels_per_pad` taxels however many touch: counted as the filter
 counts them (a hundred independent taxels on a pad), the data outweighed the prior in
-directions it does not measure, and on the CD drive, whose jaws press on two flat faces,
-the start moved 54 mm along the faces (the object had moved 1 mm) and the filter stayed
-there; with every pad counted alike it starts 4.5 mm along them.
+directions it does not measure: on an object whose jaws press on two flat faces the start
+moved far along the faces, where the object had hardly moved, and the filter stayed there.
 """
 
 from __future__ import annotations

@@ -15,16 +15,15 @@ Choices this module makes where the paper is silent:
 * **Correspondence covariance.** ``C_i = C_t + J P J^T`` is evaluated at the current state
   but with a covariance ``P`` that is fixed for the whole grasp: Stage 1 uses its prior
   ``P-``, Stage 2 the covariance Stage 1 ended with. (The paper indexes it by iteration,
-  eq. 7. Measured on the Fig. 8 study, shrinking the gates to each iterate's posterior
+  eq. 7. On the Fig. 8 study, shrinking the gates to each iterate's posterior
   makes the iteration oscillate: after a large step the narrowed gates lose the back, the
   plane falls back to its prior, the wide gates find the back again, and so on. Fixed gates
   keep one objective per grasp. Wide gates pull the weighted means toward the inside of a
   curved surface, so with ``refine_gates`` (default) Stage 1 then iterates the grasp a
   second time from its result with gates fixed at that first pass's posterior, which
-  removes most of that pull (on the plugin test's 1000-point cylinder Stage 1's mean
-  surface error drops from 4.3 to 0.4 mm, Stage 0 being 5.8 mm); the first pass only has to
-  get there, so it stops at the looser ``gate_tolerance_m``. If the second pass diverges or
-  loses its correspondences the first pass's result stands. Stage 2 uses Stage 1's final
+  removes most of that pull (docs/results.md, "The code's own choices"); the first pass
+  only has to get there, so it stops at the looser ``gate_tolerance_m``. If the second pass
+  diverges or loses its correspondences the first pass's result stands. Stage 2 uses Stage 1's final
   covariance.)
 * **Surface filter.** A taxel only weighs points whose surface faces like it, see
   :mod:`.surface` (``GraspContacts.normals``; None gives the paper's eq. 9). On the front
@@ -32,8 +31,8 @@ Choices this module makes where the paper is silent:
   started from, so the filter stays fixed within a pass.
 * **Trust region.** A Gauss-Newton step that would move some point of the completed model
   by more than ``max_step_m`` is shortened along its direction to that length (a damped
-  IEKF), so the weights are recomputed before the model travels further; from a 45 deg
-  plane error an undamped first step overshoots by tens of centimetres.
+  IEKF), so the weights are recomputed before the model travels further; from a large
+  plane error an undamped first step overshoots far past the object.
 * **Stages.** Stage 1 holds the points fixed (6 states). Stage 2 estimates points too; like
   the paper it *starts from the Stage-1 result*: each grasp's iterations begin at Stage 1's
   ``(b, m)`` for that grasp and its gates use Stage 1's covariance, but the prior

@@ -3,8 +3,7 @@
 A gate wider than the distance to an edge of the object takes in points of the adjacent face:
 a taxel on the top row of a pad gripping a box sees the box's top face too, so its weighted
 mean (eq. 9) lies millimetres inside and above the touched face, and it carries the largest
-weight mass of its pad (eq. 11). Measured on a 45 x 120 x 100 mm brick and on the CD drive,
-those top-row residuals (up to 9 mm along the normal, 2 mm vertically) drag the bias down and
+weight mass of its pad (eq. 11). On a box, those top-row residuals drag the bias down and
 the plane sideways; vertical faces do not observe ``b_z`` well enough to resist.
 
 A pad can only touch a face roughly parallel to it, so a point corresponds to a taxel only
@@ -23,11 +22,11 @@ azimuth, :data:`AZIMUTH_BAND_DEG` bands, compatible when under 45 deg apart) whe
 normals are less than 45 deg from horizontal. Unlike the elevation this depends on the state,
 but only through the bias yaw (the front map is a rotation about z), whose prior is a few
 degrees, so the caller maps the taxel normals into the points' frame and compares labels.
-Measured on the Fig. 10 three-finger study: with a 20-50 mm bias a side finger lands on the
-middle of the seen face, whose surface is 60 deg away from facing it; explained by it, the
-fingers drive the yaw to its divergence bound instead of translating the object. The back's
-orientation follows ``m_theta`` too, which can be tens of degrees off, so there the azimuth
-is not compared (see :func:`facing_labels`).
+On the Fig. 10 three-finger study, a large bias lands a side finger on the middle of the
+seen face, whose surface is far from facing it; explained by it, the fingers drive the yaw
+to its divergence bound instead of translating the object. The back's orientation follows
+``m_theta`` too, which can be tens of degrees off, so there the azimuth is not compared
+(see :func:`facing_labels`).
 """
 
 from __future__ import annotations

@@ -420,17 +420,36 @@ def _share(count: int, total: int) -> str:
 def report(rows: list[dict], out_dir: Path) -> list[Path]:
     """``results.csv``, ``explore.png`` (median deviation and plane errors after each
     grasp per strategy, all trials and the hard ones) and ``report.md``."""
-    from ..figures import LinePanel, line_figure
+    from ..figures import line_figure
 
     out_dir = Path(out_dir)
     csv_path = write_csv(rows, out_dir / "results.csv")
     finished = finished_rows(rows)
-    hard = hard_rows(rows)
-    hard_keys = {(row["params"]["label"], row["params"]["yaw_deg"]) for row in hard}
+    hard_keys = {(row["params"]["label"], row["params"]["yaw_deg"]) for row in hard_rows(rows)}
     # A pose is hard by its first grasp, which every strategy shares: keep all three.
     hard = [
         row for row in finished if (row["params"]["label"], row["params"]["yaw_deg"]) in hard_keys
     ]
+    lines, panels = _per_grasp_section(rows, finished, hard)
+    figure = line_figure(panels, out_dir / "explore.png", title="Deviation after each grasp")
+    lines += _second_grasp_section(hard)
+    lines += _worse_section(finished)
+    lines += motion_lines(finished, hard)
+    lines += score_lines(finished)
+    lines += _per_object_section(finished)
+    lines += failures_section(failure_lines(rows))
+    report_path = out_dir / "report.md"
+    report_path.write_text("\n".join(lines) + "\n")
+    return [csv_path, figure, report_path]
+
+
+def _per_grasp_section(
+    rows: list[dict], finished: list[dict], hard: list[dict]
+) -> tuple[list[str], list[Any]]:
+    """The report's head: per grasp and strategy, the medians over all trials and over the
+    hard ones; and the figure's panels of the same deviations."""
+    from ..figures import LinePanel
+
     grasps = range(1, GRASPS + 1)
     lines = [
         "# Several grasps: where to grasp next",
@@ -466,9 +485,13 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
                 curves,
             )
         )
-    figure = line_figure(panels, out_dir / "explore.png", title="Deviation after each grasp")
+    return lines, panels
 
-    lines += [
+
+def _second_grasp_section(hard: list[dict]) -> list[str]:
+    """What the second grasp gained on the hard poses, per strategy, and whether
+    information's gain beats random's and the paper's (paired by pose)."""
+    lines = [
         "",
         f"## The second grasp on poses whose first leaves more than {HARD_MM:g} mm",
         "",
@@ -490,40 +513,55 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             f"| {strategy} | {len(members)} | {fmt(mean, 2)} | {fmt(median, 2)} "
             f"| {fmt(selected[0], 2)} / {fmt(selected[1], 2)} |"
         )
-    informed, drawn = gains["information"][0], gains["random"][0]
+    lines += _gain_ratio_lines(gains["information"][0], gains["random"][0])
+    for other in ("random", "paper"):
+        lines += _paired_lines(hard, other)
+    return lines
+
+
+def _gain_ratio_lines(informed: float, drawn: float) -> list[str]:
+    """Information's mean second-grasp gain against random's (target >= 1.3x)."""
     if np.isfinite(informed) and np.isfinite(drawn) and drawn > 0:
         verdict = "yes" if informed >= 1.3 * drawn else "no"
-        lines += [
+        return [
             "",
             f"Information's mean reduction is {informed / drawn:.2f}x random's "
             f"(target >= 1.3x): {verdict}.",
         ]
-    elif np.isfinite(informed) and np.isfinite(drawn):
-        lines += [
+    if np.isfinite(informed) and np.isfinite(drawn):
+        return [
             "",
             f"Random's mean reduction is {drawn:.2f} mm, not a reduction, so the target "
             f"(information's at least 1.3x random's) is no ratio here; information's is "
             f"{informed:.2f} mm. The paired difference below says whether the two are told "
             "apart.",
         ]
-    for other in ("random", "paper"):
-        difference, low, high, poses = paired_gain_difference(hard, "information", other)
-        if poses:
-            lines += [
-                "",
-                f"Paired by pose, information's second grasp reduced the deviation by "
-                f"{fmt(difference, 2)} mm more than {other}'s (95 % bootstrap interval "
-                f"{fmt(low, 2)} to {fmt(high, 2)} mm over {poses} pose{'s' * (poses != 1)}): "
-                "an interval that holds 0 does not tell the two strategies apart.",
-            ]
-            better, worse, p_value = paired_gain_ranks(hard, "information", other)
-            lines[-1] += (
-                f" By rank, information's gained more at {better} poses and less at {worse} "
-                f"(Wilcoxon signed-rank p = {fmt(p_value, 3)}): a p under 0.05 says the "
-                "typical pose differs, even where a few large gains or losses keep the "
-                "mean's interval wide."
-            )
-    lines += [
+    return []
+
+
+def _paired_lines(hard: list[dict], other: str) -> list[str]:
+    """Information's second-grasp gain against ``other``'s, paired by pose: the mean
+    difference with its bootstrap interval, and the signed-rank test."""
+    difference, low, high, poses = paired_gain_difference(hard, "information", other)
+    if not poses:
+        return []
+    better, worse, p_value = paired_gain_ranks(hard, "information", other)
+    return [
+        "",
+        f"Paired by pose, information's second grasp reduced the deviation by "
+        f"{fmt(difference, 2)} mm more than {other}'s (95 % bootstrap interval "
+        f"{fmt(low, 2)} to {fmt(high, 2)} mm over {poses} pose{'s' * (poses != 1)}): "
+        "an interval that holds 0 does not tell the two strategies apart."
+        f" By rank, information's gained more at {better} poses and less at {worse} "
+        f"(Wilcoxon signed-rank p = {fmt(p_value, 3)}): a p under 0.05 says the "
+        "typical pose differs, even where a few large gains or losses keep the "
+        "mean's interval wide.",
+    ]
+
+
+def _worse_section(finished: list[dict]) -> list[str]:
+    """Later grasps that made the estimate worse, by the consistency check and by the truth."""
+    lines = [
         "",
         "## Grasps that made the estimate worse",
         "",
@@ -541,14 +579,15 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             f"| {strategy} | {total} | {_share(by_check, total)} | {_share(by_truth, total)} "
             f"| {trials} | {_share(bad_trials, trials)} |"
         )
-    lines += motion_lines(finished, hard)
-    lines += score_lines(finished)
-    lines += [
+    return lines
+
+
+def _per_object_section(finished: list[dict]) -> list[str]:
+    """Per object, each strategy's Stage 2 median deviation after the first and last grasp."""
+    lines = [
         "",
         "## Per object (Stage 2 median deviation, mm: after grasp 1 -> after grasp 3)",
         "",
-    ]
-    lines += [
         "| object | poses | " + " | ".join(STRATEGIES) + " |",
         "|---|---|" + "---|" * len(STRATEGIES),
     ]
@@ -562,7 +601,4 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             last = _median(group, GRASPS, STAGE2_DEVIATION)
             cells.append(f"{fmt(first, 2)} -> {fmt(last, 2)}")
         lines.append(f"| {label} | {len(members) // len(STRATEGIES)} | " + " | ".join(cells) + " |")
-    lines += failures_section(failure_lines(rows))
-    report_path = out_dir / "report.md"
-    report_path.write_text("\n".join(lines) + "\n")
-    return [csv_path, figure, report_path]
+    return lines

@@ -165,75 +165,93 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
         subset = [row for row in good if row["params"]["gripper"] == gripper]
         if not subset:
             continue
-        magnitudes = sorted({row["params"]["bias_mm"] for row in subset})
-        samples, reach, still_good = [], None, True
-        angles = _tactile_angles(subset)
-        table = [
-            "",
-            f"## {gripper.replace('_', ' ')} (tactile angle {angles} deg)",
-            "",
-            "| bias (mm) | runs | fail | silent | S0 median | min | q1 | median | q3 | max (mm) |",
-            "|---|---|---|---|---|---|---|---|---|---|",
-        ]
-        for magnitude in magnitudes:
-            at = [row for row in subset if row["params"]["bias_mm"] == magnitude]
-            final = _as_failures_infinite([final_error(row) for row in at])
-            stage0 = _as_failures_infinite([stage_error(row, 0) for row in at])
-            with np.errstate(invalid="ignore"):  # inf - inf between two failures
-                q = np.percentile(final, [0, 25, 50, 75, 100])
-            q = np.where(np.isnan(q), math.inf, q)
-            still_good = still_good and bool(q[2] < SUCCESS_MM)
-            if still_good:
-                reach = magnitude
-            samples.append(final)
-            failing, silent = failure_shares(at)
-            table.append(
-                f"| {magnitude:g} | {len(at)} | {percent(failing)} | {percent(silent)} "
-                f"| {fmt(float(np.median(stage0)))} | "
-                + " | ".join(fmt(float(v)) for v in q)
-                + " |"
-            )
-        lines += table
-        lines += [
-            "",
-            f"Reach: median < {SUCCESS_MM:g} mm up to {fmt(reach, 0)} mm bias "
-            f"(paper: {paper_reach:g} mm).",
-        ]
-        panels.append(
-            BoxPanel(
-                f"{gripper.replace('_', ' ')}, tactile angle {angles} deg",
-                np.array(magnitudes),
-                [np.minimum(s, 1e3) for s in samples],
-            )
-        )
+        section, panel = _gripper_section(gripper, subset, paper_reach)
+        lines += section
+        panels.append(panel)
         basin = basin_panel(gripper, subset)
         if basin is not None:
             basins.append(basin)
     lines += diagnosis_section(good)
-    figure_paths = []
-    if panels:
-        figure = box_plot_figure(
-            panels,
-            out_dir / f"{NAME}.png",
-            xlabel="bias magnitude (mm)",
-            ylabel="diameter error after fusion (mm)",
-            threshold=SUCCESS_MM,
-            ylim=(0.0, 30.0),
-            title="Fig. 10: |r| <= 15 mm, theta <= 45 deg",
-        )
-        figure_paths.append(figure)
-        lines += ["", f"![{NAME}]({figure.name})"]
-    if basins:
-        figure = failing_share_figure(
-            basins,
-            out_dir / f"{NAME}_basin.png",
-            xlabel="bias direction from the nearest pad (deg; 0: toward it)",
-            ylabel="bias magnitude (mm)",
-            title="Fig. 10: where the bias's basin ends",
-        )
-        figure_paths.append(figure)
-        lines += ["", f"![{NAME} basin]({figure.name})"]
+    figure_paths = _figures(panels, basins, out_dir)
+    lines += [
+        line
+        for path in figure_paths
+        for line in ("", f"![{path.stem.replace('_', ' ')}]({path.name})")
+    ]
     lines += failures_section(failed)
     report_path = out_dir / "report.md"
     report_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return [csv_path, *figure_paths, report_path]
+
+
+def _gripper_section(
+    gripper: str, subset: list[dict], paper_reach: float
+) -> tuple[list[str], BoxPanel]:
+    """One gripper's table (per bias magnitude: runs, failing and silent shares, Stage 0's
+    median and the final error's quartiles), its reach, and its box-plot panel."""
+    magnitudes = sorted({row["params"]["bias_mm"] for row in subset})
+    samples, reach, still_good = [], None, True
+    angles = _tactile_angles(subset)
+    lines = [
+        "",
+        f"## {gripper.replace('_', ' ')} (tactile angle {angles} deg)",
+        "",
+        "| bias (mm) | runs | fail | silent | S0 median | min | q1 | median | q3 | max (mm) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for magnitude in magnitudes:
+        at = [row for row in subset if row["params"]["bias_mm"] == magnitude]
+        final = _as_failures_infinite([final_error(row) for row in at])
+        stage0 = _as_failures_infinite([stage_error(row, 0) for row in at])
+        with np.errstate(invalid="ignore"):  # inf - inf between two failures
+            q = np.percentile(final, [0, 25, 50, 75, 100])
+        q = np.where(np.isnan(q), math.inf, q)
+        still_good = still_good and bool(q[2] < SUCCESS_MM)
+        if still_good:
+            reach = magnitude
+        samples.append(final)
+        failing, silent = failure_shares(at)
+        lines.append(
+            f"| {magnitude:g} | {len(at)} | {percent(failing)} | {percent(silent)} "
+            f"| {fmt(float(np.median(stage0)))} | " + " | ".join(fmt(float(v)) for v in q) + " |"
+        )
+    lines += [
+        "",
+        f"Reach: median < {SUCCESS_MM:g} mm up to {fmt(reach, 0)} mm bias "
+        f"(paper: {paper_reach:g} mm).",
+    ]
+    panel = BoxPanel(
+        f"{gripper.replace('_', ' ')}, tactile angle {angles} deg",
+        np.array(magnitudes),
+        [np.minimum(s, 1e3) for s in samples],
+    )
+    return lines, panel
+
+
+def _figures(panels: list[BoxPanel], basins: list[GridPanel], out_dir: Path) -> list[Path]:
+    """``fig10.png`` (the box plots) and ``fig10_basin.png`` (the basin maps), where there
+    is something to draw."""
+    paths = []
+    if panels:
+        paths.append(
+            box_plot_figure(
+                panels,
+                out_dir / f"{NAME}.png",
+                xlabel="bias magnitude (mm)",
+                ylabel="diameter error after fusion (mm)",
+                threshold=SUCCESS_MM,
+                ylim=(0.0, 30.0),
+                title="Fig. 10: |r| <= 15 mm, theta <= 45 deg",
+            )
+        )
+    if basins:
+        paths.append(
+            failing_share_figure(
+                basins,
+                out_dir / f"{NAME}_basin.png",
+                xlabel="bias direction from the nearest pad (deg; 0: toward it)",
+                ylabel="bias magnitude (mm)",
+                title="Fig. 10: where the bias's basin ends",
+            )
+        )
+    return paths

@@ -200,41 +200,10 @@ def report_grid(
     failing_lines = []
     for phi in phis:
         subset = [row for row in good if row["params"]["tactile_angle_deg"] == phi]
-        final = error_grid(subset, thetas, rs)
-        panels.append(
-            GridPanel(f"tactile angle {phi:+g} deg", np.array(rs), np.array(thetas), final)
-        )
-        summary = success_summary(final, thetas, rs)
-        in_claim = [
-            row
-            for row in subset
-            if row["params"]["theta_deg"] <= CLAIM_THETA_MAX_DEG
-            and abs(row["params"]["r_mm"]) <= CLAIM_R_MAX_MM
-        ]
-        medians = [
-            fmt(float(np.nanmedian([stage_error(row, k) for row in in_claim])))
-            if in_claim and any(not math.isnan(stage_error(row, k)) for row in in_claim)
-            else "-"
-            for k in (0, 1, 2)
-        ]
-        lines.append(
-            f"| {phi:+g} | {len(subset)} | {summary['claim_successes']}/{summary['claim_cells']} "
-            f"| {' / '.join(medians)} | {summary['grid_successes']}/{summary['grid_cells']} "
-            f"| {fmt(summary['theta_reach_deg'], 2)} | {fmt(summary['r_reach_mm'], 0)} "
-            f"| {_status_counts(subset)} |"
-        )
-        bad = [
-            (theta, r, final[i, j])
-            for i, theta in enumerate(thetas)
-            for j, r in enumerate(rs)
-            if theta <= CLAIM_THETA_MAX_DEG
-            and abs(r) <= CLAIM_R_MAX_MM
-            and not final[i, j] < SUCCESS_MM
-        ]
-        if bad:
-            cells = ", ".join(f"({t:g}°, {r:+g} mm): {fmt(e)}" for t, r, e in bad[:24])
-            more = f" ... {len(bad) - 24} more" if len(bad) > 24 else ""
-            failing_lines.append(f"- tactile angle {phi:+g}: {cells}{more}")
+        line, panel, failing = _grid_angle(phi, subset, thetas, rs)
+        lines.append(line)
+        panels.append(panel)
+        failing_lines += failing
     if failing_lines:
         lines += ["", "Claim-region cells that fail (theta, r): final error in mm:", ""]
         lines += failing_lines
@@ -254,6 +223,48 @@ def report_grid(
     report_path = out_dir / "report.md"
     report_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return [csv_path, figure, report_path]
+
+
+def _grid_angle(
+    phi: float, subset: Sequence[Mapping[str, Any]], thetas: list[float], rs: list[float]
+) -> tuple[str, GridPanel, list[str]]:
+    """One tactile angle of a theta x r grid: its table row, its error-map panel, and the
+    line listing its claim-region cells that fail (none when all succeed)."""
+    final = error_grid(subset, thetas, rs)
+    panel = GridPanel(f"tactile angle {phi:+g} deg", np.array(rs), np.array(thetas), final)
+    summary = success_summary(final, thetas, rs)
+    line = (
+        f"| {phi:+g} | {len(subset)} | {summary['claim_successes']}/{summary['claim_cells']} "
+        f"| {' / '.join(claim_medians(subset))} "
+        f"| {summary['grid_successes']}/{summary['grid_cells']} "
+        f"| {fmt(summary['theta_reach_deg'], 2)} | {fmt(summary['r_reach_mm'], 0)} "
+        f"| {_status_counts(subset)} |"
+    )
+    bad = [
+        (theta, r, final[i, j])
+        for i, theta in enumerate(thetas)
+        for j, r in enumerate(rs)
+        if theta <= CLAIM_THETA_MAX_DEG
+        and abs(r) <= CLAIM_R_MAX_MM
+        and not final[i, j] < SUCCESS_MM
+    ]
+    if not bad:
+        return line, panel, []
+    cells = ", ".join(f"({t:g}°, {r:+g} mm): {fmt(e)}" for t, r, e in bad[:24])
+    more = f" ... {len(bad) - 24} more" if len(bad) > 24 else ""
+    return line, panel, [f"- tactile angle {phi:+g}: {cells}{more}"]
+
+
+def claim_medians(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The median diameter error of Stages 0, 1 and 2 over the rows in the paper's claim
+    region, formatted for a table ('-' where none is defined)."""
+    in_claim = [row for row in rows if in_claim_region(row)]
+    return [
+        fmt(float(np.nanmedian([stage_error(row, k) for row in in_claim])))
+        if in_claim and any(not math.isnan(stage_error(row, k)) for row in in_claim)
+        else "-"
+        for k in (0, 1, 2)
+    ]
 
 
 def nearest_angle(angle_deg: float, angles_deg: Sequence[float]) -> float:
@@ -357,15 +368,10 @@ def report_random(
         claim = [row for row in subset if in_claim_region(row)]
         claim_fail, claim_silent = failure_shares(claim)
         all_fail, all_silent = failure_shares(subset)
-        errors = [[stage_error(row, k) for row in claim] for k in (0, 1, 2)]
-        medians = [
-            fmt(float(np.nanmedian(e))) if any(not math.isnan(v) for v in e) else "-"
-            for e in errors
-        ]
         lines.append(
             f"| {angle:+g} | {len(subset)} | {len(claim)} | {percent(claim_fail)} / "
-            f"{percent(claim_silent)} | {' / '.join(medians)} | {percent(all_fail)} / "
-            f"{percent(all_silent)} |"
+            f"{percent(claim_silent)} | {' / '.join(claim_medians(subset))} | "
+            f"{percent(all_fail)} / {percent(all_silent)} |"
         )
         panels.append(
             GridPanel(

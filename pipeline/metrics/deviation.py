@@ -87,8 +87,7 @@ def point_to_mesh_distances(
 
     Exact point-to-triangle distances from open3d's ``RaycastingScene.compute_distance``
     (BVH-accelerated). It was chosen over ``trimesh.proximity.closest_point``, which gives the
-    same distances about 150x slower (20,000 points on a 1,000-triangle cylinder: 0.03 s
-    against 4.8 s).
+    same distances two orders of magnitude more slowly.
 
     Args:
         points: ``(N, 3)`` points, same frame as the mesh.

@@ -44,7 +44,8 @@ def project_points(
 
     Args:
         points_robot: ``(..., 3)`` points in metres (any leading shape).
-        intrinsics, T_robot_camera: the camera.
+        intrinsics: the camera's pinhole intrinsics (px).
+        T_robot_camera: the camera's pose in the robot frame (4x4, m).
 
     Returns:
         ``rows``, ``cols`` (int, nearest pixel; meaningless where ``depth <= 0``) and

@@ -68,8 +68,8 @@ class GraspSettings:
     Attributes:
         timestep_s: physics timestep used during the grasp (restored afterwards).
         descent_speed_m_s: palm speed from the pre-grasp to the grasp pose: slow enough
-            that the guard stops a landing within a step (0.4 mm at 1/240 s); at 0.3 m/s
-            the landings knocked a 210 mm box over.
+            that the guard stops a landing within a step (0.4 mm at 1/240 s); three times as
+            fast, the landings knocked a tall box over.
         descent_guard_N: upward hand-object contact force that stops the descent (0: the
             descent is not guarded and pushes on).
         reapproaches: times a stopped descent is tried again, moved aside.
