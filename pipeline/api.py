@@ -56,6 +56,7 @@ from .types import (
     Bias,
     CameraImage,
     CameraIntrinsics,
+    ClosingPad,
     Consistency,
     Contacts,
     DepthObservation,
@@ -92,6 +93,7 @@ __all__ = [
     "Bias",
     "CameraImage",
     "CameraIntrinsics",
+    "ClosingPad",
     "ConfigError",
     "Consistency",
     "Contacts",
@@ -164,6 +166,7 @@ def stage_estimate(
     seconds: float = 0.0,
     active_points: int = 0,
 ) -> StageEstimate:
+    # Nine parameters: a plugin's estimator reports every field of a stage in one call.
     """One stage of an estimate, with its completed model.
 
     Args:

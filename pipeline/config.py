@@ -15,6 +15,10 @@ Files and overrides are deep-merged over the shipped ``default.toml``. Every key
 an unknown section, key or implementation name, or a value of the wrong type, is a
 :class:`~pipeline.errors.ConfigError` naming the dotted key. Parameters of implementations
 that are not selected are validated too, so a typo never waits for the day it is used.
+
+A config knows what the user set and where (:attr:`Config.changed`): the checks that read
+"did the user choose this" (:meth:`Config.check_trial`) and the notes on settings a command
+does not read ask it rather than comparing with the defaults again.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import copy
 import dataclasses
 import importlib.resources
 import tomllib
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
@@ -32,7 +36,7 @@ import tomli_w
 from .errors import ConfigError
 from .params import build, param, to_toml
 from .registry import StageRegistry
-from .stages import STAGES
+from .stages import STAGES, StageImplementation
 
 
 @dataclasses.dataclass(frozen=True)
@@ -175,11 +179,23 @@ class Config:
         choices: stage -> selected implementation name.
         params: stage -> implementation name -> validated ``Params`` instance, for the
             selected implementation and every implementation the files mention.
+        changed: what the user set, as dotted key -> where (a config file's path, a
+            ``--set``, the command's option that stands for the key, or ``settings``):
+            every key a ``--set`` or an option names, even to its default value (``--set
+            planner.use=top-parallel`` is a choice), and every key whose value differs from
+            the shipped defaults (a whole resolved ``config.toml`` given to ``--config`` sets
+            only what it changes). A parameter of an implementation the shipped defaults do
+            not mention is set where its stage's ``use`` is.
+        shipped: the shipped defaults, resolved (:meth:`to_dict`'s form).
     """
 
     settings: Mapping[str, Any]
     choices: Mapping[str, str]
     params: Mapping[str, Mapping[str, Any]]
+    # Where the values came from is not part of what they are: two configs of equal
+    # values are equal, however they were given.
+    changed: Mapping[str, str] = dataclasses.field(default_factory=dict, compare=False)
+    shipped: Mapping[str, Any] = dataclasses.field(default_factory=dict, repr=False, compare=False)
 
     @property
     def trial(self) -> TrialSettings:
@@ -210,6 +226,58 @@ class Config:
 
     def to_toml(self) -> str:
         return tomli_w.dumps(self.to_dict())
+
+    def changed_sections(self, sources: Collection[str] | None = None) -> list[str]:
+        """The sections with a key the user set (only those set in ``sources``, when
+        given: config files' paths, say), in config order."""
+        sections = {
+            key.split(".")[0]
+            for key, where in self.changed.items()
+            if sources is None or where in sources
+        }
+        return [section for section in self.to_dict() if section in sections]
+
+    def differing(self) -> dict[str, Any]:
+        """The values that differ from the shipped defaults, as a sparse nested dict that,
+        merged over them (``load_config(settings=...)``), gives this config back."""
+        return changed_settings(self.to_dict(), self.shipped)
+
+    def check_stages(self, registry: StageRegistry, stages: Iterable[str] = STAGES) -> None:
+        """Check the parameters of the implementations selected for ``stages`` as they go
+        together (:meth:`~pipeline.stages.StageImplementation.check_params`), without
+        building them; an implementation with its own ``__init__``, which may check more,
+        is built and dropped.
+
+        Raises:
+            ConfigError: naming the key at fault.
+        """
+        for stage in stages:
+            cls = registry.get(stage, self.choices[stage]).cls
+            if cls.__init__ is not StageImplementation.__init__:
+                self.create(registry, stage)
+            else:
+                cls.check_params(self.stage_params(stage))
+
+    def check_trial(self, registry: StageRegistry) -> None:
+        """The checks across keys a trial makes before it runs: a ``planner.use`` the user
+        chose that would not plan (:func:`pipeline.hand_choice.check_planner_is_read`), and
+        the next-grasp strategy or the stop rule set for a trial of one grasp (neither
+        would act).
+
+        Raises:
+            ConfigError: naming the key (and the option that stands for it) at fault.
+        """
+        from .hand_choice import check_planner_is_read
+
+        check_planner_is_read(self, registry, self.changed)
+        if self.trial.grasps > 1:
+            return
+        for key, option in (("next_grasp", "--next-grasp"), ("until_std_mm", "--until-std")):
+            if f"trial.{key}" in self.changed:
+                raise ConfigError(
+                    f"{option} (trial.{key}) applies to a trial of several grasps; give "
+                    "--grasps N with N > 1"
+                )
 
     def write(self, path: Path) -> Path:
         """Write the resolved config as TOML; ``--config`` on it reproduces the run."""
@@ -305,22 +373,56 @@ def _registration(registry: StageRegistry, stage: str, name: str, key: str):
     return registry.get(stage, name)
 
 
+def leaf_keys(nested: Mapping[str, Any], prefix: str = "") -> list[str]:
+    """The dotted keys of the values (not tables) of a nested config dict, in order."""
+    keys: list[str] = []
+    for key, value in nested.items():
+        dotted = f"{prefix}{key}"
+        keys += leaf_keys(value, f"{dotted}.") if isinstance(value, Mapping) else [dotted]
+    return keys
+
+
+def _implied_by(key: str, where: Mapping[str, str]) -> str:
+    """Where a parameter the user did not name took a value other than the shipped one
+    (an implementation the defaults do not mention, brought in whole): where another key
+    of its table was set, else where its stage's ``use`` was."""
+    table = key.rpartition(".")[0]
+    named = (source for other, source in where.items() if other.startswith(f"{table}."))
+    return next(named, where.get(f"{key.split('.')[0]}.use", ""))
+
+
 def load_config(
     registry: StageRegistry,
     files: Iterable[Path] = (),
     overrides: Iterable[str] = (),
     settings: Mapping[str, Any] | None = None,
+    options: Iterable[tuple[str, str]] = (),
 ) -> Config:
     """Merge the defaults, ``files`` (in order), ``settings`` (a nested dict, e.g. what
-    :func:`changed_settings` returned) and ``--set`` ``overrides``; validate.
+    :meth:`Config.differing` returned), ``--set`` ``overrides`` and the ``options`` of a
+    command (``(override, option)`` pairs, the option's name for :attr:`Config.changed`);
+    validate.
 
     Raises:
         ConfigError: naming the file or dotted key at fault.
     """
-    raw = tomllib.loads(default_config_text())
-    for path in files:
-        raw = _deep_merge(raw, read_toml(path))
-    raw = _deep_merge(raw, settings or {})
-    for override in overrides:
-        raw = _deep_merge(raw, parse_override(override))
-    return _validate(raw, registry)
+    shipped = tomllib.loads(default_config_text())
+    raw, named, where = shipped, [], {}
+    layers = [(read_toml(path), str(path)) for path in files]
+    layers.append((settings or {}, "settings"))
+    for text in overrides:
+        layers.append((parse_override(text), "--set"))
+    for text, option in options:
+        layers.append((parse_override(text), option))
+    for layer, source in layers:
+        raw = _deep_merge(raw, layer)
+        keys = leaf_keys(layer)
+        where.update(dict.fromkeys(keys, source))
+        if source.startswith("--"):
+            named += keys
+    config = _validate(raw, registry)
+    defaults = _validate(shipped, registry).to_dict()
+    changed = {key: where[key] for key in named}
+    for key in leaf_keys(changed_settings(config.to_dict(), defaults)):
+        changed.setdefault(key, where.get(key) or _implied_by(key, where))
+    return dataclasses.replace(config, changed=changed, shipped=defaults)

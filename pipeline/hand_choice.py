@@ -15,7 +15,7 @@ size and every hand's aperture.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -53,18 +53,17 @@ def named_hand_planners(config: Config, registry: StageRegistry) -> list[str]:
 
 
 def check_planner_is_read(
-    config: Config, registry: StageRegistry, changed: Mapping[str, Any]
+    config: Config, registry: StageRegistry, changed: Collection[str]
 ) -> None:
-    """Refuse a ``planner.use`` the user chose (``changed``: the settings the user's files
-    and ``--set`` changed from the defaults) that would not plan: with ``trial.gripper =
-    "auto"`` every installed planner competes, and a named hand is planned by
-    ``planner.use`` only when it names that hand or no planner does
-    (:func:`named_hand_planners`).
+    """Refuse a ``planner.use`` the user chose (in ``changed``, the dotted keys the user
+    set, :attr:`Config.changed`) that would not plan: with ``trial.gripper = "auto"``
+    every installed planner competes, and a named hand is planned by ``planner.use`` only
+    when it names that hand or no planner does (:func:`named_hand_planners`).
 
     Raises:
         ConfigError: naming ``planner.use``, the hands it plans for and what to do.
     """
-    if "use" not in changed.get("planner", {}):
+    if "planner.use" not in changed:
         return
     chosen = config.choices["planner"]
     gripper = config.trial.gripper
@@ -172,6 +171,7 @@ def choose_grasp(
     grippers: Mapping[str, GripperSpec],
     table_height_m: float,
     missed: Sequence[GraspPlan] = (),
+    planners: Planners | None = None,
 ) -> HandChoice:
     """Plan the grasp for ``config.trial.gripper`` (a name in ``grippers``, or ``"auto"``).
 
@@ -180,10 +180,12 @@ def choose_grasp(
         table_height_m: z of the table top (for the size quoted in a refusal), m.
         missed: earlier grasps of this object whose pads did not touch opposing sides: each
             planner plans its best grasp unlike them (:func:`like_missed`).
+        planners: the planners built so far (None: build those asked for).
     """
+    planners = planners or Planners(config, registry)
     wanted = config.trial.gripper
     if wanted != AUTO and named_hand_planners(config, registry) == [config.choices["planner"]]:
-        planner = config.create(registry, "planner")
+        planner = planners(config.choices["planner"])
         plan = _plan(planner, cloud, proposal, grippers[wanted], missed)
         answer = PlannerAnswer(wanted, config.choices["planner"], plan)
         return HandChoice(answer, f"trial.gripper = '{wanted}'", (answer,))
@@ -192,7 +194,7 @@ def choose_grasp(
     for name in registry.names("planner"):
         for gripper in registry.get("planner", name).cls.grippers:
             if gripper in grippers and wanted in (AUTO, gripper):
-                planner = create_planner(config, registry, name)
+                planner = planners(name)
                 plan = _plan(planner, cloud, proposal, grippers[gripper], missed)
                 answers.append(PlannerAnswer(gripper, name, plan))
     feasible = [a for a in answers if a.plan.status == "ok"]
@@ -219,6 +221,21 @@ def create_planner(config: Config, registry: StageRegistry, name: str) -> GraspP
     has none: with ``trial.gripper = "auto"`` a planner other than ``planner.use`` plans)."""
     params = config.params["planner"].get(name, registry.get("planner", name).cls.Params())
     return registry.create("planner", name, to_toml(params))
+
+
+class Planners:
+    """The planners of one run by name, each built once (:func:`create_planner`) when
+    first asked for: a trial plans its first grasp and every later one with them."""
+
+    def __init__(self, config: Config, registry: StageRegistry) -> None:
+        self._config = config
+        self._registry = registry
+        self._built: dict[str, GraspPlanner] = {}
+
+    def __call__(self, name: str) -> GraspPlanner:
+        if name not in self._built:
+            self._built[name] = create_planner(self._config, self._registry, name)
+        return self._built[name]
 
 
 def _score(plan: GraspPlan) -> float:

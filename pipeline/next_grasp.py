@@ -43,13 +43,13 @@ from .perception.candidate import alignment
 from .perception.pad_contact import (
     PadContact,
     PadTaxels,
+    curved_pad_taxels,
     flat_pad_taxels,
     pad_coverage,
-    sdh_distal_taxels,
 )
-from .perception.sdh_geometry import FINGER_BASES_M, FINGERS, finger_facings
 from .types import (
     Bias,
+    ClosingPad,
     Contacts,
     GraspPlan,
     GripperSpec,
@@ -90,11 +90,12 @@ TURN_SIGMAS = 2.0
 
 @dataclass(frozen=True)
 class MeasurementModel:
-    """The estimator's model the information score predicts with (``estimator.iekf``'s
-    parameters): ``C_t`` and ``R`` as (along, across) the taxel normal (m), each point's
-    prior std (m), whether the correspondences filter by facing, and the re-grasp noise
-    ``Q`` (``(6, 6)`` over ``g``) the object's motion adds before every grasp after the
-    first."""
+    """The estimator's model the information score predicts with (what the estimator's
+    :meth:`~pipeline.stages.Estimator.measurement_model` gives; the built-in ``iekf``'s
+    from its parameters): ``C_t`` and ``R`` as (along, across) the taxel normal (m), each
+    point's prior std (m), whether the correspondences filter by facing, and the re-grasp
+    noise ``Q`` (``(6, 6)`` over ``g``) the object's motion adds before every grasp after
+    the first."""
 
     window_std_m: tuple[float, float]
     noise_std_m: tuple[float, float]
@@ -210,38 +211,47 @@ class PadApproach:
 
 
 def pad_approaches(plan: GraspPlan, gripper: GripperSpec) -> list[PadApproach]:
-    """How each tactile pad of ``plan`` closes on the object: the PG-70's two jaws along
-    the hand's x axis (front pad ``left`` forward, ``right`` back), the SDH-2's three
-    distal pads along their fingers' facings from their bases. The pads' centre height is
-    that of the plan's predicted contacts (the hand's pad height is the planner's)."""
+    """How each tactile pad of ``plan`` closes on the object, as the hand declares
+    (:attr:`~pipeline.types.GripperSpec.closing`): along its facing, turned by the plan's
+    spread, from its finger's base (a parallel gripper's jaws: along the hand's x axis
+    and back). The pads' centre height is that of the plan's predicted contacts (the
+    hand's pad height is the planner's)."""
     T = np.asarray(plan.T_robot_hand, dtype=float)
-    if len(plan.predicted_contacts) == 0:
+    if len(plan.predicted_contacts) == 0 or not gripper.closing:
         return []
     height_m = float(np.mean(np.asarray(plan.predicted_contacts)[:, 2]))
     x_hand = np.array([T[0, 0], T[1, 0], 0.0]) / np.hypot(T[0, 0], T[1, 0])
     pads = {pad.name: pad for pad in gripper.pads}
-    if gripper.fingers == 2:
-        front, back = (pads[name] for name in ("left", "right"))
-        origin = np.array([T[0, 3], T[1, 3], height_m])
-        return [
-            PadApproach(front.name, origin, x_hand, flat_pad_taxels(front, height_m)),
-            PadApproach(back.name, origin, -x_hand, flat_pad_taxels(back, height_m)),
-        ]
     rotation = np.column_stack([x_hand[:2], [x_hand[1], -x_hand[0]]])
-    bases = T[:2, 3] + FINGER_BASES_M @ rotation.T
-    facings = finger_facings(plan.spread_rad) @ rotation.T
+    bases = T[:2, 3] + np.array([closing.base_m for closing in gripper.closing]) @ rotation.T
+    facings = np.array([_facing(c, plan.spread_rad) for c in gripper.closing]) @ rotation.T
     approaches = []
-    for finger, base, facing in zip(FINGERS, bases, facings, strict=True):
-        pad = pads[f"{finger}_distal"]
+    for closing, base, facing in zip(gripper.closing, bases, facings, strict=True):
+        pad = pads[closing.pad]
+        taxels = (
+            curved_pad_taxels(pad, height_m, closing.curved_rows, closing.curve_radius_m)
+            if closing.curved_rows
+            else flat_pad_taxels(pad, height_m)
+        )
         approaches.append(
             PadApproach(
                 pad.name,
                 np.array([base[0], base[1], height_m]),
                 np.array([facing[0], facing[1], 0.0]),
-                sdh_distal_taxels(pad, height_m),
+                taxels,
             )
         )
     return approaches
+
+
+def _facing(closing: ClosingPad, spread_rad: float) -> tuple[float, float]:
+    """``closing``'s facing in the palm's xy plane at the spread ``spread_rad``."""
+    if closing.spread_sign == 0:
+        return closing.facing
+    angle = closing.spread_sign * spread_rad
+    c, s = math.cos(angle), math.sin(angle)
+    x, y = closing.facing
+    return (c * x - s * y, s * x + c * y)
 
 
 def _taxel_cells(points_m: np.ndarray, approach: PadApproach) -> np.ndarray:

@@ -323,6 +323,7 @@ def colour_bar(
     width: int = 16,
     beyond_high: bool = False,
 ) -> None:
+    # Ten parameters: where to draw, the scale and its label, as a plotting call takes them.
     """A vertical colour bar from ``low`` (bottom) to ``high`` (top) with ticks and a
     label; ``beyond_high`` caps it with a triangle in the top colour (values above
     ``high`` are drawn in it)."""

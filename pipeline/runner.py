@@ -85,9 +85,23 @@ def estimate(
     Raises:
         StageFailure: the initialiser rejected every hypothesis.
     """
+    return estimate_with(config.create(registry, "estimator"), cloud, init, grasps, view)
+
+
+def estimate_with(
+    estimator: Estimator,
+    cloud: PointCloud,
+    init: SymmetryInit,
+    grasps: Sequence[Contacts],
+    view: DepthObservation | None = None,
+) -> EstimateResult:
+    """:func:`estimate` with an estimator already built (a trial builds its stages once).
+
+    Raises:
+        StageFailure: the initialiser rejected every hypothesis.
+    """
     if init.status != "ok":
         raise StageFailure(f"initialiser gave no usable symmetry plane: {init.reason}")
-    estimator = config.create(registry, "estimator")
     problem = EstimationProblem(cloud=cloud, init=init, grasps=tuple(grasps), view=view)
     return run_estimator(estimator, problem)
 

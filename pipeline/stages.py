@@ -22,7 +22,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from types import TracebackType
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
@@ -45,6 +45,9 @@ from .types import (
     TaxelState,
 )
 
+if TYPE_CHECKING:
+    from .next_grasp import MeasurementModel
+
 STAGES = ("world", "sensor", "segmenter", "initialiser", "planner", "tactile", "estimator")
 """The stage kinds, in pipeline order; these are also the config section names."""
 
@@ -63,7 +66,19 @@ class StageImplementation(ABC):
         if params is None or isinstance(params, Mapping):
             params = build(self.Params, params or {}, section)
         self.params = params
-        check_bounds(self.params, section)
+        self.check_params(self.params)
+
+    @classmethod
+    def check_params(cls, params: object) -> None:
+        """Refuse parameters that do not go together: each within its declared bounds,
+        and (an implementation overrides this, calling it first) any pair that makes no
+        sense, named by its dotted key. Runs as the implementation is built, and when a
+        config is checked without building it (:meth:`pipeline.config.Config.check_stages`).
+
+        Raises:
+            ConfigError: naming the key at fault.
+        """
+        check_bounds(params, f"{cls.stage}.{cls.name}")
 
     @classmethod
     def description(cls) -> str:
@@ -312,6 +327,13 @@ class Estimator(StageImplementation):
     @abstractmethod
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         """Return the three stage estimates (0: initial, 1: bias + plane, 2: + points)."""
+
+    def measurement_model(self) -> MeasurementModel | None:
+        """How this estimator weighs taxels, for the next-grasp information score to predict
+        its fusion with (:class:`pipeline.next_grasp.MeasurementModel`); None when it has
+        no taxel model of its own (the score then takes an installed estimator's that
+        has, :func:`pipeline.trial.measurement_model`)."""
+        return None
 
 
 CONTRACTS: dict[str, type[StageImplementation]] = {

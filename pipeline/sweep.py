@@ -35,7 +35,7 @@ from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Any, Literal
+from typing import IO, Any, Literal
 
 from tqdm import tqdm
 
@@ -61,6 +61,7 @@ def run_sweep(
     fingerprint: str = "",
     rerun_stale: bool = False,
 ) -> list[dict]:
+    # Nine parameters: what to run and where, then how, each keyword-only with a default.
     """Run every task not yet in ``results_path`` and return the rows of all ``tasks``.
 
     Args:
@@ -99,25 +100,7 @@ def run_sweep(
 
     results_path = Path(results_path)
     results_path.parent.mkdir(parents=True, exist_ok=True)
-    hashes = {task.key: row_hash(task, fingerprint) for task in tasks}
-    rows_by_key = {row["key"]: row for row in read_rows(results_path)}
-    stale = [key for key, row in rows_by_key.items() if row.get("config_hash") != hashes.get(key)]
-    stale = [key for key in stale if key in hashes]
-    if stale and not rerun_stale:
-        raise ConfigError(
-            f"{results_path}: {len(stale)} of {len(rows_by_key)} finished rows were made with "
-            f"other params or config (first: {stale[0]}); pass --overwrite to re-run them"
-        )
-    if stale:
-        _log.warning("%s: re-running %d stale rows", results_path, len(stale))
-        for key in stale:
-            del rows_by_key[key]
-        _rewrite(results_path, rows_by_key.values())
-    pending = [
-        (task.key, _json_params(task), hashes[task.key])
-        for task in tasks
-        if task.key not in rows_by_key
-    ]
+    rows_by_key, pending = _finished_and_pending(tasks, results_path, fingerprint, rerun_stale)
     finished_before = len(tasks) - len(pending)
 
     # Connected before the progress bar starts: a scheduler that cannot be reached is then
@@ -138,18 +121,56 @@ def run_sweep(
             else _run_local(pending, run_one, workers or os.cpu_count() or 1)
         ) as lines,
     ):
-        errors = 0
-        for line in lines:
-            results.write(line + "\n")
-            results.flush()
-            os.fsync(results.fileno())
-            row = json.loads(line)
-            rows_by_key[row["key"]] = row
-            if "error" in row:
-                errors += 1
-                bar.set_postfix(errors=errors)
-            bar.update()
+        _append_rows(lines, results, bar, rows_by_key)
     return [rows_by_key[key] for key in keys]
+
+
+def _append_rows(lines: Iterable[str], results: IO[str], bar: tqdm, rows: dict[str, dict]) -> None:
+    """Append each row as it comes to the results file (flushed to disk: a row written is
+    a row kept whatever ends the run) and to ``rows`` by key; count errors on the bar."""
+    errors = 0
+    for line in lines:
+        results.write(line + "\n")
+        results.flush()
+        os.fsync(results.fileno())
+        row = json.loads(line)
+        rows[row["key"]] = row
+        if "error" in row:
+            errors += 1
+            bar.set_postfix(errors=errors)
+        bar.update()
+
+
+def _finished_and_pending(
+    tasks: Sequence[SweepTask], results_path: Path, fingerprint: str, rerun_stale: bool
+) -> tuple[dict[str, dict], list[tuple[str, str, str]]]:
+    """The rows ``results_path`` holds by key, and the tasks still to run as ``(key,
+    params as JSON, row hash)``; stale rows (module doc) are dropped from the file to be
+    run again when ``rerun_stale``.
+
+    Raises:
+        ConfigError: stale rows without ``rerun_stale``.
+    """
+    hashes = {task.key: row_hash(task, fingerprint) for task in tasks}
+    rows_by_key = {row["key"]: row for row in read_rows(results_path)}
+    stale = [key for key, row in rows_by_key.items() if row.get("config_hash") != hashes.get(key)]
+    stale = [key for key in stale if key in hashes]
+    if stale and not rerun_stale:
+        raise ConfigError(
+            f"{results_path}: {len(stale)} of {len(rows_by_key)} finished rows were made with "
+            f"other params or config (first: {stale[0]}); pass --overwrite to re-run them"
+        )
+    if stale:
+        _log.warning("%s: re-running %d stale rows", results_path, len(stale))
+        for key in stale:
+            del rows_by_key[key]
+        _rewrite(results_path, rows_by_key.values())
+    pending = [
+        (task.key, _json_params(task), hashes[task.key])
+        for task in tasks
+        if task.key not in rows_by_key
+    ]
+    return rows_by_key, pending
 
 
 # ---------------------------------------------------------------- the sweep's folder

@@ -43,6 +43,7 @@ from .types import (
     Bias,
     CameraImage,
     CameraIntrinsics,
+    ClosingPad,
     Contacts,
     EstimationProblem,
     GraspOutcome,
@@ -223,7 +224,8 @@ class AnalyticWorld(World):
         pads = tuple(
             PadLayout(name, f"{name}_pad", p.rows, p.cols, p.pitch_m) for name in ("left", "right")
         )
-        return GripperSpec(PARALLEL_HAND, 2, p.max_aperture_m, pads, p.finger_length_m)
+        closing = ClosingPad.jaws("left", "right")
+        return GripperSpec(PARALLEL_HAND, 2, p.max_aperture_m, pads, p.finger_length_m, closing)
 
     def gripper_spec(self, name: str) -> GripperSpec:
         if name != PARALLEL_HAND:

@@ -19,20 +19,17 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import __version__
-from .asset.files import write_model
 from .camera_file import camera_to_json
 from .catalogue import CatalogueObject, load_object
-from .config import Config
+from .config import Config, TrialSettings
 from .errors import StageFailure, SymfuseError
-from .estimation.map_params import regrasp_noise
 from .evaluation import (
     GroundTruth,
     evaluate_stage,
@@ -42,17 +39,13 @@ from .evaluation import (
     opposing_contacts,
 )
 from .formats import (
-    bias_to_json,
     contacts_to_json,
-    estimate_to_json,
     plan_to_json,
-    plane_to_json,
     selection_to_json,
     write_cloud,
-    write_completed_clouds,
     write_json,
 )
-from .hand_choice import HandChoice, choice_to_json, choose_grasp, create_planner, next_try
+from .hand_choice import HandChoice, Planners, choose_grasp, next_try
 from .next_grasp import (
     MeasurementModel,
     NextHand,
@@ -61,13 +54,25 @@ from .next_grasp import (
     stop_reason,
     uncertainty,
 )
+from .params import to_toml
 from .registry import StageRegistry
-from .runner import estimate
-from .stages import World
+from .result_document import estimate_entries, write_estimate_files
+from .runner import estimate_with
+from .stages import (
+    STAGES,
+    Estimator,
+    Segmenter,
+    SensorSource,
+    SymmetryInitialiser,
+    TactileModel,
+    World,
+)
+from .trial_document import TrialDocument, pose_to_json
 from .types import (
     Contacts,
     DepthObservation,
     EstimateResult,
+    GraspOutcome,
     GraspPlan,
     ObjectPose,
     PointCloud,
@@ -123,13 +128,6 @@ class TrialRecord:
     metrics: list[dict[str, Any]]
     timings: dict[str, float]
     document: dict[str, Any]
-
-
-def pose_to_json(pose: ObjectPose) -> dict[str, Any]:
-    return {
-        "position": [float(v) for v in pose.position_m],
-        "quaternion_xyzw": [float(v) for v in pose.quaternion_xyzw],
-    }
 
 
 def ground_truth(
@@ -249,6 +247,77 @@ def draw_grasps(
     )
 
 
+@dataclass(frozen=True)
+class TrialStages:
+    """The stages of one trial, each built once from the config: the world, the sensor,
+    the segmenter, the initialiser, the tactile model and the estimator, and the planners
+    (built by name as hand choice asks for them, :class:`~pipeline.hand_choice.Planners`)."""
+
+    world: World
+    sensor: SensorSource
+    segmenter: Segmenter
+    initialiser: SymmetryInitialiser
+    planners: Planners
+    tactile: TactileModel
+    estimator: Estimator
+
+    @classmethod
+    def build(cls, config: Config, registry: StageRegistry) -> TrialStages:
+        """Every configured stage, in pipeline order (a stage's own checks of its
+        parameters run as it is built, so a bad one fails before the scene is loaded)."""
+        planners = Planners(config, registry)
+        built = {
+            stage: planners(config.choices[stage])
+            if stage == "planner"
+            else config.create(registry, stage)
+            for stage in STAGES
+        }
+        built["planners"] = planners
+        del built["planner"]
+        return cls(**built)
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One running trial: its config, its stages, the object, the output folder, the
+    phase timer, the result document it fills in (``record``, written as ``result.json``)
+    and the progress callback."""
+
+    config: Config
+    registry: StageRegistry
+    stages: TrialStages
+    obj: CatalogueObject
+    out_dir: Path
+    timer: PhaseTimer
+    record: TrialDocument
+    report: Callable[[str], None]
+
+    @property
+    def settings(self) -> TrialSettings:
+        return self.config.trial
+
+    @property
+    def world(self) -> World:
+        return self.stages.world
+
+    def phase(self, name: str) -> AbstractContextManager[None]:
+        """Time the block as the phase ``name`` (:class:`PhaseTimer`)."""
+        return self.timer.phase(name)
+
+
+@dataclass(frozen=True)
+class Look:
+    """What one look at the scene left (:func:`_look_and_plan`): the object's pose when
+    seen, the observation, the object's cloud, the initialiser's proposal and the chosen
+    hand and grasp."""
+
+    pose_seen: ObjectPose
+    observation: DepthObservation
+    cloud: PointCloud
+    proposal: SymmetryInit
+    choice: HandChoice
+
+
 def run_trial(
     config: Config,
     registry: StageRegistry,
@@ -273,123 +342,95 @@ def run_trial(
     out_dir.mkdir(parents=True, exist_ok=True)
     config.write(out_dir / "config.toml")
     settings = config.trial
-    timer = PhaseTimer()
-    document: dict[str, Any] = {
-        "symfuse": __version__,
-        "command": "trial",
-        "object": settings.object,
-        "gripper": settings.gripper,
-        "seed": settings.seed,
-        "stages_used": dict(config.choices),
-        "status": "running",
-        "config": config.to_dict(),
-    }
-    stages = {stage: config.create(registry, stage) for stage in config.choices}
+    record = TrialDocument(config)
+    stages = TrialStages.build(config, registry)
     obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
+    trial = Trial(config, registry, stages, obj, out_dir, PhaseTimer(), record, report)
     try:
-        return _simulate(config, registry, stages, obj, out_dir, timer, document, report)
+        return _simulate(trial)
     except SymfuseError as exc:
         # A failure after the first data file is a result: record how far the trial got.
         if any(path.name != "config.toml" for path in out_dir.iterdir()):
-            document.update(status="failed", reason=str(exc), timings=timer.seconds)
-            write_json(out_dir / "result.json", document)
+            record.fail(out_dir, str(exc), trial.timer.seconds)
         raise
 
 
-def _simulate(
-    config: Config,
-    registry: StageRegistry,
-    stages: dict[str, Any],
-    obj: CatalogueObject,
-    out_dir: Path,
-    timer: PhaseTimer,
-    document: dict[str, Any],
-    report: Callable[[str], None],
-) -> TrialRecord:
-    """The body of :func:`run_trial`: simulate, estimate, evaluate, write. A first grasp
-    that misses (:class:`MissedGrasp`) is released and the object looked at and grasped
-    again, unlike every grasp that missed, up to ``trial.retries`` times."""
-    settings = config.trial
-    world = stages["world"]
-    report(f"scene: {settings.object} with {settings.gripper}")
+def _simulate(trial: Trial) -> TrialRecord:
+    """The body of :func:`run_trial`: simulate, estimate, evaluate, write."""
+    settings, world = trial.settings, trial.world
+    trial.report(f"scene: {settings.object} with {settings.gripper}")
     try:
-        with timer.phase("scene"):
+        with trial.phase("scene"):
             world.load_scene(
                 SceneSetup(
-                    obj,
+                    trial.obj,
                     x_m=settings.x_m,
                     y_m=settings.y_m,
                     yaw_rad=float(np.radians(settings.yaw_deg)),
                     seed=settings.seed,
                 )
             )
-        missed: list[MissedGrasp] = []
-        document["missed_grasps"] = []
-        while True:
-            pose_before, observation, cloud, proposal, choice = _look_and_plan(
-                config, registry, stages, out_dir, timer, document, report, missed
-            )
-            try:
-                fused = _grasp_and_fuse(
-                    config,
-                    registry,
-                    stages,
-                    obj,
-                    world,
-                    observation,
-                    pose_before,
-                    cloud,
-                    proposal,
-                    choice,
-                    out_dir,
-                    timer,
-                    document,
-                    report,
-                )
-                break
-            except MissedGrasp as miss:
-                if len(missed) >= settings.retries:
-                    raise MissedGrasp(
-                        f"{miss}{next_try(world.hands, miss.plan.gripper)}", miss.plan
-                    ) from None
-                # Release, look again (the pads pushed the object) and grasp unlike this.
-                document["missed_grasps"].append(document.pop("unfused_grasp"))
-                missed.append(miss)
-                report(f"{miss}; grasping again ({len(missed)} of {settings.retries})")
-                with timer.phase("grasp"):
-                    world.release()
+        look, fused = _grasp_until_held(trial)
     finally:
         world.close()
+    return _write_results(trial, look, fused)
 
+
+def _grasp_until_held(trial: Trial) -> tuple[Look, Fused]:
+    """Look, plan and grasp; a first grasp that misses (:class:`MissedGrasp`) is released
+    and the object looked at and grasped again, unlike every grasp that missed, up to
+    ``trial.retries`` times. The last look and what its grasps fused."""
+    settings, world, record = trial.settings, trial.world, trial.record
+    missed: list[MissedGrasp] = []
+    record.start_looking()
+    while True:
+        look = _look_and_plan(trial, missed)
+        try:
+            return look, _grasp_and_fuse(trial, look)
+        except MissedGrasp as miss:
+            if len(missed) >= settings.retries:
+                raise MissedGrasp(
+                    f"{miss}{next_try(world.hands, miss.plan.gripper)}", miss.plan
+                ) from None
+            # Release, look again (the pads pushed the object) and grasp unlike this.
+            record.missed()
+            missed.append(miss)
+            trial.report(f"{miss}; grasping again ({len(missed)} of {settings.retries})")
+            with trial.phase("grasp"):
+                world.release()
+
+
+def _write_results(trial: Trial, look: Look, fused: Fused) -> TrialRecord:
+    """The estimate's files, the model and its scores, the pictures and ``result.json``."""
+    out_dir, record = trial.out_dir, trial.record
     result, truth, evaluated = fused.result, fused.truth, fused.evaluated
     metrics = [stage_metrics for stage_metrics, _ in evaluated]
-    with timer.phase("write"):
-        write_completed_clouds(out_dir, result)
-        truth_mesh = obj.mesh.copy().apply_transform(fused.object_after.transform)
+    with trial.phase("write"):
+        truth_mesh = trial.obj.mesh.copy().apply_transform(fused.object_after.transform)
         truth_mesh.export(out_dir / "object_final.ply")
-    with timer.phase("model"):
-        model, document["model"] = write_model(
-            out_dir, result, config.model, observation.table_height_m, cloud.viewpoint_m
+    with trial.phase("model"):
+        model, entry = write_estimate_files(
+            out_dir,
+            result,
+            trial.config.model,
+            look.observation.table_height_m,
+            look.cloud.viewpoint_m,
         )
+        record.model(entry)
     if model is not None:
-        with timer.phase("evaluation"):
+        with trial.phase("evaluation"):
             scores = model_scores(model, truth)
         metrics = [{**m, **scores[s.stage]} for m, s in zip(metrics, result.stages, strict=True)]
-    if settings.pictures:
-        with timer.phase("pictures"):
-            draw_pictures(out_dir, config, cloud.points, fused.init, result, evaluated, truth)
-            draw_grasps(out_dir / "grasps.png", settings.object, result, truth, fused, document)
-    document.update(
-        status=result.final.status,
-        stages=[
-            {**stage_json, "metrics": stage_metrics}
-            for stage_json, stage_metrics in zip(estimate_to_json(result), metrics, strict=True)
-        ],
-        **selection_to_json(result),
-        timings=timer.seconds,
-    )
-    write_json(out_dir / "result.json", document)
-    return TrialRecord(out_dir, result, metrics, dict(timer.seconds), document)
+    if trial.settings.pictures:
+        with trial.phase("pictures"):
+            draw_pictures(
+                out_dir, trial.config, look.cloud.points, fused.init, result, evaluated, truth
+            )
+            draw_grasps(
+                out_dir / "grasps.png", trial.settings.object, result, truth, fused, record.data
+            )
+    record.finish(out_dir, result, metrics, trial.timer.seconds)
+    return TrialRecord(out_dir, result, metrics, dict(trial.timer.seconds), record.data)
 
 
 class MissedGrasp(StageFailure):
@@ -402,21 +443,11 @@ class MissedGrasp(StageFailure):
         self.plan = plan
 
 
-def _look_and_plan(
-    config: Config,
-    registry: StageRegistry,
-    stages: dict[str, Any],
-    out_dir: Path,
-    timer: PhaseTimer,
-    document: dict[str, Any],
-    report: Callable[[str], None],
-    missed: list[MissedGrasp],
-) -> tuple[ObjectPose, DepthObservation, PointCloud, SymmetryInit, HandChoice]:
+def _look_and_plan(trial: Trial, missed: list[MissedGrasp]) -> Look:
     """Sense, segment, propose a plane and choose the hand and grasp, unlike the grasps
     that ``missed`` (:func:`~pipeline.hand_choice.choose_grasp`); the hand is in the scene
-    when it returns. Writes the view's files and ``document``'s entries for them (a later
-    look replaces an earlier one's). Returns the object's pose when seen, the observation,
-    the cloud, the proposal and the choice.
+    when it returns. Writes the view's files and the record's entries for them (a later
+    look replaces an earlier one's).
 
     Raises:
         StageFailure: segmentation found no object, or no hand can grasp it (after a miss:
@@ -424,60 +455,65 @@ def _look_and_plan(
     """
     from .images import save_depth, save_rgb
 
-    settings = config.trial
-    world = stages["world"]
-    pose_before = world.object_pose()
-    report("sensing")
-    with timer.phase("sensor"):
-        observation = stages["sensor"].observe(world)
-    if settings.pictures:
-        with timer.phase("pictures"):
+    stages, world, out_dir = trial.stages, trial.world, trial.out_dir
+    pose_seen = world.object_pose()
+    trial.report("sensing")
+    with trial.phase("sensor"):
+        observation = stages.sensor.observe(world)
+    if trial.settings.pictures:
+        with trial.phase("pictures"):
             save_rgb(out_dir / "rgb.png", observation.rgb)
             save_depth(out_dir / "depth.png", observation.depth_m)
-    with timer.phase("write"):
+    with trial.phase("write"):
         np.save(out_dir / "depth.npy", observation.depth_m)
         write_json(out_dir / "camera.json", camera_to_json(observation))
-    report("segmenting")
-    with timer.phase("segmenter"):
-        cloud = stages["segmenter"].segment(observation)
-    with timer.phase("write"):
+    trial.report("segmenting")
+    with trial.phase("segmenter"):
+        cloud = stages.segmenter.segment(observation)
+    with trial.phase("write"):
         write_cloud(out_dir / "cloud.ply", cloud.points)
-    document["object_pose_before"] = pose_to_json(pose_before)
-    document["points"] = len(cloud)
-    report("initialising and planning")
-    with timer.phase("initialiser"):
-        proposal = stages["initialiser"].propose(cloud, observation)
-    with timer.phase("planner"):
+    trial.record.view(pose_seen, len(cloud))
+    trial.report("initialising and planning")
+    with trial.phase("initialiser"):
+        proposal = stages.initialiser.propose(cloud, observation)
+    with trial.phase("planner"):
         # Without a tool change the hand that missed makes every later attempt.
         hands = world.hands if world.gripper is None or world.changes_hands else ()
         grippers = {name: world.gripper_spec(name) for name in hands or (world.gripper.name,)}
         choice = choose_grasp(
-            config,
-            registry,
+            trial.config,
+            trial.registry,
             cloud,
             proposal,
             grippers,
             observation.table_height_m,
             [miss.plan for miss in missed],
+            stages.planners,
         )
-    plan = choice.plan
+    _take_choice(trial, choice, missed)
+    return Look(pose_seen, observation, cloud, proposal, choice)
+
+
+def _take_choice(trial: Trial, choice: HandChoice, missed: list[MissedGrasp]) -> None:
+    """Record the hand and grasp chosen and bring the hand into the scene.
+
+    Raises:
+        StageFailure: no hand can grasp the object (after a miss: no grasp unlike those that
+            missed; the miss is then the trial's failure).
+    """
+    plan, world = choice.plan, trial.world
     if plan.status != "ok" and missed:
         raise MissedGrasp(f"{missed[-1]}; no grasp unlike it: {plan.reason}", missed[-1].plan)
-    document["gripper"] = choice.answer.gripper
-    document["hand"] = choice_to_json(choice)
-    if choice.answer.planner:
-        document["stages_used"]["planner"] = choice.answer.planner
-    document["plan"] = plan_to_json(plan)
+    trial.record.choice(choice)
     if plan.status != "ok":
         if not choice.answer.planner:
             raise StageFailure(plan.reason)
         raise StageFailure(f"grasp planner '{choice.answer.planner}' refused: {plan.reason}")
-    with timer.phase("grasp"):
+    with trial.phase("grasp"):
         if world.gripper is not None and world.gripper.name != plan.gripper:
             world.remove_hand()
         if world.gripper is None:
             world.add_hand(plan.gripper)
-    return pose_before, observation, cloud, proposal, choice
 
 
 @dataclass(frozen=True)
@@ -494,149 +530,171 @@ class Fused:
     contacts: tuple[Contacts, ...]
 
 
-def _grasp_and_fuse(
-    config: Config,
-    registry: StageRegistry,
-    stages: dict[str, Any],
-    obj: CatalogueObject,
-    world: World,
-    observation: DepthObservation,
-    pose_seen: ObjectPose,
-    cloud: PointCloud,
-    proposal: SymmetryInit,
-    choice: HandChoice,
-    out_dir: Path,
-    timer: PhaseTimer,
-    document: dict[str, Any],
-    report: Callable[[str], None],
-) -> Fused:
+@dataclass(frozen=True)
+class Attempt:
+    """One grasp as planned, chosen and executed (:func:`_execute`): its number ``k``
+    (from 0), the plan, how it was chosen, the world's outcome, its ``executed`` entry of
+    the record, and how far it moved (m) and tilted (rad) the object."""
+
+    k: int
+    plan: GraspPlan
+    chosen_by: dict[str, Any]
+    outcome: GraspOutcome
+    executed: dict[str, Any]
+    shift_m: float
+    tilt_rad: float
+
+    def to_json(self, contacts: Contacts | None = None) -> dict[str, Any]:
+        """:func:`attempt_to_json` of this grasp (and what it touched, when read)."""
+        return attempt_to_json(self.k, self.plan, self.chosen_by, self.executed, contacts)
+
+
+def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
     """Grasp, read the taxels and fuse every grasp so far, up to ``trial.grasps`` times:
     the hand releases the object and withdraws (:meth:`World.release`) before each new
-    grasp, which is planned on the current
-    model (:mod:`pipeline.next_grasp`). The stop rule ends it earlier, and so does a later
-    grasp the planner cannot find, the hand cannot execute or that touches nothing or one
-    side only (it is not fused). ``contacts.json`` and ``document["grasps"]`` grow by one
-    grasp each time.
+    grasp, which is planned on the current model (:mod:`pipeline.next_grasp`). The stop
+    rule ends it earlier, and so does a later grasp the planner cannot find, the hand
+    cannot execute or that touches nothing or one side only (it is not fused).
+    ``contacts.json`` and the record's ``grasps`` grow by one grasp each time.
 
     Raises:
         StageFailure: the first grasp was not executed, touched nothing or one side only,
             or the initialiser rejected it.
     """
-    settings = config.trial
+    settings, record = trial.settings, trial.record
     until_m = 1e-3 * settings.until_std_mm if settings.until_std_mm > 0 else None
-    hands = next_hands(config, registry, world, choice)
-    model = measurement_model(config, registry)
+    hands = next_hands(trial.world, trial.stages.planners, look.choice)
+    model = measurement_model(trial)
     # The next-grasp draws have their own stream: the world's noise does not depend on them.
     rng = np.random.default_rng([settings.seed, 15])
     grasps: list[Contacts] = []
     plans: list[GraspPlan] = []
-    document["grasps"] = []
-    document["next_grasp"] = settings.next_grasp if settings.grasps > 1 else None
-    plan, chosen_by, fused, stop = choice.plan, {"strategy": "first"}, None, ""
+    record.start_grasping(settings.next_grasp if settings.grasps > 1 else None)
+    plan, chosen_by, fused, stop = look.choice.plan, {"strategy": "first"}, None, ""
     for k in range(settings.grasps):
         if k > 0:
-            report(f"planning grasp {k + 1} ({settings.next_grasp})")
-            with timer.phase("planner"):
+            trial.report(f"planning grasp {k + 1} ({settings.next_grasp})")
+            with trial.phase("planner"):
                 following = choose_next_grasp(
                     settings.next_grasp,
                     tuple(hands.values()),
                     fused.result.selected,
                     model,
                     rng,
-                    cloud.viewpoint_m,
+                    look.cloud.viewpoint_m,
                     tuple(plans),
                 )
             plan, chosen_by = following.plan, following.to_json()
             if plan.status != "ok":
                 stop = f"no feasible grasp {k + 1}: {plan.reason}"
                 break
-        report(f"grasp {k + 1} with {plan.gripper}")
-        with timer.phase("grasp"):
-            if k > 0:
-                released = world.release()
-                if plan.gripper != world.gripper.name:
-                    world.remove_hand()
-                    world.add_hand(plan.gripper)
-            outcome = world.execute_grasp(plan)
-        shift_m, tilt_rad = object_motion(obj.mesh, outcome.object_before, outcome.object_after)
-        executed = {
-            **({"object_pose_released": pose_to_json(released)} if k > 0 else {}),
-            "object_pose_grasped": pose_to_json(outcome.object_after),
-            "executed": outcome.executed,
-            "aperture_m": outcome.aperture_m,
-            "joint_positions": outcome.joint_positions,
-            "T_robot_hand": np.asarray(outcome.T_robot_hand).tolist(),
-            "reason": outcome.reason,
-            "reapproaches": outcome.reapproaches,
-            "object_shift_mm": 1e3 * shift_m,
-            "object_tilt_deg": float(np.degrees(tilt_rad)),
-            "object_turn_deg": float(
-                np.degrees(object_turn(outcome.object_before, outcome.object_after))
-            ),
-        }
-        if k == 0:
-            document["grasp"] = executed
-            document["object_pose_after"] = pose_to_json(outcome.object_after)
-            if not outcome.executed:
-                raise StageFailure(
-                    f"grasp not executed: {outcome.reason}{next_try(world.hands, plan.gripper)}"
-                )
-        elif not outcome.executed:
-            stop = f"grasp {k + 1} not executed: {outcome.reason}"
-            document["unfused_grasp"] = attempt_to_json(k, plan, chosen_by, executed)
-            break
-        with timer.phase("tactile"):
-            contacts = stages["tactile"].read(world, outcome)
-        stop = unfused_reason(k, contacts, shift_m, tilt_rad)
+        attempt = _execute(trial, k, plan, chosen_by)
+        contacts, stop = _read_taxels(trial, attempt, grasps, plans)
         if stop:
-            document["unfused_grasp"] = attempt_to_json(k, plan, chosen_by, executed, contacts)
-            if k == 0:
-                if len(contacts):  # the taxels are kept for `symfuse fuse`, as read
-                    with timer.phase("write"):
-                        write_json(out_dir / "contacts.json", contacts_to_json([contacts], [plan]))
-                raise MissedGrasp(stop, plan)
             break
         grasps.append(contacts)
         plans.append(plan)
-        with timer.phase("write"):
-            write_json(out_dir / "contacts.json", contacts_to_json(grasps, plans))
-        if k == 0:
-            init = _initial_state(config, stages, proposal, cloud, plan, contacts, timer, document)
-        report(f"fusing {len(grasps)} grasp(s)")
-        with timer.phase("estimator"):
-            result = estimate(config, registry, cloud, init, grasps, observation)
-        with timer.phase("evaluation"):
-            truth = ground_truth(
-                obj, outcome.object_after, pose_seen, observation.calibration_error
-            )
-            centre = np.asarray(plan.T_robot_hand)[:2, 3]
-            evaluated = [evaluate_stage(stage, truth, centre) for stage in result.stages]
-        known = uncertainty(result.selected)
-        fused = Fused(init, result, truth, evaluated, outcome.object_after, tuple(grasps))
-        document["grasps"].append(
-            grasp_to_json(
-                k,
-                plan,
-                hands[plan.gripper].planner.name,
-                chosen_by,
-                executed,
-                contacts,
-                fused,
-                known,
-            )
-        )
-        document["object_pose_after"] = pose_to_json(outcome.object_after)
+        with trial.phase("write"):
+            write_json(trial.out_dir / "contacts.json", contacts_to_json(grasps, plans))
+        init = fused.init if fused else _initial_state(trial, look, plan, contacts)
+        fused = _fuse(trial, look, attempt, init, tuple(grasps))
+        known = uncertainty(fused.result.selected)
+        planner = hands[plan.gripper].planner.name
+        record.fused(grasp_to_json(attempt, planner, contacts, fused, known), fused.object_after)
         stop = stop_reason(known, k + 1, settings.grasps, until_m)
         if stop:
             break
-    document["taxels_in_contact"] = sum(len(c) for c in grasps)
-    document["stop_reason"] = stop
+    record.stopped(sum(len(c) for c in grasps), stop)
     return fused
 
 
-def next_hands(
-    config: Config, registry: StageRegistry, world: World, choice: HandChoice
-) -> dict[str, NextHand]:
+def _execute(trial: Trial, k: int, plan: GraspPlan, chosen_by: dict[str, Any]) -> Attempt:
+    """Grasp ``k`` (from 0) with ``plan``: a later grasp first releases the object and
+    changes the hand when the plan's is another; the record's ``grasp`` is the first.
+
+    Raises:
+        StageFailure: the first grasp was not executed.
+    """
+    world = trial.world
+    trial.report(f"grasp {k + 1} with {plan.gripper}")
+    with trial.phase("grasp"):
+        if k > 0:
+            released = world.release()
+            if plan.gripper != world.gripper.name:
+                world.remove_hand()
+                world.add_hand(plan.gripper)
+        outcome = world.execute_grasp(plan)
+    shift_m, tilt_rad = object_motion(trial.obj.mesh, outcome.object_before, outcome.object_after)
+    executed = {
+        **({"object_pose_released": pose_to_json(released)} if k > 0 else {}),
+        "object_pose_grasped": pose_to_json(outcome.object_after),
+        "executed": outcome.executed,
+        "aperture_m": outcome.aperture_m,
+        "joint_positions": outcome.joint_positions,
+        "T_robot_hand": np.asarray(outcome.T_robot_hand).tolist(),
+        "reason": outcome.reason,
+        "reapproaches": outcome.reapproaches,
+        "object_shift_mm": 1e3 * shift_m,
+        "object_tilt_deg": float(np.degrees(tilt_rad)),
+        "object_turn_deg": float(
+            np.degrees(object_turn(outcome.object_before, outcome.object_after))
+        ),
+    }
+    if k == 0:
+        trial.record.first_grasp(executed, outcome.object_after)
+        if not outcome.executed:
+            raise StageFailure(
+                f"grasp not executed: {outcome.reason}{next_try(world.hands, plan.gripper)}"
+            )
+    return Attempt(k, plan, chosen_by, outcome, executed, shift_m, tilt_rad)
+
+
+def _read_taxels(
+    trial: Trial, attempt: Attempt, grasps: list[Contacts], plans: list[GraspPlan]
+) -> tuple[Contacts | None, str]:
+    """The taxels ``attempt`` touched, and why it is not fused (``""``: it is); a grasp
+    not fused is the record's ``unfused_grasp``.
+
+    Raises:
+        MissedGrasp: the first grasp touched nothing or one side only (its taxels, when
+            any, are written to ``contacts.json`` for ``symfuse fuse``, as read).
+    """
+    k, plan = attempt.k, attempt.plan
+    if not attempt.outcome.executed:
+        trial.record.unfused(attempt.to_json())
+        return None, f"grasp {k + 1} not executed: {attempt.outcome.reason}"
+    with trial.phase("tactile"):
+        contacts = trial.stages.tactile.read(trial.world, attempt.outcome)
+    stop = unfused_reason(k, contacts, attempt.shift_m, attempt.tilt_rad)
+    if stop:
+        trial.record.unfused(attempt.to_json(contacts))
+        if k == 0:
+            if len(contacts):
+                with trial.phase("write"):
+                    write_json(
+                        trial.out_dir / "contacts.json", contacts_to_json([contacts], [plan])
+                    )
+            raise MissedGrasp(stop, plan)
+    return contacts, stop
+
+
+def _fuse(
+    trial: Trial, look: Look, attempt: Attempt, init: SymmetryInit, grasps: tuple[Contacts, ...]
+) -> Fused:
+    """Fuse ``grasps`` (every grasp so far, ``attempt`` the last) from ``init`` and score
+    the estimate against the object as ``attempt`` left it."""
+    trial.report(f"fusing {len(grasps)} grasp(s)")
+    with trial.phase("estimator"):
+        result = estimate_with(trial.stages.estimator, look.cloud, init, grasps, look.observation)
+    with trial.phase("evaluation"):
+        after = attempt.outcome.object_after
+        truth = ground_truth(trial.obj, after, look.pose_seen, look.observation.calibration_error)
+        centre = np.asarray(attempt.plan.T_robot_hand)[:2, 3]
+        evaluated = [evaluate_stage(stage, truth, centre) for stage in result.stages]
+    return Fused(init, result, truth, evaluated, after, grasps)
+
+
+def next_hands(world: World, planners: Planners, choice: HandChoice) -> dict[str, NextHand]:
     """The hands later grasps may be made with, by name, each with one planner.
 
     With ``trial.gripper = "auto"`` in a world that changes hands
@@ -650,7 +708,7 @@ def next_hands(
     hands: dict[str, NextHand] = {}
     for answer in answers:
         if answer.gripper not in hands:
-            planner = create_planner(config, registry, answer.planner)
+            planner = planners(answer.planner)
             hands[answer.gripper] = NextHand(planner, world.gripper_spec(answer.gripper))
     return hands
 
@@ -699,77 +757,51 @@ def unfused_reason(k: int, contacts: Contacts, shift_m: float, tilt_rad: float) 
     )
 
 
-def _initial_state(
-    config: Config,
-    stages: dict[str, Any],
-    proposal: SymmetryInit,
-    cloud: PointCloud,
-    plan: GraspPlan,
-    contacts: Contacts,
-    timer: PhaseTimer,
-    document: dict[str, Any],
-) -> SymmetryInit:
-    """Stage 0 from the proposal and the first grasp (``document["init"]``).
+def _initial_state(trial: Trial, look: Look, plan: GraspPlan, contacts: Contacts) -> SymmetryInit:
+    """Stage 0 from the proposal and the first grasp (the record's ``init``).
 
     Raises:
         StageFailure: the initialiser rejected every hypothesis.
     """
-    with timer.phase("initialiser"):
-        init = stages["initialiser"].refine(proposal, cloud, plan, contacts)
-    document["init"] = {
-        "plane": plane_to_json(init.plane),
-        "bias": bias_to_json(init.bias),
-        "status": init.status,
-        "hypotheses": [
-            {**plane_to_json(h.plane), "score": h.score, "violations": h.violations}
-            for h in init.hypotheses[:20]
-        ],
-    }
+    with trial.phase("initialiser"):
+        init = trial.stages.initialiser.refine(look.proposal, look.cloud, plan, contacts)
+    trial.record.initial_state(init)
     if init.status != "ok":
-        raise StageFailure(f"initialiser '{config.choices['initialiser']}' rejected: {init.reason}")
+        name = trial.config.choices["initialiser"]
+        raise StageFailure(f"initialiser '{name}' rejected: {init.reason}")
     return init
 
 
-def measurement_model(config: Config, registry: StageRegistry) -> MeasurementModel:
-    """The taxel model the information score predicts with: the ``iekf`` estimator's
-    parameters (whichever estimator fuses, the score is the IEKF's)."""
-    params = config.params["estimator"].get("iekf")
-    if params is None:
-        params = registry.get("estimator", "iekf").cls.Params()
-    return MeasurementModel(
-        window_std_m=(params.window_along_normal_m, params.window_across_normal_m),
-        noise_std_m=(params.noise_along_normal_m, params.noise_across_normal_m),
-        point_std_m=params.point_std_m,
-        facing_filter=params.facing_filter,
-        regrasp_noise=regrasp_noise(params),
-    )
+def measurement_model(trial: Trial) -> MeasurementModel:
+    """The taxel model the information score predicts with: the configured estimator's
+    (:meth:`~pipeline.stages.Estimator.measurement_model`), else that of the first
+    installed estimator that has one, with its configured parameters (whichever
+    estimator fuses, the score predicts as a taxel-fusing estimator would)."""
+    own = trial.stages.estimator.measurement_model()
+    if own is not None:
+        return own
+    registry, params = trial.registry, trial.config.params["estimator"]
+    for name in registry.names("estimator"):
+        cls = registry.get("estimator", name).cls
+        if cls.measurement_model is not Estimator.measurement_model:
+            model = registry.create("estimator", name, to_toml(params.get(name, cls.Params())))
+            return model.measurement_model()
+    raise StageFailure("no installed estimator predicts taxels for the next-grasp score")
 
 
 def grasp_to_json(
-    k: int,
-    plan: GraspPlan,
-    planner: str,
-    chosen_by: dict[str, Any],
-    executed: dict[str, Any],
-    contacts: Contacts,
-    fused: Fused,
-    known: Uncertainty,
+    attempt: Attempt, planner: str, contacts: Contacts, fused: Fused, known: Uncertainty
 ) -> dict[str, Any]:
     """One entry of ``result.json``'s ``grasps``: how the grasp was chosen and went, and
     the estimate after fusing it and every grasp before (each stage without its iteration
     trace, with its metrics against the object after this grasp)."""
-    stages = [
-        {key: value for key, value in stage_json.items() if key != "trace"}
-        | {"metrics": stage_metrics}
-        for stage_json, (stage_metrics, _) in zip(
-            estimate_to_json(fused.result), fused.evaluated, strict=True
-        )
-    ]
+    metrics = [stage_metrics for stage_metrics, _ in fused.evaluated]
+    entries = estimate_entries(fused.result, metrics, trace=False)
     return {
-        **attempt_to_json(k, plan, chosen_by, executed, contacts),
+        **attempt.to_json(contacts),
         "planner": planner,
         "status": fused.result.final.status,
         **selection_to_json(fused.result),
         "uncertainty": known.to_json(),
-        "stages": stages,
+        "stages": entries["stages"],
     }

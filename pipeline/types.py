@@ -221,6 +221,40 @@ class PadLayout:
 
 
 @dataclass(frozen=True)
+class ClosingPad:
+    """A tactile pad that closes on the object horizontally, as the next-grasp scoring
+    predicts its touch (:func:`pipeline.next_grasp.pad_approaches`). Palm frame (the hand
+    frame of :attr:`GraspPlan.T_robot_hand`): z along the approach, x the closing
+    direction.
+
+    Attributes:
+        pad: the pad's name (one of :attr:`GripperSpec.pads`).
+        base_m: ``(x, y)`` in the palm's xy plane (m) of the line the pad closes along:
+            its finger's base (the palm axis for a parallel gripper's jaws).
+        facing: ``(x, y)`` unit direction the pad faces and closes along at spread 0.
+        spread_sign: how the facing turns with the plan's spread
+            (:attr:`GraspPlan.spread_rad`): by ``+spread``, ``-spread`` or not at all
+            (``1``, ``-1``, ``0``).
+        curved_rows: the rows nearest the fingertip that lie on a cylinder curving away
+            from the object (0: a flat pad).
+        curve_radius_m: that cylinder's radius (m; unused for a flat pad).
+    """
+
+    pad: str
+    base_m: tuple[float, float]
+    facing: tuple[float, float]
+    spread_sign: int = 0
+    curved_rows: int = 0
+    curve_radius_m: float = 0.0
+
+    @staticmethod
+    def jaws(front: str, back: str) -> tuple[ClosingPad, ClosingPad]:
+        """A parallel gripper's flat pads, closing on the palm axis: ``front`` along +x,
+        ``back`` along -x."""
+        return ClosingPad(front, (0.0, 0.0), (1.0, 0.0)), ClosingPad(back, (0.0, 0.0), (-1.0, 0.0))
+
+
+@dataclass(frozen=True)
 class GripperSpec:
     """What grasp planners need to know about a hand.
 
@@ -230,6 +264,10 @@ class GripperSpec:
         max_aperture_m: widest opening between the pad surfaces.
         pads: the tactile pads.
         finger_length_m: reach of the fingers below the palm, used to place top grasps.
+        closing: the pads that close on the object and how (:class:`ClosingPad`): what
+            the next-grasp scoring predicts each candidate's touch from. A hand without
+            them has no predicted touch, so an information-scored later grasp cannot
+            prefer its candidates.
     """
 
     name: str
@@ -237,6 +275,7 @@ class GripperSpec:
     max_aperture_m: float
     pads: tuple[PadLayout, ...]
     finger_length_m: float
+    closing: tuple[ClosingPad, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,12 @@ from functools import partial
 from typing import TYPE_CHECKING, Literal
 
 from pipeline import hookimpl
-from pipeline.estimation.map_params import MapParams, consistency_settings, fusion_problem
+from pipeline.estimation.map_params import (
+    MapParams,
+    consistency_settings,
+    fusion_problem,
+    regrasp_noise,
+)
 from pipeline.estimation.problem import estimate_result
 from pipeline.params import param, project
 from pipeline.stages import Estimator
@@ -16,6 +21,7 @@ from pipeline.types import EstimateResult, EstimationProblem
 
 if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
     from pipeline.estimation.iekf import IekfSettings
+    from pipeline.next_grasp import MeasurementModel
 
 
 class IekfEstimator(Estimator):
@@ -86,6 +92,20 @@ class IekfEstimator(Estimator):
         from pipeline.estimation.iekf import IekfSettings
 
         return project(IekfSettings, self.params)
+
+    def measurement_model(self) -> MeasurementModel:
+        """``C_t``, ``R``, the point prior, the facing filter and the re-grasp noise of
+        these parameters."""
+        from pipeline.next_grasp import MeasurementModel
+
+        p = self.params
+        return MeasurementModel(
+            window_std_m=(p.window_along_normal_m, p.window_across_normal_m),
+            noise_std_m=(p.noise_along_normal_m, p.noise_across_normal_m),
+            point_std_m=p.point_std_m,
+            facing_filter=p.facing_filter,
+            regrasp_noise=regrasp_noise(p),
+        )
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         from pipeline.estimation.iekf import fuse

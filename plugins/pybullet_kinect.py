@@ -55,10 +55,11 @@ class PybulletKinect(SensorSource):
             1, "pixels dropped on each side of a depth edge (px)", at_least=0
         )
 
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        check_camera_params(self.params, f"sensor.{self.name}")
-        check_depth_range(self.params, f"sensor.{self.name}")
+    @classmethod
+    def check_params(cls, params: Params) -> None:
+        super().check_params(params)
+        check_camera_params(params, f"sensor.{cls.name}")
+        check_depth_range(params, f"sensor.{cls.name}")
 
     def _corrupt(
         self, depth_m: np.ndarray, intrinsics: CameraIntrinsics, rng: np.random.Generator

@@ -57,10 +57,11 @@ class PybulletTaxels(TactileModel):
             at_most=1.0,
         )
 
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        p = self.params
-        key = f"tactile.{self.name}"
+    @classmethod
+    def check_params(cls, params: Params) -> None:
+        super().check_params(params)
+        p = params
+        key = f"tactile.{cls.name}"
         if p.ray_length_m < p.contact_threshold_m:
             raise ConfigError(
                 f"config key '{key}.ray_length_m' ({p.ray_length_m}) must be >= "

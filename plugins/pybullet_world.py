@@ -1,29 +1,24 @@
 """Built-in world ``pybullet``: the object on a table and a Schunk hand, simulated in PyBullet.
 
 The simulation itself lives in :mod:`pipeline.sim` (scene, hands, guarded grasp, camera
-rendering); this plugin exposes it through the :class:`pipeline.stages.World` contract. The
-simulator is imported when a scene is loaded, not when the plugin is, so listing plugins
+rendering); this plugin exposes it through the :class:`pipeline.stages.World` contract, with
+what it shares with the ``mujoco`` world in :class:`pipeline.shipped_hands.ShippedHandsWorld`.
+The simulator is imported when a scene is loaded, not when the plugin is, so listing plugins
 stays quick.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pipeline import hookimpl
-from pipeline.errors import ConfigError
-from pipeline.params import param
-from pipeline.stages import World
+from pipeline.shipped_hands import ShippedHandsWorld
 from pipeline.types import (
     CameraImage,
     CameraIntrinsics,
-    GraspOutcome,
-    GraspPlan,
-    GripperSpec,
     ObjectPose,
     SceneObject,
     SceneSetup,
@@ -34,7 +29,7 @@ if TYPE_CHECKING:
     from pipeline.sim.world import PybulletWorld
 
 
-class Pybullet(World):
+class Pybullet(ShippedHandsWorld):
     """PyBullet physics: table, free object, PG-70 or SDH-2 with taxel pads, TinyRenderer.
 
     The object is a dynamic body (its catalogue mesh, mass and friction, or its URDF) left
@@ -46,19 +41,6 @@ class Pybullet(World):
     """
 
     name = "pybullet"
-    #: The hands in ``robots/`` (:data:`pipeline.sim.hand_models.HAND_MODELS`; importing
-    #: :mod:`pipeline.sim` loads PyBullet, so they are named here; a test keeps the two equal).
-    hands = ("pg70", "sdh")
-    changes_hands = True
-
-    @dataclass(frozen=True)
-    class Params:
-        table_height_m: float = param(0.0, "z of the table top in frame R (m)")
-
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        self._sim: PybulletWorld | None = None
-        self._opening_m = 0.0
 
     @classmethod
     def create(
@@ -85,9 +67,7 @@ class Pybullet(World):
     @property
     def sim(self) -> PybulletWorld:
         """The underlying :class:`pipeline.sim.world.PybulletWorld` (PyBullet-only code)."""
-        if self._sim is None:
-            raise ConfigError("world 'pybullet' has no scene yet: call load_scene first")
-        return self._sim
+        return super().sim
 
     def load_scene(self, setup: SceneSetup) -> None:
         from pipeline.sim.world import PybulletWorld
@@ -113,26 +93,6 @@ class Pybullet(World):
             self._sim.close()
             self._sim = None
 
-    def gripper_spec(self, name: str) -> GripperSpec:
-        from pipeline.sim.hands import GRIPPERS
-
-        if name not in GRIPPERS:
-            hands = ", ".join(self.hands)
-            raise ConfigError(f"world 'pybullet' has no hand '{name}' (hands: {hands})")
-        return GRIPPERS[name]
-
-    def add_hand(self, name: str) -> None:
-        self.sim.add_hand(name)
-        self.gripper = self.sim.gripper
-        self._opening_m = self.gripper.max_aperture_m
-
-    def remove_hand(self) -> None:
-        self.sim.remove_hand()
-        self.gripper = None
-
-    def object_pose(self) -> ObjectPose:
-        return self.sim.object_pose()
-
     def render(
         self,
         intrinsics: CameraIntrinsics,
@@ -152,37 +112,11 @@ class Pybullet(World):
     def taxels(self, behind_m: float, beyond_m: float) -> TaxelState:
         return self._hand().taxel_state(self.sim.object_id, behind_m, beyond_m)
 
-    def execute_grasp(self, plan: GraspPlan) -> GraspOutcome:
-        self._hand()
-        outcome = self.sim.execute_grasp(plan)
-        if outcome.executed:
-            self._opening_m = plan.opening_m
-        return outcome
-
     def release(self) -> ObjectPose:
         from pipeline.sim.grasping import release
 
         hand = self._hand()
         return release(self.sim.client, hand, self.sim.object_id, self._opening_m)
-
-    @classmethod
-    def hand_meshes(
-        cls,
-        gripper: str,
-        joint_positions: dict[str, float] | None,
-        T_robot_hand: np.ndarray,
-        plan: GraspPlan,
-    ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Each link of a shipped hand from its URDF
-        (:func:`pipeline.sim.hand_models.hand_link_meshes`)."""
-        from pipeline.sim.hand_models import hand_link_meshes
-
-        return hand_link_meshes(gripper, joint_positions, T_robot_hand, plan)
-
-    def _hand(self):
-        if self.sim.hand is None:
-            raise ConfigError("world 'pybullet' has no hand: call add_hand first")
-        return self.sim.hand
 
 
 @hookimpl

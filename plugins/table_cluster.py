@@ -96,13 +96,14 @@ class TableCluster(Segmenter):
         ransac_iterations: int = param(200, "RANSAC: random point triples tried", at_least=1)
         ransac_seed: int = param(0, "RANSAC: seed of its random generator", at_least=0)
 
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        check_ordered(self.params, f"segmenter.{self.name}", "min_height_m", "max_height_m")
-        if self.params.cut == "fit" and self.params.min_height_m != self.Params().min_height_m:
+    @classmethod
+    def check_params(cls, params: Params) -> None:
+        super().check_params(params)
+        check_ordered(params, f"segmenter.{cls.name}", "min_height_m", "max_height_m")
+        if params.cut == "fit" and params.min_height_m != cls.Params().min_height_m:
             raise ConfigError(
-                f"config key 'segmenter.{self.name}.min_height_m' is read with cut = 'fixed' "
-                f"only (the cut follows the table's fit): set segmenter.{self.name}.cut = "
+                f"config key 'segmenter.{cls.name}.min_height_m' is read with cut = 'fixed' "
+                f"only (the cut follows the table's fit): set segmenter.{cls.name}.cut = "
                 "'fixed' as well"
             )
 

@@ -81,14 +81,15 @@ class VcInitialiser(SymmetryInitialiser):
             at_most=1.0,
         )
 
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        p = self.params
+    @classmethod
+    def check_params(cls, params: Params) -> None:
+        super().check_params(params)
+        p = params
         if p.max_angle_deg == 0.0 and p.orientations > 1:
             # The orientations would all be the seed's, and on a round footprint the angular
             # step that extends them to +-90 deg would be 0.
             raise ConfigError(
-                f"config key 'initialiser.{self.name}.max_angle_deg' ({p.max_angle_deg}) must be "
+                f"config key 'initialiser.{cls.name}.max_angle_deg' ({p.max_angle_deg}) must be "
                 f"> 0 when orientations ({p.orientations}) > 1"
             )
 

@@ -7,8 +7,8 @@ import argparse
 import pytest
 import trimesh
 
-from pipeline import cli_objects
 from pipeline.catalogue import list_objects
+from pipeline.cli import objects as cli_objects
 
 
 def parse(argv: list[str]) -> argparse.Namespace:

@@ -161,3 +161,72 @@ def test_declared_bounds_are_enforced_with_the_dotted_key(registry):
     assert str(error.value) == (
         "config key 'estimator.iekf.consistency_alpha': must be < 1, got 1.0"
     )
+
+
+def test_changed_names_what_the_user_set_and_where(registry, tmp_path):
+    """A file's key counts where it differs from the shipped default (a resolved
+    config.toml sets only what it changes); a --set or an option counts even at the
+    default; the later source of a key wins."""
+    resolved = load_config(registry, overrides=["trial.seed=4"])
+    whole = resolved.write(tmp_path / "config.toml")
+    partial = write(tmp_path, '[trial]\nyaw_deg = 10.0\ngripper = "auto"\n')
+    config = load_config(
+        registry,
+        [whole, partial],
+        ["planner.use=top-parallel", "trial.yaw_deg=20"],
+        options=[("trial.gripper=pg70", "--gripper")],
+    )
+    assert config.changed == {
+        "planner.use": "--set",
+        "trial.yaw_deg": "--set",
+        "trial.gripper": "--gripper",
+        "trial.seed": str(whole),
+    }
+    assert config.changed_sections([str(whole), str(partial)]) == ["trial"]
+    assert config.changed_sections(["--gripper"]) == ["trial"]
+    assert load_config(registry, [whole]).changed == {"trial.seed": str(whole)}
+    assert load_config(registry).changed == {}
+
+
+def test_an_implementation_brought_in_whole_is_set_where_its_use_was(registry):
+    config = load_config(registry, overrides=["estimator.use=icp"])
+    params = [key for key in config.changed if key.startswith("estimator.icp.")]
+    assert params and {config.changed[key] for key in params} == {"--set"}
+    named = load_config(registry, overrides=["estimator.icp.max_iterations=5"])
+    assert named.changed["estimator.icp.max_iterations"] == "--set"
+    assert named.changed["estimator.icp.point_std_m"] == "--set"  # its table was named
+
+
+def test_differing_gives_the_config_back_over_the_defaults(registry, tmp_path):
+    path = write(tmp_path, '[trial]\nseed = 3\n[estimator]\nuse = "icp"\n')
+    config = load_config(registry, [path], ["planner.use=top-parallel"])
+    sparse = config.differing()
+    assert sparse["trial"] == {"seed": 3} and "planner" not in sparse
+    assert load_config(registry, settings=sparse) == config
+
+
+def test_changed_is_not_part_of_a_configs_identity(registry, tmp_path):
+    via_set = load_config(registry, overrides=["trial.seed=2"])
+    via_file = load_config(registry, [write(tmp_path, "[trial]\nseed = 2\n")])
+    assert via_set == via_file and via_set.changed != via_file.changed
+
+
+def test_a_trial_refuses_strategies_for_one_grasp_whoever_set_them(registry):
+    with pytest.raises(ConfigError, match=r"--next-grasp \(trial.next_grasp\) applies"):
+        load_config(registry, overrides=["trial.next_grasp=random"]).check_trial(registry)
+    several = load_config(registry, overrides=["trial.grasps=2", "trial.until_std_mm=1"])
+    several.check_trial(registry)
+
+
+def test_stages_are_checked_without_being_built(registry, monkeypatch):
+    """A pair of parameters that does not go together is refused by the config, naming
+    the key; the implementation is not built for it (a sensor's check needs no scene)."""
+    bad = load_config(registry, overrides=["segmenter.table-cluster.min_height_m=0.05"])
+    built = []
+    monkeypatch.setattr(registry, "create", lambda *args: built.append(args))
+    with pytest.raises(ConfigError, match=r"'segmenter.table-cluster.min_height_m' is read with"):
+        bad.check_stages(registry, ["segmenter"])
+    load_config(registry).check_stages(registry, ["sensor", "segmenter", "tactile"])
+    assert built == []
+    load_config(registry).check_stages(registry, ["world"])  # its own __init__: built
+    assert [args[:2] for args in built] == [("world", "pybullet")]

@@ -188,7 +188,7 @@ def test_a_chosen_planner_that_would_not_plan_is_refused_in_one_line():
     ]:
         config = load_config(registry, overrides=overrides)
         with pytest.raises(ConfigError, match=message):
-            check_planner_is_read(config, registry, {"planner": {"use": "aaa-pinch"}})
+            check_planner_is_read(config, registry, {"planner.use": "--set"})
     check_planner_is_read(load_config(registry, overrides=["trial.gripper=sdh"]), registry, {})
     config = load_config(registry, overrides=["planner.use=aaa-pinch", "trial.gripper=pg70"])
-    check_planner_is_read(config, registry, {"planner": {"use": "aaa-pinch"}})
+    check_planner_is_read(config, registry, {"planner.use": "--set"})

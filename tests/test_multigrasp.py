@@ -677,7 +677,7 @@ def test_the_next_grasp_is_chosen_among_every_hand_and_scored_with_its_own_pads(
 
 def test_later_grasps_change_hands_only_in_a_world_that_can_after_an_auto_choice():
     from pipeline.config import load_config
-    from pipeline.hand_choice import HandChoice, PlannerAnswer
+    from pipeline.hand_choice import HandChoice, PlannerAnswer, Planners
     from pipeline.registry import load_registry
     from pipeline.testing import PARALLEL_HAND, AnalyticWorld
     from pipeline.trial import next_hands
@@ -689,17 +689,16 @@ def test_later_grasps_change_hands_only_in_a_world_that_can_after_an_auto_choice
         PlannerAnswer("pg70", "top-parallel", _plan(0.0)),
         PlannerAnswer("sdh", "top-three-finger", _plan(0.0, gripper="sdh")),
     )
-    auto = next_hands(config, registry, Pybullet(), HandChoice(answers[1], "", answers))
+    planners = Planners(config, registry)
+    auto = next_hands(Pybullet(), planners, HandChoice(answers[1], "", answers))
     # The first grasp's hand first, each hand with the planner that answered for it.
     assert list(auto) == ["sdh", "pg70"]
     assert [hand.planner.name for hand in auto.values()] == ["top-three-finger", "top-parallel"]
     assert auto["pg70"].gripper is GRIPPERS["pg70"]
     named = HandChoice(answers[0], "trial.gripper = 'pg70'", answers[:1])
-    assert list(next_hands(config, registry, Pybullet(), named)) == ["pg70"]
+    assert list(next_hands(Pybullet(), planners, named)) == ["pg70"]
     parallel = PlannerAnswer(PARALLEL_HAND, "top-parallel", _plan(0.0, gripper=PARALLEL_HAND))
-    fixed = next_hands(
-        config, registry, AnalyticWorld(), HandChoice(parallel, "", (parallel, answers[1]))
-    )
+    fixed = next_hands(AnalyticWorld(), planners, HandChoice(parallel, "", (parallel, answers[1])))
     assert list(fixed) == [PARALLEL_HAND]
 
 

@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 from pipeline.cli import main
-from pipeline.cli_trial import grasps_summary, run_name
+from pipeline.cli.trial import grasps_summary, run_name
 from pipeline.formats import read_cloud
 from pipeline.tables import TERMINAL_WIDTH
 from pipeline.trial import PICTURE_FILES, TRIAL_FILES

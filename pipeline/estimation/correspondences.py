@@ -410,6 +410,7 @@ def find_correspondences(
     taxel_normals: np.ndarray | None = None,
     facing_g: np.ndarray | None = None,
 ) -> Correspondences:
+    # Eleven parameters: a numeric kernel given the state, the taxels and the gates as arrays.
     """Weights of every taxel against the front and back images of the current points.
 
     Args:

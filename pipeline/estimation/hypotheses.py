@@ -199,6 +199,7 @@ def diagnose(
     settings: ConsistencySettings,
     tree: cKDTree,
 ) -> Candidate:
+    # Nine parameters: a numeric kernel given one hypothesis' state and what it is checked on.
     """A hypothesis' model diagnosed by :func:`~.consistency.assess` plus the motion test
     (:func:`moved_free_space` against :func:`motion_limit`); a failed motion test is added
     to the verdict's reason."""

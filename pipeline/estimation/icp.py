@@ -60,6 +60,7 @@ def _solve(
     g_start,
     move_points,
 ):
+    # Eleven parameters: a numeric kernel given the prior, the matches and the weights as arrays.
     """Least-squares MAP solve with fixed matches; returns g, moved points, cov of g."""
     unique, slot = np.unique(n, return_inverse=True) if move_points else (n[:0], None)
     prior_whiten = np.linalg.inv(np.linalg.cholesky(covariance))
@@ -126,6 +127,7 @@ def _grasp(
     move_points,
     halfwidth,
 ):
+    # Nine parameters: the kernel's state and settings for one grasp, as arrays and numbers.
     whiten = np.linalg.inv(np.linalg.cholesky(contacts.noise))
     g, points, g_cov = np.array(g_start, float), points_prior, covariance
     previous, status, iterations = None, "max_iterations", 0

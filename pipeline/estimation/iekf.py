@@ -289,6 +289,7 @@ def _correspondences(
     need_pairs: bool,
     facing_g: np.ndarray,
 ) -> Correspondences:
+    # Ten parameters: a numeric kernel given the state, the taxels and the gates as arrays.
     found = find_correspondences(
         index,
         points,
@@ -320,6 +321,7 @@ def update_grasp(
     sane_halfwidth: np.ndarray,
     point_variance_m2: np.ndarray,
 ) -> _GraspResult:
+    # Thirteen parameters: the filter's state, priors and gates for one grasp, as arrays.
     """Iterate one grasp's update (see the module docstring); the caller commits the gain.
 
     ``points_prior`` is never modified; with ``move_points`` the result holds a new array.

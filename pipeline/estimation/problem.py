@@ -85,6 +85,7 @@ def stage_estimate(
     grasp_g: Sequence[np.ndarray] = (),
     filter_covariance: np.ndarray | None = None,
 ) -> StageEstimate:
+    # Twelve parameters: every field of a stage the estimators fill, in one call.
     """A :class:`StageEstimate` with the completed model ``{f_b(p)} u {f_mb(p)}``;
     ``grasp_g`` is the state each grasp's taxels are compared under, ``covariance`` the
     reported one and ``filter_covariance`` the filter's own (None: the same)."""

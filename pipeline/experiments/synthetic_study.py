@@ -74,6 +74,7 @@ def trial_params(
     bias_direction_deg: float = 0.0,
     default_estimator_params: Mapping[str, Any] | None = None,
 ) -> SweepTask:
+    # Nine parameters: one grid cell's coordinates, keyword-only, as the study's loops name them.
     """A :class:`SweepTask` for one trial; user overrides win over the experiment's defaults."""
     estimator_params = dict(default_estimator_params or {}) if options.estimator == "iekf" else {}
     estimator_params.update(options.estimator_params)

@@ -227,6 +227,7 @@ def parallel_top_grasp(
     flat_radius_m: float = 0.15,
     touch_depth_m: float = 0.001,
 ) -> ParallelGrasp | None:
+    # Eleven parameters: a numeric kernel given the cloud, the line and the hand's distances.
     """Place a parallel gripper opened to ``opening_m`` so the front jaw stands
     ``jaw_clearance_m`` in front of the visible surface on the line through ``centre_m``.
     The visible surface's position is where the front pad first touches it

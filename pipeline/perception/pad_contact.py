@@ -111,9 +111,17 @@ def sdh_flat_part_edge_m(pad: PadLayout) -> float:
 def sdh_distal_taxels(pad: PadLayout, centre_z_m: float) -> PadTaxels:
     """An SDH-2 distal pad on a vertical distal link: rows along the link toward the tip
     (down), the curved tip rows recessed behind the flat surface."""
-    positions, _ = pad_grid(
-        pad.rows, pad.cols, pad.pitch_m, sdh.DISTAL_PAD_CURVED_ROWS, sdh.DISTAL_PAD_CURVE_RADIUS_M
+    return curved_pad_taxels(
+        pad, centre_z_m, sdh.DISTAL_PAD_CURVED_ROWS, sdh.DISTAL_PAD_CURVE_RADIUS_M
     )
+
+
+def curved_pad_taxels(
+    pad: PadLayout, centre_z_m: float, curved_rows: int, radius_m: float
+) -> PadTaxels:
+    """A pad on a vertical link whose ``curved_rows`` rows nearest the tip (down) lie on a
+    cylinder of ``radius_m`` curving away, recessed behind the flat surface."""
+    positions, _ = pad_grid(pad.rows, pad.cols, pad.pitch_m, curved_rows, radius_m)
     grid = positions.reshape(pad.rows, pad.cols, 3)
     return PadTaxels(grid[0, :, 1], centre_z_m - grid[:, 0, 0], -grid[:, 0, 2], pad.pitch_m)
 

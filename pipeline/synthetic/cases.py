@@ -286,6 +286,7 @@ def make_case(
     pad: PadGeometry = DEFAULT_PAD,
     touch: TouchSettings = DEFAULT_TOUCH,
 ) -> SyntheticCase:
+    # Thirteen parameters: each knob of a synthetic case, keyword-only with its default.
     """Generate one synthetic trial (see the module docstring for every convention).
 
     Args:

@@ -4,24 +4,23 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from . import __version__
-from .cli_view import add_rerun_option, check_rerun, record_if_asked
-from .completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
+from .. import __version__
+from ..completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
+from .view import add_rerun_option, check_rerun, record_if_asked
 
 if TYPE_CHECKING:
-    from .types import Contacts
+    from ..types import Contacts
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``complete`` verb to the CLI's subparsers and return its parser."""
-    from .cli import _add_config_options, _add_output_options
+    from . import _add_config_options, _add_output_options
 
     parser = subparsers.add_parser(
         "complete",
@@ -68,33 +67,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 READS = ("sensor", "segmenter", "initialiser", "estimator", "model")
 
 
-def overrides(args: argparse.Namespace) -> list[str]:
-    """The config overrides ``complete``'s options stand for (after the user's ``--set``)."""
-    settings = {
-        "sensor.use": "recorded",
-        "sensor.recorded.path": str(args.scan),
-    }
-    if args.init:
-        settings["initialiser.use"] = args.init
-    if args.camera:
-        settings["sensor.recorded.camera"] = str(args.camera)
-    if args.topic:
-        settings["sensor.recorded.topic"] = args.topic
-    return [f"{key}={json.dumps(value)}" for key, value in settings.items()]
-
-
 def run(args: argparse.Namespace) -> int:
     """Complete the capture's objects, write the results, print a table."""
-    from .cli import _load
-    from .cli_summary import one_sided_line
-    from .completion import complete_scene
-    from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, FAILED_STATUSES
-    from .evaluation import one_sided_grasps
-    from .formats import read_contacts
-    from .outdir import staged_output
+    from ..completion import complete_scene
+    from ..errors import EXIT_ESTIMATE_FAILED, EXIT_OK, FAILED_STATUSES
+    from ..evaluation import one_sided_grasps
+    from ..formats import read_contacts
+    from ..outdir import staged_output
+    from . import _load
+    from .summary import one_sided_line
 
     check_rerun(args)
-    registry, config = _load(args, overrides(args), reads=READS)
+    registry, config = _load(args, reads=READS)
     inputs = [p for p in (args.scan, args.camera, args.contacts, *args.config) if p is not None]
     with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
         recorded = read_contacts(args.contacts) if args.contacts else None
@@ -136,7 +120,7 @@ def scene_table(scene: SceneCompletion) -> str:
     set aside at the edge of the view."""
     import numpy as np
 
-    from .tables import format_table
+    from ..tables import format_table
 
     rows = []
     for completion in scene.objects:
@@ -173,16 +157,14 @@ def write_outputs(
     contacts given, fused with the selected object."""
     import numpy as np
 
-    from .asset.files import write_model
-    from .figures import SceneObjectView, plot_scene
-    from .formats import (
-        bias_to_json,
-        estimate_to_json,
-        plane_to_json,
-        selection_to_json,
-        write_cloud,
-        write_completed_clouds,
-        write_json,
+    from ..figures import SceneObjectView, plot_scene
+    from ..formats import write_cloud, write_json
+    from ..result_document import (
+        estimate_entries,
+        init_to_json,
+        start_document,
+        write_document,
+        write_estimate_files,
     )
 
     out = Path(out)
@@ -194,38 +176,27 @@ def write_outputs(
         folder = out / f"object_{completion.index}"
         folder.mkdir(exist_ok=True)
         write_cloud(folder / "cloud.ply", completion.cloud.points)
-        document: dict[str, Any] = {
-            "symfuse": __version__,
-            "command": "complete",
-            "inputs": inputs,
-            **object_summary(completion),
-        }
+        document = start_document("complete", inputs=inputs, **object_summary(completion))
         if completion.init is not None:
-            document["init"] = {
-                "source": config.choices["initialiser"],
-                "plane": plane_to_json(completion.init.plane),
-                "bias": bias_to_json(completion.init.bias),
-                "status": completion.init.status,
-            }
+            source = config.choices["initialiser"]
+            document["init"] = init_to_json(completion.init, source, status=True)
         if completion.result is not None:
-            write_completed_clouds(folder, completion.result)
             # As `fuse` writes it: the contacts fused (taxels per grasp), the stage the
             # evidence supports best and why, and the estimator's time (s).
             fused = len(completion.result.stages) > 1
             document.update(
                 grasps=[len(c) for c in grasps] if fused else [],
-                stages=estimate_to_json(completion.result),
-                **selection_to_json(completion.result),
+                **estimate_entries(completion.result),
                 seconds=sum(stage.seconds for stage in completion.result.stages),
             )
-            _, document["model"] = write_model(
+            _, document["model"] = write_estimate_files(
                 folder,
                 completion.result,
                 config.model,
                 observation.table_height_m,
                 completion.cloud.viewpoint_m,
             )
-        write_json(folder / "result.json", {**document, "config": config.to_dict()})
+        write_document(folder, {**document, "config": config.to_dict()})
         final = completion.result.final if completion.result else None
         views.append(
             SceneObjectView(

@@ -3,32 +3,30 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
 from pathlib import Path
 
-from .cli import (
+from ..entry import stop_if_interrupted
+from ..errors import EXIT_ESTIMATE_FAILED, EXIT_OK, estimate_failed
+from ..outdir import fresh_folder, staged_output
+from ..tables import format_table, wrapped
+from . import (
     _add_config_options,
     _add_output_options,
     _add_units_option,
     _load,
     add_wide_option,
     counting_number,
-    user_settings,
 )
-from .cli_summary import CONSISTENCY_HEADER, consistency_cells, selection_line
-from .cli_view import add_rerun_option, check_rerun, record_if_asked
-from .entry import stop_if_interrupted
-from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError, estimate_failed
-from .outdir import fresh_folder, staged_output
-from .tables import format_table, wrapped
+from .summary import CONSISTENCY_HEADER, consistency_cells, selection_line
+from .view import add_rerun_option, check_rerun, record_if_asked
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """The ``trial`` verb's options."""
-    from .config import NEXT_GRASP_STRATEGIES
+    from ..config import NEXT_GRASP_STRATEGIES
 
     parser = subparsers.add_parser(
         "trial",
@@ -84,30 +82,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
-def trial_overrides(args: argparse.Namespace) -> list[str]:
-    """The ``--set`` overrides the trial's shortcut options stand for."""
-    overrides = []
-    if args.object or args.mesh:
-        overrides.append(f"trial.object={json.dumps(str(args.object or args.mesh))}")
-    if args.gripper:
-        overrides.append(f"trial.gripper={args.gripper}")
-    if args.init:
-        overrides.append(f"initialiser.use={args.init}")
-    if args.seed is not None:
-        overrides.append(f"trial.seed={args.seed}")
-    if args.yaw is not None:
-        overrides.append(f"trial.yaw_deg={args.yaw}")
-    if args.grasps is not None:
-        overrides.append(f"trial.grasps={args.grasps}")
-    if args.next_grasp:
-        overrides.append(f"trial.next_grasp={args.next_grasp}")
-    if args.until_std is not None:
-        overrides.append(f"trial.until_std_mm={args.until_std}")
-    if args.symmetry is not None:
-        overrides.append(f"trial.symmetry={list(args.symmetry)}")
-    return overrides
-
-
 def three_numbers(text: str) -> tuple[float, float, float]:
     """An argparse ``type``: ``NX,NY,D``, three finite numbers."""
     try:
@@ -117,24 +91,6 @@ def three_numbers(text: str) -> tuple[float, float, float]:
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
         raise argparse.ArgumentTypeError(f"expected three numbers NX,NY,D, got '{text}'")
     return values
-
-
-def check_several_grasps_options(settings, changed: dict) -> None:
-    """Refuse the next-grasp strategy or the stop rule set (``changed``: the settings changed
-    from the defaults) for a trial of one grasp: they choose and stop later grasps, so
-    neither would act.
-
-    Raises:
-        ConfigError: naming the option (and its config key) and ``--grasps``.
-    """
-    if settings.grasps > 1:
-        return
-    for key, option in (("next_grasp", "--next-grasp"), ("until_std_mm", "--until-std")):
-        if key in changed.get("trial", {}):
-            raise ConfigError(
-                f"{option} (trial.{key}) applies to a trial of several grasps; give --grasps N "
-                "with N > 1"
-            )
 
 
 def run_name(obj: str) -> str:
@@ -275,20 +231,13 @@ def _progress(message: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .hand_choice import check_planner_is_read, next_try
-    from .registry import load_registry
-    from .trial import run_trial
+    from ..hand_choice import next_try
+    from ..trial import run_trial
 
     check_rerun(args)
-    registry = load_registry()
-    overrides = trial_overrides(args)
-    if args.units:
-        overrides.append(f"trial.units={args.units}")
-    registry, config = _load(args, overrides, registry=registry)
-    changed = user_settings(config, registry, [*args.overrides, *overrides])
-    check_planner_is_read(config, registry, changed)
+    registry, config = _load(args)
+    config.check_trial(registry)
     settings = config.trial
-    check_several_grasps_options(settings, changed)
     out = args.out or fresh_folder(
         Path("runs") / f"trial-{run_name(settings.object)}-seed{settings.seed}"
     )

@@ -6,7 +6,7 @@ Every deliberate failure (:class:`~pipeline.errors.SymfuseError`) is printed as 
 instead. Every verb that writes follows the output-folder policy of :mod:`pipeline.outdir`.
 
 This module holds the options the verbs share, ``plugins`` and ``config``, the parser and
-:func:`main`; every other verb lives in its own ``cli_<verb>`` module with an
+:func:`main`; every other verb lives in its own module of this package with an
 ``add_parser`` and a ``run``.
 """
 
@@ -19,11 +19,11 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from . import __version__
-from .entry import interrupt_received, report_interrupt
-from .errors import EXIT_BAD_INPUT, EXIT_OK, ConfigError, SymfuseError
-from .stages import STAGES
-from .tables import format_table
+from .. import __version__
+from ..entry import interrupt_received, report_interrupt
+from ..errors import EXIT_BAD_INPUT, EXIT_OK, ConfigError, SymfuseError
+from ..stages import STAGES
+from ..tables import format_table
 
 
 def _add_config_options(parser: argparse.ArgumentParser) -> None:
@@ -95,40 +95,33 @@ def counting_number(least: int) -> Callable[[str], int]:
     return parse
 
 
-def _load(
-    args: argparse.Namespace,
-    extra_overrides: Sequence[str] = (),
-    reads: Sequence[str] | None = None,
-    registry=None,
-):
-    """The registry and the config of ``--config``, ``--set`` and ``extra_overrides`` (what
-    the verb's own options stand for, applied last).
+def _load(args: argparse.Namespace, reads: Sequence[str] | None = None, registry=None):
+    """The registry and the config of ``--config``, ``--set`` and the verb's own options
+    that stand for config keys (:mod:`pipeline.cli.options`, applied last).
 
     Args:
         reads: the config sections the verb reads (None: all); see :func:`check_overrides`.
         registry: the installed plugins, when the caller has loaded them already.
     """
-    from .config import load_config
-    from .registry import load_registry
+    from ..config import load_config
+    from ..registry import load_registry
+    from .options import option_overrides
 
     registry = registry or load_registry()
-    config = load_config(registry, args.config, [*args.overrides, *extra_overrides])
-    check_overrides(args.verb, args.overrides, extra_overrides, reads)
+    options = option_overrides(args)
+    config = load_config(registry, args.config, args.overrides, options=options)
+    check_overrides(args.verb, args.overrides, [text for text, _ in options], reads)
     if args.config and reads is not None:
-        note_unread_sections(args.verb, args.config, registry, reads)
+        note_unread_sections(args.verb, args.config, config, reads)
     return registry, config
 
 
-def note_unread_sections(verb: str, files: Sequence[Path], registry, reads: Sequence[str]) -> None:
+def note_unread_sections(verb: str, files: Sequence[Path], config, reads: Sequence[str]) -> None:
     """Say which sections of the ``--config`` files ``verb`` does not read, where they
     differ from the defaults. A note, not an error (a ``--set`` there is one): a config
     written by another command, a trial's ``config.toml`` say, is a whole resolved config
     and is meant to be reusable."""
-    from .config import changed_settings, load_config
-
-    changed = changed_settings(
-        load_config(registry, files).to_dict(), load_config(registry).to_dict()
-    )
+    changed = config.changed_sections([str(path) for path in files])
     unread = sorted(set(changed) - set(reads))
     if unread:
         print(
@@ -166,36 +159,13 @@ def check_overrides(
             )
 
 
-def user_settings(config, registry, overrides: Sequence[str]) -> dict[str, Any]:
-    """The settings the user chose: what the ``--config`` files and ``--set`` changed from
-    the shipped defaults, and every key a ``--set`` (or an option, in ``overrides``) names,
-    even to its default value (``--set planner.use=top-parallel`` is a choice the checks
-    of later options must see; a whole resolved ``config.toml`` given to ``--config`` is
-    not, beyond what it changes).
-
-    Args:
-        config: the resolved :class:`~pipeline.config.Config`.
-        overrides: the ``--set`` texts and those the verb's options stand for.
-    """
-    from .config import changed_settings, dotted_value, load_config, parse_override
-
-    chosen = changed_settings(config.to_dict(), load_config(registry).to_dict())
-    for text in overrides:
-        *sections, key = text.partition("=")[0].strip().split(".")
-        node = chosen
-        for section in sections:
-            node = node.setdefault(section, {})
-        node[key] = dotted_value(parse_override(text), ".".join([*sections, key]))
-    return chosen
-
-
 # --- symfuse plugins -------------------------------------------------------------------
 
 
 def _cmd_plugins(args: argparse.Namespace) -> int:
-    from .config import load_config
-    from .params import describe
-    from .registry import load_registry
+    from ..config import load_config
+    from ..params import describe
+    from ..registry import load_registry
 
     registry = load_registry()
     rows = []
@@ -227,11 +197,8 @@ def _cmd_plugins(args: argparse.Namespace) -> int:
 
 
 def _cmd_config(args: argparse.Namespace) -> int:
-    from .stages import STAGES
-
     registry, config = _load(args)
-    for stage in STAGES:  # a selected stage's own checks of its parameters run as it is built
-        config.create(registry, stage)
+    config.check_stages(registry)
     print(config.to_toml(), end="")
     return 0
 
@@ -296,9 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_options(config)
     config.set_defaults(run=_cmd_config)
 
-    from . import cli_complete, cli_fuse, cli_objects, cli_sweep, cli_trial, cli_view
+    from . import complete, fuse, objects, sweep, trial, view
 
-    for verb in (cli_fuse, cli_trial, cli_sweep, cli_complete, cli_objects, cli_view):
+    for verb in (fuse, trial, sweep, complete, objects, view):
         verb.add_parser(verbs).set_defaults(run=verb.run)
     return parser
 
@@ -358,9 +325,3 @@ def interrupted(exc: BaseException) -> bool:
         seen.add(id(cause))
         cause = cause.__cause__ or cause.__context__
     return False
-
-
-if __name__ == "__main__":
-    from .entry import main as console_main
-
-    sys.exit(console_main())

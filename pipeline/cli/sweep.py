@@ -7,8 +7,8 @@ import json
 import sys
 from pathlib import Path
 
-from .cli import _add_config_options, _load, counting_number
-from .errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError
+from ..errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError
+from . import _add_config_options, _load, counting_number
 
 
 def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
@@ -20,7 +20,7 @@ def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
             ``*/textured.obj``.
         InputError: a scan cannot be read as an object (named).
     """
-    from .catalogue import load_object
+    from ..catalogue import load_object
 
     if args.scans is None:
         return None
@@ -53,23 +53,21 @@ def _captures_folder(args: argparse.Namespace, experiment) -> Path | None:
     return Path(args.captures).resolve()
 
 
-def run(args: argparse.Namespace) -> int:
-    from .config import changed_settings, load_config
-    from .experiments import EXPERIMENTS, ExperimentOptions
-    from .outdir import SWEEP_ROWS_FILE
-    from .stages import STAGES
-    from .sweep import prepare_sweep_folder, run_sweep, settings_section
+def _planned_tasks(args: argparse.Namespace, registry, config, experiment):
+    """The sweep's output folder, its trials and the config sections they read, once the
+    config is checked for them.
 
-    if args.scheduler and args.executor != "dask":
-        raise ConfigError("--scheduler applies to --executor dask")
-    registry, config = _load(args, [f"estimator.use={args.estimator}"] if args.estimator else [])
-    experiment = EXPERIMENTS[args.experiment]
-    if args.grid and not experiment.randomised:
-        randomised = ", ".join(name for name, row in sorted(EXPERIMENTS.items()) if row.randomised)
-        raise ConfigError(f"sweep {args.experiment}: --grid applies to {randomised} only")
+    Raises:
+        ConfigError: the user set a section the trials do not read, a stage's parameters
+            do not go together, or a chosen ``planner.use`` would not plan.
+    """
+    from ..config import leaf_keys
+    from ..experiments import ExperimentOptions
+    from ..stages import STAGES
+
     estimator = config.choices["estimator"]
     resolved = config.to_dict()
-    user = changed_settings(resolved, load_config(registry).to_dict())
+    user = config.differing()
     sections = experiment.config_sections or tuple(resolved)
     unread = sorted(set(user) - set(sections))
     if unread:
@@ -77,11 +75,8 @@ def run(args: argparse.Namespace) -> int:
             f"sweep {args.experiment}: its trials read only [{'], ['.join(sections)}] of the "
             f"config, not [{'], ['.join(unread)}]; remove those from --config/--set"
         )
-    # A stage checks how its parameters go together as it is built: a bad pair fails here,
-    # once, rather than in every trial.
-    for stage in STAGES:
-        if stage in sections:
-            config.create(registry, stage)
+    # A bad pair of a stage's parameters fails here, once, rather than in every trial.
+    config.check_stages(registry, [stage for stage in STAGES if stage in sections])
     # The default folder is fixed, not fresh: typing the command again resumes the sweep.
     out = args.out or Path("runs") / f"sweep-{args.experiment}-{estimator}"
     options = ExperimentOptions(
@@ -98,13 +93,30 @@ def run(args: argparse.Namespace) -> int:
     )
     tasks = experiment.tasks(options)
     if "use" in user.get("planner", {}):
-        from .experiments.paper_tasks import trial_config
-        from .hand_choice import check_planner_is_read
+        from ..experiments.paper_tasks import trial_config
+        from ..hand_choice import check_planner_is_read
 
         # The trials of one hand read planner.use alike: the first of each stands for all.
         by_hand = {task.params["gripper"]: task for task in tasks if "gripper" in task.params}
         for task in by_hand.values():
-            check_planner_is_read(trial_config(task.params), registry, user)
+            check_planner_is_read(trial_config(task.params), registry, leaf_keys(user))
+    return out, tasks, sections
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..experiments import EXPERIMENTS
+    from ..outdir import SWEEP_ROWS_FILE
+    from ..sweep import prepare_sweep_folder, run_sweep, settings_section
+
+    if args.scheduler and args.executor != "dask":
+        raise ConfigError("--scheduler applies to --executor dask")
+    registry, config = _load(args)
+    experiment = EXPERIMENTS[args.experiment]
+    if args.grid and not experiment.randomised:
+        randomised = ", ".join(name for name, row in sorted(EXPERIMENTS.items()) if row.randomised)
+        raise ConfigError(f"sweep {args.experiment}: --grid applies to {randomised} only")
+    out, tasks, sections = _planned_tasks(args, registry, config, experiment)
+    resolved, user = config.to_dict(), config.differing()
     read = {section: resolved[section] for section in sections}
     fingerprint = json.dumps(read, sort_keys=True)
     keys = [task.key for task in tasks]
@@ -141,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """The ``sweep`` verb's options."""
-    from .experiments import EXPERIMENTS, experiment_descriptions
+    from ..experiments import EXPERIMENTS, experiment_descriptions
 
     parser = subparsers.add_parser(
         "sweep",

@@ -10,17 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import __version__
-from .cli import (
-    _add_config_options,
-    _add_output_options,
-    _add_units_option,
-    _load,
-    add_wide_option,
-)
-from .cli_summary import one_sided_line, selection_line, stage_summary
-from .cli_view import add_rerun_option, check_rerun, record_if_asked
-from .errors import (
+from ..errors import (
     EXIT_ESTIMATE_FAILED,
     EXIT_OK,
     ConfigError,
@@ -28,14 +18,23 @@ from .errors import (
     StageFailure,
     estimate_failed,
 )
-from .outdir import staged_output
-from .tables import wrapped
+from ..outdir import staged_output
+from ..tables import wrapped
+from . import (
+    _add_config_options,
+    _add_output_options,
+    _add_units_option,
+    _load,
+    add_wide_option,
+)
+from .summary import one_sided_line, selection_line, stage_summary
+from .view import add_rerun_option, check_rerun, record_if_asked
 
 if TYPE_CHECKING:
-    from .config import Config
-    from .formats import RecordedGrasps
-    from .registry import StageRegistry
-    from .types import DepthObservation, PointCloud, SymmetryPlane
+    from ..config import Config
+    from ..formats import RecordedGrasps
+    from ..registry import StageRegistry
+    from ..types import DepthObservation, PointCloud, SymmetryPlane
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -87,8 +86,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def parse_plane(text: str):
     """``NX,NY,D`` as a :class:`~pipeline.types.SymmetryPlane` (``NX x + NY y = D``)."""
-    from .types import SymmetryPlane
-    from .units import FARTHEST_M
+    from ..types import SymmetryPlane
+    from ..units import FARTHEST_M
 
     fields = [field.strip() for field in text.split(",")]
     if len(fields) != 3:
@@ -115,11 +114,10 @@ FUSE_READS = ("initialiser", "estimator", "model")
 
 
 def run(args: argparse.Namespace) -> int:
-    from .formats import read_cloud, read_contacts
+    from ..formats import read_cloud, read_contacts
 
     check_rerun(args)
-    overrides = [f"initialiser.use={args.init}"] if args.init else []
-    registry, config = _load(args, overrides, reads=FUSE_READS)
+    registry, config = _load(args, reads=FUSE_READS)
     plane = parse_plane(args.plane) if args.plane else None
     if args.camera and not args.depth:
         raise ConfigError("--camera describes the camera of --depth, which is not given")
@@ -144,7 +142,7 @@ def read_view(depth: Path, camera: Path | None) -> DepthObservation:
         InputError: unreadable, or its camera has no pose in the robot frame (the cloud and
             the contacts are in that frame).
     """
-    from .captures import depth_camera_path, read_depth_image
+    from ..captures import depth_camera_path, read_depth_image
 
     capture = read_depth_image(depth, camera, None)
     if capture.T_robot_camera is None:
@@ -169,54 +167,48 @@ def _fuse_into(
 
     A :class:`StageFailure` is recorded in ``result.json`` (status ``failed``) and re-raised.
     """
-    from .asset.files import write_model
-    from .evaluation import one_sided_grasps
-    from .formats import (
-        bias_to_json,
-        estimate_to_json,
-        plane_to_json,
-        selection_to_json,
-        write_completed_clouds,
-        write_json,
+    from ..evaluation import one_sided_grasps
+    from ..result_document import (
+        estimate_entries,
+        init_to_json,
+        record_failure,
+        start_document,
+        write_document,
+        write_estimate_files,
     )
-    from .runner import fuse
+    from ..runner import fuse
 
     config.write(out / "config.toml")
     started = time.perf_counter()
-    document = {
-        "symfuse": __version__,
-        "command": "fuse",
-        "inputs": {
+    document = start_document(
+        "fuse",
+        inputs={
             "cloud": str(args.cloud),
             "contacts": str(args.contacts),
             **({"depth": str(args.depth)} if view is not None else {}),
         },
-        "points": len(cloud),
-        "grasps": [len(c) for c in recorded.contacts],
-        "one_sided_grasps": one_sided_grasps(recorded.contacts),
-        "config": config.to_dict(),
-    }
+        points=len(cloud),
+        grasps=[len(c) for c in recorded.contacts],
+        one_sided_grasps=one_sided_grasps(recorded.contacts),
+        config=config.to_dict(),
+    )
     try:
         run = fuse(config, registry, cloud, recorded.contacts, recorded.plans, plane, view)
     except StageFailure as exc:
-        document.update(status="failed", reason=str(exc))
-        write_json(out / "result.json", document)
+        record_failure(out, document, str(exc))
         raise
-    write_completed_clouds(out, run.result)
     table_z = view.table_height_m if view is not None else None
-    _, document["model"] = write_model(out, run.result, config.model, table_z, cloud.viewpoint_m)
+    _, document["model"] = write_estimate_files(
+        out, run.result, config.model, table_z, cloud.viewpoint_m
+    )
+    source = "--plane" if plane is not None else config.choices["initialiser"]
     document.update(
-        init={
-            "source": "--plane" if plane is not None else config.choices["initialiser"],
-            "plane": plane_to_json(run.init.plane),
-            "bias": bias_to_json(run.init.bias),
-        },
-        stages=estimate_to_json(run.result),
-        **selection_to_json(run.result),
+        init=init_to_json(run.init, source),
+        **estimate_entries(run.result),
         status=run.result.final.status,
         seconds=time.perf_counter() - started,
     )
-    write_json(out / "result.json", document)
+    write_document(out, document)
     print(stage_summary(run.result, args.wide))
     print(wrapped(selection_line(run.result)))
     if note := one_sided_line(document["one_sided_grasps"]):

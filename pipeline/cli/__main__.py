@@ -1,0 +1,7 @@
+"""``python -m pipeline.cli``: the console script, Ctrl-C handling included."""
+
+import sys
+
+from ..entry import main
+
+sys.exit(main())
