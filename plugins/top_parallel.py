@@ -140,7 +140,7 @@ class TopParallel(CandidatePlanner):
         if p.strategy == "candidates":
             return plan_from_candidates(
                 gripper.name,
-                self._candidates(cloud, proposal, gripper),
+                self._ranked(cloud, proposal, gripper),
                 p.pregrasp_height_m,
                 gripper.max_aperture_m,
             )
@@ -211,9 +211,12 @@ class TopParallel(CandidatePlanner):
             )
 
     def _candidates(
-        self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
+        self,
+        cloud: PointCloud,
+        proposal: SymmetryInit,
+        gripper: GripperSpec,
+        p: Params,
     ) -> list[Candidate]:
-        p = self.params
         points = cloud.points
         pad = gripper.pads[0]
         frame = candidate_frame(

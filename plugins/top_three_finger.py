@@ -135,7 +135,7 @@ class TopThreeFinger(CandidatePlanner):
         if p.strategy == "candidates":
             return plan_from_candidates(
                 gripper.name,
-                self._candidates(cloud, proposal, gripper),
+                self._ranked(cloud, proposal, gripper),
                 p.pregrasp_height_m,
                 gripper.max_aperture_m,
             )
@@ -200,9 +200,12 @@ class TopThreeFinger(CandidatePlanner):
             )
 
     def _candidates(
-        self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
+        self,
+        cloud: PointCloud,
+        proposal: SymmetryInit,
+        gripper: GripperSpec,
+        p: Params,
     ) -> list[Candidate]:
-        p = self.params
         points = cloud.points
         pad = next(pad for pad in gripper.pads if pad.name.endswith("distal"))
         frame = candidate_frame(

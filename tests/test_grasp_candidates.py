@@ -463,3 +463,21 @@ def test_a_jaw_finger_that_meets_a_shoulder_below_its_pad_is_rejected():
     ):
         candidate = _jaws_closing_along_y(visible, np.vstack([visible, back]))
         assert candidate.summary.reason == reason
+
+
+def test_the_lowest_pad_height_is_not_below_the_clearance_it_is_computed_from():
+    # The lowest height a planner tries puts the fingertips exactly at the clearance: table
+    # + clearance + pad-to-fingertip, less pad-to-fingertip, is that bound only up to float
+    # rounding, which put it a fraction of a nanometre below in about one case in five.
+    rng = np.random.default_rng(3)
+    for table in rng.uniform(-0.05, 0.05, 200):
+        settings = CandidateSettings(
+            table_height_m=float(table),
+            table_clearance_m=0.01,
+            descent_clearance_m=0.004,
+            touch_tolerance_m=0.002,
+            tipping_weight=0.5,
+        )
+        lowest = float(table) + 0.01 + 0.029
+        assert not settings.below_clearance(lowest - 0.029)
+        assert settings.below_clearance(lowest - 0.029 - 1e-6)

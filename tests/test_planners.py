@@ -247,3 +247,41 @@ def test_planners_check_the_number_of_fingers():
         TopParallel(TopParallel.Params(strategy="paper")).plan(cloud, _true_plane(), SDH)
     with pytest.raises(ConfigError, match="top-parallel"):
         TopThreeFinger(TopThreeFinger.Params(strategy="paper")).plan(cloud, _true_plane(), PG70)
+
+
+def test_parallel_reaches_down_to_a_low_object_only_when_nothing_else_is_feasible():
+    # An 18 mm tall box segmented with the fitted cut (a few mm above the table), the table
+    # taken at the cloud's bottom (the shipped config): with the fingertips 10 mm above it
+    # the pads' lowest taxels stand over the box's top, so no grasp is feasible; reaching
+    # down to the lowest point seen grasps it with both pads on its sides.
+    observation = synthetic_observation(
+        box_object(0.04, 0.04, 0.018), (0.6, 0.0, 0.0), rng=np.random.default_rng(8)
+    )
+    cloud = TableCluster().segment(observation)
+    bottom = float(cloud.points[:, 2].min())
+    assert bottom < 0.008
+    plans = {}
+    for low in (0.01, 0.0):
+        params = TopParallel.Params(cloud_base_above_table_m=0.0, low_table_clearance_m=low)
+        plans[low] = TopParallel(params).plan(cloud, _true_plane(), PG70)
+    assert plans[0.01].status == "refused"
+    assert "no surface before the front pad" in plans[0.01].reason
+    plan = plans[0.0]
+    assert plan.status == "ok"
+    fingertip_z = plan.T_robot_hand[2, 3] - 0.125 - 0.029
+    assert bottom - 1e-6 <= fingertip_z < bottom + 0.01
+    best = plan.candidates[0]
+    assert len(best.contact_coverage) == 2 and min(best.contact_coverage) > 0.0
+    # A tall box keeps the clearance: the lower reach is tried only when nothing else is.
+    tall = TableCluster().segment(
+        synthetic_observation(
+            box_object(0.04, 0.1, 0.1), (0.6, 0.0, 0.0), rng=np.random.default_rng(8)
+        )
+    )
+    low_heights = min(
+        c.height_m
+        for c in TopParallel(TopParallel.Params(cloud_base_above_table_m=0.0))
+        .plan(tall, _true_plane(), PG70)
+        .candidates
+    )
+    assert low_heights - 0.029 >= float(tall.points[:, 2].min()) + 0.01 - 1e-6

@@ -198,6 +198,16 @@ class CandidateSettings:
     touch_tolerance_m: float
     tipping_weight: float
 
+    def below_clearance(self, fingertip_z_m: float) -> bool:
+        """Whether a fingertip at ``fingertip_z_m`` lies below ``table_clearance_m`` above
+        the table. The lowest pad height tried is that bound itself, which float rounding
+        would otherwise put a fraction of a nanometre below it."""
+        return fingertip_z_m < self.table_height_m + self.table_clearance_m - _ROUNDING_M
+
+
+#: Slack of :meth:`CandidateSettings.below_clearance` (m).
+_ROUNDING_M = 1e-9
+
 
 @dataclass(frozen=True)
 class CandidateParams:
@@ -229,6 +239,13 @@ class CandidateParams:
     top_margin_m: float = param(0.005, "pad top edge below the object's top (m)", at_least=0.0)
     table_clearance_m: float = param(
         0.01, "lowest fingertip height above the table (m)", at_least=0.0
+    )
+    low_table_clearance_m: float = param(
+        0.0,
+        "candidates: the fingertips' clearance above the table tried when no grasp is "
+        "feasible with table_clearance_m, so a low object's sides reach the pads' lowest "
+        "taxels (m)",
+        at_least=0.0,
     )
     cloud_base_above_table_m: float = param(
         0.02, "the table lies this far below the cloud's lowest point (m)", at_least=0.0

@@ -15,12 +15,13 @@ from __future__ import annotations
 import re
 from abc import abstractmethod
 from collections import defaultdict
+from dataclasses import replace
 
 import numpy as np
 
 from ..stages import GraspPlanner
 from ..types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
-from .candidate import Candidate
+from .candidate import Candidate, CandidateParams
 
 
 def closing_angles(step_deg: float) -> np.ndarray:
@@ -108,15 +109,38 @@ class CandidatePlanner(GraspPlanner):
     """A planner that ranks candidates: its feasible ones are the alternatives a next grasp
     is chosen among, whatever its ``strategy``. A subclass provides ``_check_hand`` (raise
     :class:`~pipeline.errors.ConfigError` for a hand it cannot plan for) and
-    ``_candidates`` (every candidate it considers on the cloud)."""
+    ``_candidates`` (every candidate it considers on the cloud with the given parameters);
+    both plan from :meth:`_ranked`."""
 
     @abstractmethod
     def _check_hand(self, gripper: GripperSpec) -> None: ...
 
     @abstractmethod
     def _candidates(
-        self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
+        self,
+        cloud: PointCloud,
+        proposal: SymmetryInit,
+        gripper: GripperSpec,
+        params: CandidateParams,
     ) -> list[Candidate]: ...
+
+    def _ranked(
+        self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
+    ) -> list[Candidate]:
+        """The candidates with the fingertips ``table_clearance_m`` above the table; when
+        none of them is feasible, those with the fingertips ``low_table_clearance_m`` above
+        it instead. The clearance keeps a fingertip off a table that is not quite where the
+        cloud says, and costs nothing on an object taller than the pads; on a low object it
+        leaves the pads' lowest taxels above the object's sides, and the lower reach is the
+        only grasp there is (docs/method.md §5)."""
+        p = self.params
+        candidates = self._candidates(cloud, proposal, gripper, p)
+        if p.low_table_clearance_m >= p.table_clearance_m or any(
+            c.summary.feasible for c in candidates
+        ):
+            return candidates
+        low = replace(p, table_clearance_m=p.low_table_clearance_m)
+        return self._candidates(cloud, proposal, gripper, low)
 
     def alternatives(
         self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
@@ -124,7 +148,7 @@ class CandidatePlanner(GraspPlanner):
         self._check_hand(gripper)
         return feasible_plans(
             gripper.name,
-            self._candidates(cloud, proposal, gripper),
+            self._ranked(cloud, proposal, gripper),
             self.params.pregrasp_height_m,
             gripper.max_aperture_m,
         )

@@ -98,7 +98,7 @@ def parallel_candidate(
     s = settings
     lateral = np.array([-direction[1], direction[0], 0.0])
     fingertip_z = height_m - hand.pad_centre_to_fingertip_m
-    if fingertip_z < s.table_height_m + s.table_clearance_m:
+    if s.below_clearance(fingertip_z):
         return Candidate.rejected(angle_rad, height_m, 0.0, "fingertips below the table clearance")
 
     def column(visible: bool) -> np.ndarray:

@@ -131,7 +131,7 @@ def sdh_candidate(
     lowest_tip = palm_z - (
         sdh.KNUCKLE_DEPTH_M + sdh.PROXIMAL_LENGTH_M * math.cos(steepest) + sdh.DISTAL_LENGTH_M
     )
-    if lowest_tip < s.table_height_m + s.table_clearance_m:
+    if s.below_clearance(lowest_tip):
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "fingertips below the table clearance"
         )
