@@ -62,7 +62,7 @@ from .next_grasp import (
     uncertainty,
 )
 from .registry import StageRegistry
-from .runner import estimate
+from .runner import estimate, one_blas_thread
 from .stages import World
 from .types import (
     Contacts,
@@ -287,7 +287,8 @@ def run_trial(
     stages = {stage: config.create(registry, stage) for stage in config.choices}
     obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
     try:
-        return _simulate(config, registry, stages, obj, out_dir, timer, document, report)
+        with one_blas_thread():  # small matrices: BLAS threads only contend
+            return _simulate(config, registry, stages, obj, out_dir, timer, document, report)
     except SymfuseError as exc:
         # A failure after the first data file is a result: record how far the trial got.
         if any(path.name != "config.toml" for path in out_dir.iterdir()):
