@@ -222,7 +222,7 @@ def draw_grasps(
     """``grasps.png``: the object from above with every grasp's pads numbered, how it was
     chosen and by which hand, and the selected stage's median deviation after it; the grasp
     the trial stopped on without fusing it, where it was planned to touch."""
-    from .figures import GraspMarks, grasps_figure
+    from .trial_pictures import GraspMarks, grasps_picture
 
     marks = []
     for contacts, entry in zip(fused.contacts, document["grasps"], strict=True):
@@ -240,7 +240,7 @@ def draw_grasps(
             "(planned contacts)"
         )
         marks.append(GraspMarks(label, planned, np.full(len(planned), "planned"), fused=False))
-    grasps_figure(
+    grasps_picture(
         out_path,
         result.selected.completed,
         truth.vertices,
