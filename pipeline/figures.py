@@ -1,6 +1,5 @@
 """The figures drawn with matplotlib: the experiments' study figures (deviation
-histograms, error grids, box plots, line panels), the multi-object scene picture and a
-multi-grasp trial's ``grasps.png``.
+histograms, error grids, box plots, line panels) and the multi-object scene picture.
 
 They use matplotlib's object API with the Agg canvas: no pyplot, no global backend switch,
 so they work headless, in worker processes and beside a user's own backend; matplotlib is
@@ -278,69 +277,6 @@ def plot_scene(
     path = Path(path)
     figure.savefig(path, dpi=110, bbox_inches="tight", pil_kwargs=PNG_OPTIONS)
     return path
-
-
-@dataclass(frozen=True)
-class GraspMarks:
-    """One grasp's taxels in contact for :func:`grasps_figure`: their ``(M, 3)`` positions
-    (frame R, m), the pad of each, and the legend text (e.g. the deviation after it). A
-    grasp that was not fused (``fused`` False: it touched one side only or nothing) is
-    marked where its plan predicted its pads' contacts instead, with crosses."""
-
-    label: str
-    taxels_m: np.ndarray
-    pads: np.ndarray
-    fused: bool = True
-
-
-def grasps_figure(
-    out_path: Path,
-    model_m: np.ndarray,
-    truth_vertices_m: np.ndarray,
-    grasps: Sequence[GraspMarks],
-    title: str,
-) -> Path:
-    """The object from above: the true footprint (the convex hull of the mesh, grey), the
-    final completed model (blue), and each grasp's taxels in contact in its own colour,
-    every pad numbered with its grasp at the centroid of its taxels (a grasp not fused: its
-    planned contacts, crossed); the legend carries each grasp's label. Axes in mm,
-    frame R."""
-    from matplotlib.figure import Figure
-    from scipy.spatial import ConvexHull
-
-    figure = Figure(figsize=(6.4, 6.0), dpi=110)
-    axes = figure.add_subplot(1, 1, 1)
-
-    truth = 1e3 * np.asarray(truth_vertices_m)[:, :2]
-    outline = truth[ConvexHull(truth).vertices]
-    axes.fill(*outline.T, fc="0.9", ec="0.5", label="true footprint (hull)")
-    model = 1e3 * np.asarray(model_m)[:, :2]
-    axes.scatter(*model.T, s=1, c="tab:blue", alpha=0.4, label="final model")
-    colours = ("tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink")
-    for number, grasp in enumerate(grasps, start=1):
-        colour = colours[(number - 1) % len(colours)]
-        taxels = 1e3 * np.asarray(grasp.taxels_m).reshape(-1, 3)[:, :2]
-        marker = "s" if grasp.fused else "x"
-        axes.scatter(*taxels.T, s=10, c=colour, marker=marker, label=f"{number}: {grasp.label}")
-        for pad in np.unique(grasp.pads):
-            centre = taxels[grasp.pads == pad].mean(axis=0)
-            axes.annotate(
-                str(number),
-                centre,
-                fontsize=11,
-                fontweight="bold",
-                color="white",
-                ha="center",
-                va="center",
-                bbox={"boxstyle": "circle,pad=0.2", "fc": colour, "ec": "none"},
-            )
-    axes.set_aspect("equal")
-    axes.set_xlabel("x (mm)")
-    axes.set_ylabel("y (mm)")
-    axes.set_title(title)
-    axes.legend(loc="best", fontsize=8, markerscale=2)
-    figure.tight_layout()
-    return _save(figure, out_path)
 
 
 @dataclass(frozen=True)

@@ -7,9 +7,10 @@ registry; which implementation runs is the config's business.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -125,14 +126,22 @@ def initial_estimate(cloud: PointCloud, init: SymmetryInit) -> EstimateResult:
     return EstimateResult(stages=(stage,))
 
 
-def run_estimator(estimator: Estimator, problem: EstimationProblem) -> EstimateResult:
-    """``estimator.estimate(problem)`` on a single-threaded BLAS.
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Run the block on a single-threaded BLAS.
 
-    The estimators' matrices are small (hundreds of rows): a multi-threaded BLAS only
-    contends with itself and with sweep workers (a Cholesky of that size runs slower with two
-    threads than with one on a loaded machine).
+    A trial's matrices are small (hundreds to thousands of rows): a multi-threaded BLAS
+    only contends with itself and with sweep workers. On a loaded 2-core machine a 336-row
+    Cholesky is 3.5x slower with two threads than with one, and a ``(2000, 2) @ (2, 200)``
+    product (a robust line fit's start) costs 25x the processor time.
     """
     with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
+def run_estimator(estimator: Estimator, problem: EstimationProblem) -> EstimateResult:
+    """``estimator.estimate(problem)`` on a single-threaded BLAS (:func:`one_blas_thread`)."""
+    with one_blas_thread():
         return estimator.estimate(problem)
 
 

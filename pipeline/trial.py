@@ -57,7 +57,7 @@ from .next_grasp import (
 from .params import to_toml
 from .registry import StageRegistry
 from .result_document import estimate_entries, write_estimate_files
-from .runner import estimate_with
+from .runner import estimate_with, one_blas_thread
 from .stages import (
     STAGES,
     Estimator,
@@ -220,7 +220,7 @@ def draw_grasps(
     """``grasps.png``: the object from above with every grasp's pads numbered, how it was
     chosen and by which hand, and the selected stage's median deviation after it; the grasp
     the trial stopped on without fusing it, where it was planned to touch."""
-    from .figures import GraspMarks, grasps_figure
+    from .trial_pictures import GraspMarks, grasps_picture
 
     marks = []
     for contacts, entry in zip(fused.contacts, document["grasps"], strict=True):
@@ -238,7 +238,7 @@ def draw_grasps(
             "(planned contacts)"
         )
         marks.append(GraspMarks(label, planned, np.full(len(planned), "planned"), fused=False))
-    grasps_figure(
+    grasps_picture(
         out_path,
         result.selected.completed,
         truth.vertices,
@@ -347,7 +347,8 @@ def run_trial(
     obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
     trial = Trial(config, registry, stages, obj, out_dir, PhaseTimer(), record, report)
     try:
-        return _simulate(trial)
+        with one_blas_thread():  # small matrices: BLAS threads only contend
+            return _simulate(trial)
     except SymfuseError as exc:
         # A failure after the first data file is a result: record how far the trial got.
         if any(path.name != "config.toml" for path in out_dir.iterdir()):

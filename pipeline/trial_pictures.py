@@ -1,7 +1,7 @@
 """The pictures a trial draws every time: the deviation heatmap
 (:func:`deviation_heatmap`), the cloud with its symmetry plane
-(:func:`plot_cloud_with_plane`) and the VC hypothesis grid (:func:`plot_vc_scores`);
-``depth.png`` is in :mod:`pipeline.images`.
+(:func:`plot_cloud_with_plane`), the VC hypothesis grid (:func:`plot_vc_scores`) and the
+grasps from above (:func:`grasps_picture`); ``depth.png`` is in :mod:`pipeline.images`.
 
 They are drawn in image space (:mod:`pipeline.raster`): a trial draws them every time, and
 matplotlib's axes and markers cost several times the drawing itself. Inputs are in SI
@@ -38,6 +38,19 @@ MIRRORED_GREY = (190, 190, 190)
 PLANE_RED = (220, 20, 20)
 HEIGHT_CMAP = "viridis"
 SCORE_CMAP = "viridis_r"
+#: The grasps picture: the true footprint, the final model (light: it lies under the
+#: taxels) and one colour per grasp.
+FOOTPRINT_GREY = (230, 230, 230)
+FOOTPRINT_EDGE = (128, 128, 128)
+MODEL_BLUE = (165, 201, 225)
+GRASP_COLOURS = (
+    (214, 39, 40),
+    (44, 160, 44),
+    (255, 127, 14),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+)
 
 
 @dataclass(frozen=True)
@@ -254,3 +267,88 @@ def plot_vc_scores(
         "fraction of mirrored points in free space",
     )
     return sheet.save(path)
+
+
+@dataclass(frozen=True)
+class GraspMarks:
+    """One grasp's taxels in contact for :func:`grasps_picture`: their ``(M, 3)`` positions
+    (frame R, m), the pad of each, and the legend text (e.g. the deviation after it). A
+    grasp that was not fused (``fused`` False: it touched one side only or nothing) is
+    marked where its plan predicted its pads' contacts instead, with crosses."""
+
+    label: str
+    taxels_m: np.ndarray
+    pads: np.ndarray
+    fused: bool = True
+
+
+def grasps_picture(
+    out_path: Path,
+    model_m: np.ndarray,
+    truth_vertices_m: np.ndarray,
+    grasps: Sequence[GraspMarks],
+    title: str,
+) -> Path:
+    """The object from above: the true footprint (the convex hull of the mesh, grey), the
+    final completed model (light blue), and each grasp's taxels in contact in its own colour,
+    every pad numbered with its grasp at the centroid of its taxels (a grasp not fused: its
+    planned contacts, crossed); the legend below carries each grasp's label. Axes in mm,
+    frame R."""
+    from scipy.spatial import ConvexHull
+
+    mm = 1000.0
+    truth = mm * np.asarray(truth_vertices_m, dtype=float)[:, :2]
+    outline = truth[ConvexHull(truth).vertices]  # counter-clockwise
+    model = mm * np.asarray(model_m, dtype=float)[:, :2]
+    taxels = [mm * np.asarray(g.taxels_m, dtype=float).reshape(-1, 3)[:, :2] for g in grasps]
+    shown = np.concatenate([outline, model, *taxels])
+    low, high = shown.min(axis=0), shown.max(axis=0)
+    legend = ["true footprint (hull)", "final model"]
+    legend += [f"{number}: {g.label}" for number, g in enumerate(grasps, start=1)]
+    sheet = Sheet(560, 560 + 18 * len(legend))
+    frame = Frame.fitted(*_padded(low, high), 80, 50, 440, 440)
+    fan = np.column_stack(
+        [
+            np.zeros(len(outline) - 2, int),
+            np.arange(1, len(outline) - 1),
+            np.arange(2, len(outline)),
+        ]
+    )
+    frame.triangles(sheet, outline, fan, FOOTPRINT_GREY)
+    for start, end in zip(outline, np.roll(outline, -1, axis=0), strict=True):
+        frame.line(sheet, start, end, FOOTPRINT_EDGE, 1.0)
+    frame.points(sheet, model[:, 0], model[:, 1], MODEL_BLUE, 1.0)
+    # A cross's arm: 3 px in data units (the frame has one scale on both axes).
+    arm = 3.0 * (frame.x_range[1] - frame.x_range[0]) / frame.width
+    for number, (grasp, at) in enumerate(zip(grasps, taxels, strict=True), start=1):
+        colour = GRASP_COLOURS[(number - 1) % len(GRASP_COLOURS)]
+        if grasp.fused:
+            frame.points(sheet, at[:, 0], at[:, 1], colour, 2.0)
+        else:
+            for x, y in at:
+                frame.line(sheet, (x - arm, y - arm), (x + arm, y + arm), colour, 1.5)
+                frame.line(sheet, (x - arm, y + arm), (x + arm, y - arm), colour, 1.5)
+        pads = np.asarray(grasp.pads)
+        for pad in np.unique(pads):
+            centre = at[pads == pad].mean(axis=0)
+            frame.points(sheet, centre[:1], centre[1:], colour, 9.0)
+            column, row = frame.to_pixels(centre[0], centre[1])
+            sheet.text(
+                float(column),
+                float(row),
+                str(number),
+                size=SMALL,
+                anchor="mm",
+                colour=(255, 255, 255),
+            )
+    frame.axes(sheet, xlabel="x (mm)", ylabel="y (mm)", title=title)
+    swatches = [
+        FOOTPRINT_GREY,
+        MODEL_BLUE,
+        *(GRASP_COLOURS[k % len(GRASP_COLOURS)] for k in range(len(grasps))),
+    ]
+    for k, (text, colour) in enumerate(zip(legend, swatches, strict=True)):
+        y = 50 + 440 + 50 + 18 * k
+        sheet.rectangle(80, y - 5, 10, 10, colour)
+        sheet.text(96, y, text, size=SMALL, anchor="lm")
+    return sheet.save(out_path)

@@ -15,6 +15,7 @@ from pipeline.estimation.bias_search import (
     scored_taxels,
     search_start,
     translation_grid,
+    truncated_squared_distances,
 )
 from pipeline.estimation.hypotheses import HYPOTHESES, held_problem
 from pipeline.estimation.iekf import fuse
@@ -36,6 +37,26 @@ def test_distance_field_is_within_a_voxel_of_the_brute_force_distance():
     assert np.max(np.abs(field(queries) - expected)) <= math.sqrt(3.0) * voxel
     assert field(np.array([[1.0, 1.0, 1.0]]))[0] == limit  # far outside the grid
     assert field(points[:5]).max() <= math.sqrt(3.0) * voxel
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_truncated_distances_match_the_whole_distance_transform_within_the_radius(seed):
+    """scipy's exact Euclidean distance transform is the oracle: equal within the radius
+    (bit for bit: both take the root of an integer sum of squares), beyond it inf."""
+    from scipy.ndimage import distance_transform_edt
+
+    rng = np.random.default_rng(seed)
+    shape = tuple(int(n) for n in rng.integers(1, 30, 3))
+    count = int(rng.integers(1, 60))
+    cells = np.column_stack([rng.integers(0, n, count) for n in shape])
+    radius = int(rng.integers(0, 7))
+    free = np.ones(shape, dtype=bool)
+    free[tuple(cells.T)] = False
+    exact = distance_transform_edt(free)
+    found = np.sqrt(truncated_squared_distances(cells, shape, radius))
+    within = exact <= radius
+    assert np.array_equal(found[within], exact[within])
+    assert np.all(np.isinf(found[~within]))
 
 
 def test_translation_grid_fills_the_prior_ellipse_from_its_centre():

@@ -64,3 +64,18 @@ def test_the_trial_core_imports_no_physics_engine():
     configured world imports its own when it loads a scene)."""
     code = "import pipeline.trial, pipeline.runner, pipeline.cli, pipeline.stages"
     assert loaded_after(code, ("pybullet", "mujoco")) == []
+
+
+def test_the_grasps_picture_is_drawn_without_matplotlib(tmp_path):
+    """``grasps.png`` is drawn in image space: a trial's pictures pay for no figure."""
+    code = (
+        "import numpy as np\nfrom pathlib import Path\n"
+        "from pipeline.trial_pictures import GraspMarks, grasps_picture\n"
+        "rng = np.random.default_rng(0)\n"
+        "box = np.array([[x, y, z] for x in (-7, 7) for y in (-2, 2) for z in (0, 1)]) / 100\n"
+        "marks = [GraspMarks('a', rng.uniform(-0.05, 0.05, (10, 3)), np.repeat(['l', 'r'], 5))]\n"
+        f"grasps_picture(Path({str(tmp_path / 'grasps.png')!r}), "
+        "rng.uniform(-0.05, 0.05, (500, 3)), box, marks, 'title')"
+    )
+    assert loaded_after(code, ("matplotlib",)) == []
+    assert (tmp_path / "grasps.png").stat().st_size > 0

@@ -603,12 +603,14 @@ def test_a_grasp_already_made_is_made_again_only_when_nothing_else_teaches():
 
 
 def test_a_grasp_not_fused_is_drawn_where_it_was_planned(monkeypatch):
-    import pipeline.figures
+    import pipeline.trial_pictures
     from pipeline.trial import draw_grasps
 
     drawn = {}
     monkeypatch.setattr(
-        pipeline.figures, "grasps_figure", lambda *args, **kwargs: drawn.update(marks=args[3])
+        pipeline.trial_pictures,
+        "grasps_picture",
+        lambda *args, **kwargs: drawn.update(marks=args[3]),
     )
     first = {
         "selected_stage": 2,

@@ -126,9 +126,10 @@ class SolidGrid:
     origin_m: np.ndarray
     pitch_m: float
 
-    @property
+    @functools.cached_property
     def cells(self) -> np.ndarray:
-        """``(M, 3)`` centres of the cells inside the mesh (m)."""
+        """``(M, 3)`` centres of the cells inside the mesh (m); found once (every stage's
+        mesh is scored against the same cells)."""
         return self.origin_m + self.pitch_m * np.argwhere(self.inside)
 
     @property
