@@ -20,6 +20,7 @@ from .estimation.problem import initial_state, stage_estimate
 from .registry import StageRegistry
 from .stages import Estimator
 from .types import (
+    AfterView,
     Bias,
     Contacts,
     DepthObservation,
@@ -77,10 +78,12 @@ def estimate(
     init: SymmetryInit,
     grasps: Sequence[Contacts],
     view: DepthObservation | None = None,
+    after_views: Sequence[AfterView | None] = (),
 ) -> EstimateResult:
     """Run the configured estimator from ``init`` over ``grasps`` (in order); ``view``, the
     depth image the cloud came from, lets the estimator check its model against the space
-    the camera saw empty.
+    the camera saw empty; ``after_views``, the camera's view after each grasp (None where
+    a grasp has none), measure how the grasps moved the object.
 
     Raises:
         StageFailure: the initialiser rejected every hypothesis.
@@ -88,7 +91,9 @@ def estimate(
     if init.status != "ok":
         raise StageFailure(f"initialiser gave no usable symmetry plane: {init.reason}")
     estimator = config.create(registry, "estimator")
-    problem = EstimationProblem(cloud=cloud, init=init, grasps=tuple(grasps), view=view)
+    problem = EstimationProblem(
+        cloud=cloud, init=init, grasps=tuple(grasps), view=view, after_views=tuple(after_views)
+    )
     return run_estimator(estimator, problem)
 
 
@@ -130,6 +135,7 @@ def fuse(
     plans: Sequence[GraspPlan | None] = (),
     plane: SymmetryPlane | None = None,
     view: DepthObservation | None = None,
+    after_views: Sequence[AfterView | None] = (),
 ) -> FusionRun:
     """Fuse a recorded cloud (frame R) with recorded contacts.
 
@@ -139,9 +145,11 @@ def fuse(
         view: the depth image the cloud came from, its camera pose in frame R, when
             recorded: initialisers that need it can run, and the estimator checks its model
             against the space the camera saw empty, as in a trial.
+        after_views: each grasp's after-view, where recorded (docs/after-view.md).
     """
     if plane is not None:
         init = SymmetryInit(plane=plane, bias=Bias(pivot_m=np.mean(cloud.points, axis=0)))
     else:
         init = initialise_from_recording(config, registry, cloud, grasps, plans, view)
-    return FusionRun(init=init, result=estimate(config, registry, cloud, init, grasps, view))
+    result = estimate(config, registry, cloud, init, grasps, view, after_views)
+    return FusionRun(init=init, result=result)

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
+from .after_view_files import write_after_view
 from .asset.files import write_model
 from .camera_file import camera_to_json
 from .catalogue import CatalogueObject, load_object
@@ -61,10 +62,12 @@ from .next_grasp import (
     stop_reason,
     uncertainty,
 )
+from .perception.after_view import look_after
 from .registry import StageRegistry
 from .runner import estimate
 from .stages import World
 from .types import (
+    AfterView,
     Contacts,
     DepthObservation,
     EstimateResult,
@@ -530,6 +533,8 @@ def _grasp_and_fuse(
     rng = np.random.default_rng([settings.seed, 15])
     grasps: list[Contacts] = []
     plans: list[GraspPlan] = []
+    views: list[AfterView | None] = []
+    entries: list[dict[str, Any]] = []
     document["grasps"] = []
     document["next_grasp"] = settings.next_grasp if settings.grasps > 1 else None
     plan, chosen_by, fused, stop = choice.plan, {"strategy": "first"}, None, ""
@@ -598,13 +603,20 @@ def _grasp_and_fuse(
             break
         grasps.append(contacts)
         plans.append(plan)
+        if settings.after_view:
+            report(f"looking again after grasp {k + 1}")
+            with timer.phase("after_view"):
+                views.append(look_after(stages["sensor"], world, observation, cloud, outcome, plan))
+        else:
+            views.append(None)
         with timer.phase("write"):
-            write_json(out_dir / "contacts.json", contacts_to_json(grasps, plans))
+            entries.append(write_after_view(out_dir, k, views[-1], outcome))
+            write_json(out_dir / "contacts.json", contacts_to_json(grasps, plans, entries))
         if k == 0:
             init = _initial_state(config, stages, proposal, cloud, plan, contacts, timer, document)
         report(f"fusing {len(grasps)} grasp(s)")
         with timer.phase("estimator"):
-            result = estimate(config, registry, cloud, init, grasps, observation)
+            result = estimate(config, registry, cloud, init, grasps, observation, views)
         with timer.phase("evaluation"):
             truth = ground_truth(
                 obj, outcome.object_after, pose_seen, observation.calibration_error
