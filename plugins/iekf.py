@@ -118,6 +118,17 @@ class IekfEstimator(Estimator):
             "object, instead of taking it as unknown (right to a millimetre on most poses, "
             "off by several on some: docs/after-view.md)",
         )
+        after_view_hand_floor_yaw_rad: float = param(
+            0.02,
+            "after-view, hand calibration: std of its yaw error beyond its own covariance (rad)",
+            at_least=0.0,
+        )
+        after_view_hand_floor_xy_m: float = param(
+            0.002,
+            "after-view, hand calibration: std of each horizontal component of its error "
+            "beyond its own covariance (m)",
+            at_least=0.0,
+        )
         after_view_gate_alpha: float = param(
             0.001,
             "after-view: false-alarm probability of the chi-square gate on its innovation; a "
@@ -148,6 +159,8 @@ class IekfEstimator(Estimator):
             floor_yaw_rad=p.after_view_floor_yaw_rad,
             floor_xy_m=p.after_view_floor_xy_m,
             hand_calibration=p.after_view_hand_calibration,
+            hand_floor_yaw_rad=p.after_view_hand_floor_yaw_rad,
+            hand_floor_xy_m=p.after_view_hand_floor_xy_m,
             gate_alpha=p.after_view_gate_alpha,
         )
 

@@ -56,6 +56,8 @@ class AfterViewSettings:
         floor_yaw_rad, floor_xy_m: std of the registration's error beyond its own
             covariance, in yaw and in each horizontal component (rad, m).
         hand_calibration: measure the calibration error on the hand (see above).
+        hand_floor_yaw_rad, hand_floor_xy_m: std of that measurement's error beyond its own
+            covariance (the hand's model against its image, points by its edge).
         gate_alpha: false-alarm probability of the innovation's chi-square gate (3 dof).
     """
 
@@ -65,6 +67,8 @@ class AfterViewSettings:
     floor_yaw_rad: float = 0.02
     floor_xy_m: float = 0.001
     hand_calibration: bool = False
+    hand_floor_yaw_rad: float = 0.02
+    hand_floor_xy_m: float = 0.002
     gate_alpha: float = 0.001
 
 
@@ -158,7 +162,8 @@ def hand_error(
     )
     if hand is None or not hand.converged:
         return np.zeros(3), calibration
-    return hand.motion, hand.covariance
+    xy = settings.hand_floor_xy_m**2
+    return hand.motion, hand.covariance + np.diag([settings.hand_floor_yaw_rad**2, xy, xy])
 
 
 def innovation(measurement: AfterViewMeasurement, g: np.ndarray) -> np.ndarray:
