@@ -268,6 +268,10 @@ def test_a_hand_in_view_measures_the_calibration_error_it_constrains():
     assert abs(blind.motion[2] - shift[1]) > 2e-3
 
 
+#: A trial's recorded files ``fuse`` reads: option, file.
+RECORDED = (("cloud", "cloud.ply"), ("contacts", "contacts.json"), ("depth", "depth.npy"))
+
+
 @pytest.mark.slow
 def test_fuse_with_the_after_depth_repeats_the_trial(tmp_path):
     from pipeline.cli import main
@@ -278,56 +282,23 @@ def test_fuse_with_the_after_depth_repeats_the_trial(tmp_path):
     contacts = json.loads((trial / "contacts.json").read_text())
     assert contacts["grasps"][0]["after_depth"] == "after_depth.npy"
     assert (trial / "after_depth.npy").exists()
-    fused = {}
-    for name, extra in (("from-contacts", []), ("given", ["--after-depth"])):
-        out = tmp_path / name
-        given = [str(trial / "after_depth.npy")] if extra else []
-        code = main(
-            [
-                "fuse",
-                "--cloud",
-                str(trial / "cloud.ply"),
-                "--contacts",
-                str(trial / "contacts.json"),
-                "--depth",
-                str(trial / "depth.npy"),
-                "--init",
-                "ps",
-                *extra,
-                *given,
-                "--out",
-                str(out),
-            ]
-        )
+
+    def fuse(name: str, *extra: str) -> list:
+        recorded = [f"--{kind}={trial / file}" for kind, file in RECORDED]
+        code = main(["fuse", *recorded, "--init", "ps", *extra, "--out", str(tmp_path / name)])
         assert code in (0, 3)
-        fused[name] = json.loads((out / "result.json").read_text())["stages"]
+        return json.loads((tmp_path / name / "result.json").read_text())["stages"]
+
+    fused = [fuse("from-contacts"), fuse("given", f"--after-depth={trial / 'after_depth.npy'}")]
     expected = json.loads((trial / "result.json").read_text())["stages"]
-    for stages in fused.values():
+    for stages in fused:
         for stage, mine in zip(expected, stages, strict=True):
             assert mine["bias"]["translation"] == pytest.approx(
                 stage["bias"]["translation"], abs=1e-9
             )
             assert mine["plane"]["offset"] == pytest.approx(stage["plane"]["offset"], abs=1e-9)
     # Without the after-view the same recording fuses otherwise: the view counted.
-    blind = tmp_path / "blind"
-    assert main(
-        [
-            "fuse",
-            "--cloud",
-            str(trial / "cloud.ply"),
-            "--contacts",
-            str(trial / "contacts.json"),
-            "--depth",
-            str(trial / "depth.npy"),
-            "--init",
-            "ps",
-            "--set",
-            "estimator.iekf.after_view=false",
-            "--out",
-            str(blind),
-        ]
-    ) in (0, 3)
-    stages = json.loads((blind / "result.json").read_text())["stages"]
+    stages = fuse("blind", "--set", "estimator.iekf.after_view=false")
     assert stages[1]["bias"]["translation"] != pytest.approx(
         expected[1]["bias"]["translation"], abs=1e-6
     )
