@@ -14,7 +14,7 @@ object; contacts for fusion are given in that frame.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,6 +27,7 @@ from .perception.segmentation import outside_view, touches_view_edge
 from .perception.support import recentre
 from .registry import StageRegistry
 from .types import (
+    AfterView,
     Contacts,
     DepthObservation,
     EstimateResult,
@@ -34,6 +35,9 @@ from .types import (
     PointCloud,
     SymmetryInit,
 )
+
+#: The grasps' after-views of an object, given its cloud (one per grasp, None: none).
+AfterViews = Callable[[PointCloud], tuple[AfterView | None, ...]]
 
 #: Pixels between an object and the edge of the view below which it is set aside.
 VIEW_EDGE_MARGIN_PX = 2
@@ -149,9 +153,11 @@ def complete_object(
     observation: DepthObservation,
     grasps: Sequence[Contacts],
     plans: Sequence[GraspPlan | None],
+    after_views: AfterViews | None = None,
 ) -> ObjectCompletion:
     """Initialise one object's plane and complete it (Stage 0), fusing ``grasps`` when
-    there are any (Stages 1, 2)."""
+    there are any (Stages 1, 2), with the grasps' after-views ``after_views`` finds for the
+    object's cloud (docs/after-view.md)."""
     from .runner import estimate, initial_estimate  # the estimator's scipy: only when used
 
     initialiser = config.create(registry, "initialiser")
@@ -168,7 +174,8 @@ def complete_object(
         return ObjectCompletion(index, cloud, "completed", init, initial_estimate(cloud, init))
     # With the depth image, as in a trial: the camera's free space catches contacts of
     # another scene, which the taxels alone explain by any plane they pull the model to.
-    result = estimate(config, registry, cloud, init, grasps, observation)
+    views = after_views(cloud) if after_views is not None else ()
+    result = estimate(config, registry, cloud, init, grasps, observation, views)
     return ObjectCompletion(index, cloud, result.final.status, init, result)
 
 
@@ -178,15 +185,17 @@ def complete_scene(
     which: str,
     grasps: Sequence[Contacts] = (),
     plans: Sequence[GraspPlan | None] = (),
+    after_views: AfterViews | None = None,
 ) -> SceneCompletion:
     """Observe with the configured sensor, segment every object, complete the ones
-    ``which`` selects (see :func:`select_objects`), fusing ``grasps`` when given."""
+    ``which`` selects (see :func:`select_objects`), fusing ``grasps`` when given (with
+    their after-views, ``after_views`` of the object's cloud)."""
     observation = config.create(registry, "sensor").observe(None)
     segmenter = config.create(registry, "segmenter")
     observation, clouds, set_aside = segment_scene(segmenter, observation)
     selected = set(select_objects(which, clouds, observation, bool(grasps)))
     objects = tuple(
-        complete_object(config, registry, index, cloud, observation, grasps, plans)
+        complete_object(config, registry, index, cloud, observation, grasps, plans, after_views)
         if index in selected
         else ObjectCompletion(index, cloud, "not selected")
         for index, cloud in enumerate(clouds)

@@ -82,6 +82,11 @@ class TrialSettings:
         "both at most this (mm); 0: make all the grasps",
         at_least=0.0,
     )
+    after_view: bool = param(
+        True,
+        "look again while the hand holds the object and fuse that view as a measurement of "
+        "how the grasp moved it (docs/after-view.md); false: the paper's pipeline",
+    )
     retries: int = param(
         2,
         "after a first grasp whose pads do not touch opposing sides (nothing to fuse): "

@@ -11,7 +11,10 @@ the validators and JSON helpers here).
   records the grasp plan (see :func:`plan_to_json`); PS initialisation uses its predicted
   contacts for the initial bias.
   ``units`` is ``"m"`` or ``"mm"`` (positions and the plan's lengths); a reader's ``units``
-  argument overrides it (``--units``).
+  argument overrides it (``--units``). A grasp may name its after-view, the depth image the
+  camera took while the hand held the object (``"after_depth"``: a ``.npy`` file beside the
+  contacts file, metres), with the hand's pose then (``"hand"``: ``T_robot_hand`` and
+  ``joint_positions`` by joint name), which masks the hand out of it (docs/after-view.md).
 * Results: ``result.json`` (see :func:`estimate_to_json`) and ``completed_stage{0,1,2}.ply``.
 * Cameras: ``camera.json``, in :mod:`pipeline.camera_file`.
 
@@ -174,11 +177,23 @@ def _vector(value: Any, where: str, path: Path) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class HeldHand:
+    """Where the hand was while it held the object: its palm pose (frame R, the file's
+    units read as metres) and its finger joints by name (rad or m)."""
+
+    T_robot_hand: np.ndarray
+    joint_positions: dict[str, float]
+
+
+@dataclass(frozen=True)
 class RecordedGrasps:
-    """The grasps of a contacts file: contacts per grasp and, when recorded, its plan."""
+    """The grasps of a contacts file: contacts per grasp and, when recorded, its plan, its
+    after-view's depth image file and the hand holding the object then (else None)."""
 
     contacts: tuple[Contacts, ...]
     plans: tuple[GraspPlan | None, ...]
+    after_depth: tuple[Path | None, ...] = ()
+    hands: tuple[HeldHand | None, ...] = ()
 
 
 #: The keys of one taxel in a contacts file.
@@ -214,12 +229,12 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
     grasps = document.get("grasps")
     if not isinstance(grasps, list) or not grasps:
         raise InputError(f"{path}: 'grasps' must be a non-empty list (one entry per grasp)")
-    contacts, plans = [], []
+    contacts, plans, after_depth, hands = [], [], [], []
     for g, grasp in enumerate(grasps):
         taxels = grasp.get("taxels") if isinstance(grasp, dict) else None
         if not isinstance(taxels, list) or not taxels:
             raise InputError(f"{path}: grasps[{g}].taxels must be a non-empty list")
-        check_keys(grasp, ("taxels", "plan"), f"grasps[{g}].", path)
+        check_keys(grasp, GRASP_KEYS, f"grasps[{g}].", path)
         positions, normals, pads, indices = [], [], [], []
         for t, taxel in enumerate(taxels):
             where = f"grasps[{g}].taxels[{t}]"
@@ -254,7 +269,39 @@ def contacts_from_json(document: Any, path: Path, units: str | None = None) -> R
         if plan is not None:
             plan = _scaled_plan(plan_from_json(plan, f"grasps[{g}].plan", path), scale)
         plans.append(plan)
-    return RecordedGrasps(tuple(contacts), tuple(plans))
+        after_depth.append(_after_depth(grasp.get("after_depth"), f"grasps[{g}]", path))
+        hands.append(_held_hand(grasp.get("hand"), f"grasps[{g}].hand", path, scale))
+    return RecordedGrasps(tuple(contacts), tuple(plans), tuple(after_depth), tuple(hands))
+
+
+#: The keys of one grasp in a contacts file.
+GRASP_KEYS = ("taxels", "plan", "after_depth", "hand")
+
+
+def _after_depth(value: Any, where: str, path: Path) -> Path | None:
+    """A grasp's after-view file, relative to the contacts file's folder."""
+    if value is None:
+        return None
+    if not isinstance(value, str) or not value:
+        raise InputError(f"{path}: {where}.after_depth must be a file name")
+    return path.parent / value
+
+
+def _held_hand(value: Any, where: str, path: Path, scale: float) -> HeldHand | None:
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise InputError(f"{path}: {where} must be an object")
+    check_keys(value, ("T_robot_hand", "joint_positions"), f"{where}.", path)
+    transform = rigid_transform(value.get("T_robot_hand"), f"{where}.T_robot_hand", path)
+    transform[:3, 3] *= scale
+    joints = value.get("joint_positions", {})
+    if not isinstance(joints, dict) or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        for v in joints.values()
+    ):
+        raise InputError(f"{path}: {where}.joint_positions must map joint names to numbers")
+    return HeldHand(transform, {str(k): float(v) for k, v in joints.items()})
 
 
 def read_json(path: Path) -> Any:
@@ -312,10 +359,15 @@ def read_contacts(path: Path, units: str | None = None) -> RecordedGrasps:
 
 
 def contacts_to_json(
-    grasps: Sequence[Contacts], plans: Sequence[GraspPlan | None] | None = None
+    grasps: Sequence[Contacts],
+    plans: Sequence[GraspPlan | None] | None = None,
+    entries: Sequence[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
-    """The contacts document for ``grasps`` (what :func:`read_contacts` reads back)."""
+    """The contacts document for ``grasps`` (what :func:`read_contacts` reads back);
+    ``entries`` adds keys to each grasp's entry (its after-view,
+    :func:`pipeline.after_view_files.write_after_view`)."""
     plans = list(plans) if plans is not None else [None] * len(grasps)
+    entries = list(entries) if entries is not None else [{}] * len(grasps)
     return {
         "frame": "robot",
         "units": "m",
@@ -337,8 +389,9 @@ def contacts_to_json(
                     )
                 ],
                 **({"plan": plan_to_json(plan)} if plan is not None else {}),
+                **entry,
             }
-            for contacts, plan in zip(grasps, plans, strict=True)
+            for contacts, plan, entry in zip(grasps, plans, entries, strict=True)
         ],
     }
 

@@ -21,6 +21,7 @@ from .estimation.problem import initial_state, stage_estimate
 from .registry import StageRegistry
 from .stages import Estimator
 from .types import (
+    AfterView,
     Bias,
     Contacts,
     DepthObservation,
@@ -78,15 +79,18 @@ def estimate(
     init: SymmetryInit,
     grasps: Sequence[Contacts],
     view: DepthObservation | None = None,
+    after_views: Sequence[AfterView | None] = (),
 ) -> EstimateResult:
     """Run the configured estimator from ``init`` over ``grasps`` (in order); ``view``, the
     depth image the cloud came from, lets the estimator check its model against the space
-    the camera saw empty.
+    the camera saw empty; ``after_views``, the camera's view after each grasp (None where
+    a grasp has none), measure how the grasps moved the object.
 
     Raises:
         StageFailure: the initialiser rejected every hypothesis.
     """
-    return estimate_with(config.create(registry, "estimator"), cloud, init, grasps, view)
+    estimator = config.create(registry, "estimator")
+    return estimate_with(estimator, cloud, init, grasps, view, after_views)
 
 
 def estimate_with(
@@ -95,6 +99,7 @@ def estimate_with(
     init: SymmetryInit,
     grasps: Sequence[Contacts],
     view: DepthObservation | None = None,
+    after_views: Sequence[AfterView | None] = (),
 ) -> EstimateResult:
     """:func:`estimate` with an estimator already built (a trial builds its stages once).
 
@@ -103,7 +108,9 @@ def estimate_with(
     """
     if init.status != "ok":
         raise StageFailure(f"initialiser gave no usable symmetry plane: {init.reason}")
-    problem = EstimationProblem(cloud=cloud, init=init, grasps=tuple(grasps), view=view)
+    problem = EstimationProblem(
+        cloud=cloud, init=init, grasps=tuple(grasps), view=view, after_views=tuple(after_views)
+    )
     return run_estimator(estimator, problem)
 
 
@@ -153,6 +160,7 @@ def fuse(
     plans: Sequence[GraspPlan | None] = (),
     plane: SymmetryPlane | None = None,
     view: DepthObservation | None = None,
+    after_views: Sequence[AfterView | None] = (),
 ) -> FusionRun:
     """Fuse a recorded cloud (frame R) with recorded contacts.
 
@@ -162,9 +170,11 @@ def fuse(
         view: the depth image the cloud came from, its camera pose in frame R, when
             recorded: initialisers that need it can run, and the estimator checks its model
             against the space the camera saw empty, as in a trial.
+        after_views: each grasp's after-view, where recorded (docs/after-view.md).
     """
     if plane is not None:
         init = SymmetryInit(plane=plane, bias=Bias(pivot_m=np.mean(cloud.points, axis=0)))
     else:
         init = initialise_from_recording(config, registry, cloud, grasps, plans, view)
-    return FusionRun(init=init, result=estimate(config, registry, cloud, init, grasps, view))
+    result = estimate(config, registry, cloud, init, grasps, view, after_views)
+    return FusionRun(init=init, result=result)

@@ -237,6 +237,13 @@ class SensorSource(StageImplementation):
     def observe(self, world: World) -> DepthObservation:
         """Render or capture one depth + colour image; noise uses ``world.rng``."""
 
+    def observe_again(self, world: World, first: DepthObservation) -> DepthObservation | None:
+        """The camera that took ``first`` looking at the world again now, through the same
+        sensor model (noise, calibration): the after-view while the hand holds the object
+        (docs/after-view.md). None, the default, when the sensor cannot look again (a
+        recorded capture)."""
+        return None
+
 
 class Segmenter(StageImplementation):
     """Cuts the object out of a depth observation."""

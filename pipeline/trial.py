@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from .after_view_files import write_after_view
 from .camera_file import camera_to_json
 from .catalogue import CatalogueObject, load_object
 from .config import Config, TrialSettings
@@ -55,6 +56,7 @@ from .next_grasp import (
     uncertainty,
 )
 from .params import to_toml
+from .perception.after_view import look_after
 from .registry import StageRegistry
 from .result_document import estimate_entries, write_estimate_files
 from .runner import estimate_with, one_blas_thread
@@ -69,6 +71,7 @@ from .stages import (
 )
 from .trial_document import TrialDocument, pose_to_json
 from .types import (
+    AfterView,
     Contacts,
     DepthObservation,
     EstimateResult,
@@ -570,6 +573,8 @@ def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
     rng = np.random.default_rng([settings.seed, 15])
     grasps: list[Contacts] = []
     plans: list[GraspPlan] = []
+    views: list[AfterView | None] = []
+    entries: list[dict[str, Any]] = []
     record.start_grasping(settings.next_grasp if settings.grasps > 1 else None)
     plan, chosen_by, fused, stop = look.choice.plan, {"strategy": "first"}, None, ""
     for k in range(settings.grasps):
@@ -595,10 +600,12 @@ def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
             break
         grasps.append(contacts)
         plans.append(plan)
+        views.append(_look_after(trial, look, attempt))
         with trial.phase("write"):
-            write_json(trial.out_dir / "contacts.json", contacts_to_json(grasps, plans))
+            entries.append(write_after_view(trial.out_dir, k, views[-1], attempt.outcome))
+            write_json(trial.out_dir / "contacts.json", contacts_to_json(grasps, plans, entries))
         init = fused.init if fused else _initial_state(trial, look, plan, contacts)
-        fused = _fuse(trial, look, attempt, init, tuple(grasps))
+        fused = _fuse(trial, look, attempt, init, tuple(grasps), tuple(views))
         known = uncertainty(fused.result.selected)
         planner = hands[plan.gripper].planner.name
         record.fused(grasp_to_json(attempt, planner, contacts, fused, known), fused.object_after)
@@ -679,14 +686,39 @@ def _read_taxels(
     return contacts, stop
 
 
+def _look_after(trial: Trial, look: Look, attempt: Attempt) -> AfterView | None:
+    """The camera's view while the hand holds the object after ``attempt``
+    (docs/after-view.md); None when ``trial.after_view`` is off."""
+    if not trial.settings.after_view:
+        return None
+    trial.report(f"looking again after grasp {attempt.k + 1}")
+    with trial.phase("after_view"):
+        return look_after(
+            trial.stages.sensor,
+            trial.world,
+            look.observation,
+            look.cloud,
+            attempt.outcome,
+            attempt.plan,
+        )
+
+
 def _fuse(
-    trial: Trial, look: Look, attempt: Attempt, init: SymmetryInit, grasps: tuple[Contacts, ...]
+    trial: Trial,
+    look: Look,
+    attempt: Attempt,
+    init: SymmetryInit,
+    grasps: tuple[Contacts, ...],
+    views: tuple[AfterView | None, ...],
 ) -> Fused:
-    """Fuse ``grasps`` (every grasp so far, ``attempt`` the last) from ``init`` and score
-    the estimate against the object as ``attempt`` left it."""
+    """Fuse ``grasps`` (every grasp so far, ``attempt`` the last) from ``init``, with each
+    grasp's after-view in ``views``, and score the estimate against the object as
+    ``attempt`` left it."""
     trial.report(f"fusing {len(grasps)} grasp(s)")
     with trial.phase("estimator"):
-        result = estimate_with(trial.stages.estimator, look.cloud, init, grasps, look.observation)
+        result = estimate_with(
+            trial.stages.estimator, look.cloud, init, grasps, look.observation, views
+        )
     with trial.phase("evaluation"):
         after = attempt.outcome.object_after
         truth = ground_truth(trial.obj, after, look.pose_seen, look.observation.calibration_error)

@@ -574,6 +574,35 @@ class EstimateResult:
 
 
 @dataclass(frozen=True)
+class AfterView:
+    """The camera's view while the hand holds the object after one grasp (docs/after-view.md).
+
+    Attributes:
+        observation: the depth image, from the same camera as the first view and through the
+            same sensor model (so with the same calibration error).
+        points: ``(N, 3)`` the object's visible points in it, frame ``R`` as the camera
+            believes it: the points near the first view's object, above the table, less
+            those the hand covers (masked by the hand's known pose, not by ground truth).
+        hand_points: ``(K, 3)`` the points it sees on the hand (those the mask took out),
+            the same frame.
+        hand_surface: ``(S, 3)`` points on the hand's surface where its known pose puts it,
+            frame ``R`` (true: the arm's kinematics, not the camera); registering
+            ``hand_points`` to it measures the camera's calibration error.
+        hand_normals: ``(S, 3)`` the unit normal of the hand's surface at each of them.
+    """
+
+    observation: DepthObservation
+    points: np.ndarray
+    hand_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    hand_surface: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    hand_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def __post_init__(self) -> None:
+        for name in ("points", "hand_points", "hand_surface", "hand_normals"):
+            object.__setattr__(self, name, _as_points(getattr(self, name), f"AfterView.{name}"))
+
+
+@dataclass(frozen=True)
 class EstimationProblem:
     """Everything an estimator is given.
 
@@ -584,12 +613,19 @@ class EstimationProblem:
         view: the depth image the cloud was segmented from, when known (a trial has it,
             recorded data may not); the self-diagnosis then also checks the model against
             the space the camera saw empty.
+        after_views: the camera's view after each grasp, in grasp order, None for a grasp
+            without one; empty when there are none (optional: an estimator may ignore it).
     """
 
     cloud: PointCloud
     init: SymmetryInit
     grasps: tuple[Contacts, ...]
     view: DepthObservation | None = None
+    after_views: tuple[AfterView | None, ...] = ()
+
+    def after_view(self, k: int) -> AfterView | None:
+        """The after-view of grasp ``k`` (from 0), None when it has none."""
+        return self.after_views[k] if k < len(self.after_views) else None
 
 
 @dataclass(frozen=True)

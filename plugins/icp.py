@@ -20,7 +20,7 @@ class IcpEstimator(Estimator):
     :mod:`pipeline.estimation.icp`, under the same noise, priors, re-grasp noise and
     self-diagnosis (:class:`~pipeline.estimation.map_params.MapParams`); a taxel's match is
     its nearest point, so there is no correspondence window. ``active_points`` counts the
-    matched taxels.
+    matched taxels. It ignores the problem's after-views: the baseline is the paper's.
     """
 
     name = "icp"

@@ -20,6 +20,7 @@ from pipeline.stages import Estimator
 from pipeline.types import EstimateResult, EstimationProblem
 
 if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
+    from pipeline.estimation.after_view_term import AfterViewSettings
     from pipeline.estimation.iekf import IekfSettings
     from pipeline.next_grasp import MeasurementModel
 
@@ -28,7 +29,9 @@ class IekfEstimator(Estimator):
     """Visuo-tactile IEKF fusing taxel contacts with the mirrored cloud (paper sec. 3-5).
 
     A thin adapter over :func:`pipeline.estimation.iekf.fuse` (structured covariance). The
-    bias pivot is the centroid of the cloud, recorded in every stage's ``Bias``. Noise,
+    bias pivot is the centroid of the cloud, recorded in every stage's ``Bias``. It uses
+    the problem's after-views (``after_view``): each grasp's is registered to the cloud
+    and fused as a measurement of the bias before that grasp's taxels. Noise,
     priors and self-diagnosis are :class:`~pipeline.estimation.map_params.MapParams`, shared
     with ``icp``; defaults come from the hardware (docs/method.md §4).
     """
@@ -86,6 +89,59 @@ class IekfEstimator(Estimator):
             "longer Gauss-Newton steps are shortened (m)",
             above=0.0,
         )
+        after_view: bool = param(
+            True,
+            "fuse the camera's view after each grasp, when the problem has one, as a "
+            "measurement of the object's motion (docs/after-view.md); False ignores it",
+        )
+        after_view_calibration_yaw_rad: float = param(
+            0.02,
+            "after-view: std of the camera calibration's yaw error, which both views share "
+            "and the after-view cannot see (rad)",
+            above=0.0,
+        )
+        after_view_calibration_xy_m: float = param(
+            0.005,
+            "after-view: std of each horizontal component of the camera calibration's "
+            "translation error, which both views share (m)",
+            above=0.0,
+        )
+        after_view_floor_yaw_rad: float = param(
+            0.02,
+            "after-view: std of the registration's yaw error beyond its own covariance (the "
+            "object's tilt in the grasp, correlated depth noise) (rad)",
+            at_least=0.0,
+        )
+        after_view_floor_xy_m: float = param(
+            0.001,
+            "after-view: std of each horizontal component of the registration's error beyond "
+            "its own covariance (m)",
+            at_least=0.0,
+        )
+        after_view_hand_calibration: bool = param(
+            False,
+            "after-view: measure the camera's calibration error on the hand seen holding the "
+            "object, instead of taking it as unknown (right to a millimetre on most poses, "
+            "off by several on some: docs/after-view.md)",
+        )
+        after_view_hand_floor_yaw_rad: float = param(
+            0.02,
+            "after-view, hand calibration: std of its yaw error beyond its own covariance (rad)",
+            at_least=0.0,
+        )
+        after_view_hand_floor_xy_m: float = param(
+            0.002,
+            "after-view, hand calibration: std of each horizontal component of its error "
+            "beyond its own covariance (m)",
+            at_least=0.0,
+        )
+        after_view_gate_alpha: float = param(
+            0.001,
+            "after-view: false-alarm probability of the chi-square gate on its innovation; a "
+            "registration beyond it is not fused",
+            above=0.0,
+            below=1.0,
+        )
 
     def settings(self) -> IekfSettings:
         """The kernel's iteration control under these parameters."""
@@ -107,13 +163,36 @@ class IekfEstimator(Estimator):
             regrasp_noise=regrasp_noise(p),
         )
 
+    def after_view_settings(self) -> AfterViewSettings | None:
+        """How the after-view enters the filter, None when ``after_view`` is off; the
+        registration's noise is the cloud's (``point_std_m``)."""
+        from pipeline.estimation.after_view_term import AfterViewSettings
+        from pipeline.estimation.registration import RegistrationSettings
+
+        p = self.params
+        if not p.after_view:
+            return None
+        return AfterViewSettings(
+            registration=RegistrationSettings(noise_std_m=p.point_std_m),
+            calibration_yaw_rad=p.after_view_calibration_yaw_rad,
+            calibration_xy_m=p.after_view_calibration_xy_m,
+            floor_yaw_rad=p.after_view_floor_yaw_rad,
+            floor_xy_m=p.after_view_floor_xy_m,
+            hand_calibration=p.after_view_hand_calibration,
+            hand_floor_yaw_rad=p.after_view_hand_floor_yaw_rad,
+            hand_floor_xy_m=p.after_view_hand_floor_xy_m,
+            gate_alpha=p.after_view_gate_alpha,
+        )
+
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
         from pipeline.estimation.iekf import fuse
 
         p = self.params
         started = time.perf_counter()
         window = (p.window_along_normal_m, p.window_across_normal_m)
-        fusion = fusion_problem(problem, p, self.name, window, p.facing_filter)
+        fusion = fusion_problem(
+            problem, p, self.name, window, p.facing_filter, self.after_view_settings()
+        )
         settings = self.settings()
         outcomes = fuse(fusion, settings, last_stage=p.last_stage)
         # The alternative hypotheses (docs/method.md §9) re-fuse under the same settings.

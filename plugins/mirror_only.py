@@ -24,7 +24,8 @@ class MirrorOnlyEstimator(Estimator):
     achieves. Stages 1 and 2 repeat Stage 0 so that every estimator returns the same layout;
     they report status ``converged`` with 0 iterations because there is nothing to iterate.
     The reported covariance is the prior the IEKF would start from (its parameters below),
-    which is the honest uncertainty of a model no contact has corrected.
+    which is the honest uncertainty of a model no contact has corrected. It ignores the
+    problem's after-views too: vision alone means the first view alone.
     """
 
     name = "mirror-only"

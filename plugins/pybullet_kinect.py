@@ -70,6 +70,9 @@ class PybulletKinect(SensorSource):
     def observe(self, world: World) -> DepthObservation:
         return observe(world, self.params, self._corrupt)
 
+    def observe_again(self, world: World, first: DepthObservation) -> DepthObservation:
+        return observe(world, self.params, self._corrupt, again=first)
+
 
 @hookimpl
 def symfuse_register_stages(registry):

@@ -63,6 +63,9 @@ class PybulletStereo(SensorSource):
     def observe(self, world: World) -> DepthObservation:
         return observe(world, self.params, self._corrupt)
 
+    def observe_again(self, world: World, first: DepthObservation) -> DepthObservation:
+        return observe(world, self.params, self._corrupt, again=first)
+
 
 @hookimpl
 def symfuse_register_stages(registry):

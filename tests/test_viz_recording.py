@@ -65,6 +65,7 @@ def test_a_trial_recording_holds_every_entity_with_the_runs_sizes(trial):
         "world/plane",
         "world/truth",
         "world/taxels",
+        "world/after_view",
         "log",
         *(f"world/hand/{link}" for link in hand),
         *plots,
@@ -83,6 +84,13 @@ def test_a_trial_recording_holds_every_entity_with_the_runs_sizes(trial):
     for k, row in enumerate(models):
         completed = read_cloud(trial / f"completed_stage{k}.ply").points
         np.testing.assert_allclose(positions(row), completed, atol=1e-6)
+
+    # The after-view: the object where the grasp left it, near the cloud.
+    after = positions(rrd["world/after_view"][0])
+    assert len(after) > len(cloud) / 2
+    from scipy.spatial import cKDTree
+
+    assert np.median(cKDTree(cloud).query(after)[0]) < 0.01
 
     taxels = read_contacts(trial / "contacts.json").contacts[0].positions
     assert all(len(positions(row)) == len(taxels) for row in rrd["world/taxels"])

@@ -64,7 +64,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 #: The config sections ``complete`` reads.
-READS = ("sensor", "segmenter", "initialiser", "estimator", "model")
+READS = ("world", "sensor", "segmenter", "initialiser", "estimator", "model")
+
+
+def after_view_reader(config, registry, recorded):
+    """The grasps' after-views the contacts file names (``"after_depth"``), read for an
+    object's cloud, the hand drawn by the configured world; None without any."""
+    from functools import partial
+
+    from ..after_view_files import read_after_views
+
+    if recorded is None or not any(path is not None for path in recorded.after_depth):
+        return None
+    world = registry.get("world", config.choices["world"]).cls
+    return partial(read_after_views, recorded, world=world)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -90,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
             which,
             recorded.contacts if recorded else (),
             recorded.plans if recorded else (),
+            after_view_reader(config, registry, recorded),
         )
         sources = {
             "scan": str(args.scan),

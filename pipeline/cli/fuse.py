@@ -76,6 +76,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="FILE",
         help="camera.json of --depth (default: beside it)",
     )
+    parser.add_argument(
+        "--after-depth",
+        type=Path,
+        metavar="FILE",
+        help="the after-view of grasp 1: a depth image (16-bit PNG in mm or NPY in m) the "
+        "camera took while the hand held the object, fused as a measurement of how the grasp "
+        "moved it (docs/after-view.md; later grasps: 'after_depth' in the contacts file). "
+        "The contacts file must give the grasp's plan and hand pose",
+    )
+    parser.add_argument(
+        "--after-camera",
+        type=Path,
+        metavar="FILE",
+        help="camera.json of --after-depth (default: beside it)",
+    )
     _add_units_option(parser, "the cloud (the contacts file states its own, which must agree)")
     _add_config_options(parser)
     _add_output_options(parser, default=None)
@@ -110,7 +125,7 @@ def parse_plane(text: str):
 
 
 #: The config sections ``fuse`` reads.
-FUSE_READS = ("initialiser", "estimator", "model")
+FUSE_READS = ("world", "initialiser", "estimator", "model")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -121,12 +136,18 @@ def run(args: argparse.Namespace) -> int:
     plane = parse_plane(args.plane) if args.plane else None
     if args.camera and not args.depth:
         raise ConfigError("--camera describes the camera of --depth, which is not given")
-    inputs = [args.cloud, args.contacts, *filter(None, (args.depth, args.camera)), *args.config]
+    if args.after_camera and not args.after_depth:
+        raise ConfigError(
+            "--after-camera describes the camera of --after-depth, which is not given"
+        )
+    given = (args.depth, args.camera, args.after_depth, args.after_camera)
+    inputs = [args.cloud, args.contacts, *filter(None, given), *args.config]
     with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
         cloud = read_cloud(args.cloud, units=args.units or "m")
         recorded = read_contacts(args.contacts, units=args.units)
         view = read_view(args.depth, args.camera) if args.depth else None
-        status = _fuse_into(staging, args, config, registry, cloud, recorded, plane, view)
+        views = recorded_after_views(config, registry, recorded, cloud, args)
+        status = _fuse_into(staging, args, config, registry, cloud, recorded, plane, (view, views))
     print(f"wrote {args.out}/ (result.json, config.toml, completed_stage{{0,1,2}}.ply, model.*)")
     record_if_asked(args, args.out)
     if estimate_failed(status):
@@ -153,6 +174,21 @@ def read_view(depth: Path, camera: Path | None) -> DepthObservation:
     return capture.view(capture.T_robot_camera, capture.table_height_m)
 
 
+def recorded_after_views(
+    config: Config,
+    registry: StageRegistry,
+    recorded: RecordedGrasps,
+    cloud: PointCloud,
+    args: argparse.Namespace,
+) -> tuple:
+    """The grasps' after-views (``--after-depth`` and the contacts file's), the hand drawn
+    by the configured world (the estimator's ``after_view`` decides whether they count)."""
+    from ..after_view_files import read_after_views
+
+    world = registry.get("world", config.choices["world"]).cls
+    return read_after_views(recorded, cloud, world, (args.after_depth, args.after_camera))
+
+
 def _fuse_into(
     out: Path,
     args: argparse.Namespace,
@@ -161,9 +197,10 @@ def _fuse_into(
     cloud: PointCloud,
     recorded: RecordedGrasps,
     plane: SymmetryPlane | None,
-    view: DepthObservation | None,
+    views: tuple[DepthObservation | None, tuple],
 ) -> str:
     """Run the estimator and write its results into ``out``; return the final status.
+    ``views``: the first view (``--depth``) and the grasps' after-views.
 
     A :class:`StageFailure` is recorded in ``result.json`` (status ``failed``) and re-raised.
     """
@@ -178,6 +215,7 @@ def _fuse_into(
     )
     from ..runner import fuse
 
+    view, after_views = views
     config.write(out / "config.toml")
     started = time.perf_counter()
     document = start_document(
@@ -186,14 +224,18 @@ def _fuse_into(
             "cloud": str(args.cloud),
             "contacts": str(args.contacts),
             **({"depth": str(args.depth)} if view is not None else {}),
+            **({"after_depth": str(args.after_depth)} if args.after_depth else {}),
         },
+        after_views=[view is not None for view in after_views],
         points=len(cloud),
         grasps=[len(c) for c in recorded.contacts],
         one_sided_grasps=one_sided_grasps(recorded.contacts),
         config=config.to_dict(),
     )
     try:
-        run = fuse(config, registry, cloud, recorded.contacts, recorded.plans, plane, view)
+        run = fuse(
+            config, registry, cloud, recorded.contacts, recorded.plans, plane, view, after_views
+        )
     except StageFailure as exc:
         record_failure(out, document, str(exc))
         raise

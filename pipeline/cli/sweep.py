@@ -53,6 +53,17 @@ def _captures_folder(args: argparse.Namespace, experiment) -> Path | None:
     return Path(args.captures).resolve()
 
 
+def user_settings(config) -> dict:
+    """What the sweep's trials take from the user: the values that differ from the
+    defaults, and ``trial.after_view`` whenever the user named it, even at the default's
+    own value: the paper's reproductions keep their single view unless asked
+    (docs/after-view.md), so the choice travels with the config."""
+    user = config.differing()
+    if "trial.after_view" in config.changed:
+        user.setdefault("trial", {})["after_view"] = config.trial.after_view
+    return user
+
+
 def _planned_tasks(args: argparse.Namespace, registry, config, experiment):
     """The sweep's output folder, its trials and the config sections they read, once the
     config is checked for them.
@@ -67,7 +78,7 @@ def _planned_tasks(args: argparse.Namespace, registry, config, experiment):
 
     estimator = config.choices["estimator"]
     resolved = config.to_dict()
-    user = config.differing()
+    user = user_settings(config)
     sections = experiment.config_sections or tuple(resolved)
     unread = sorted(set(user) - set(sections))
     if unread:
@@ -116,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         randomised = ", ".join(name for name, row in sorted(EXPERIMENTS.items()) if row.randomised)
         raise ConfigError(f"sweep {args.experiment}: --grid applies to {randomised} only")
     out, tasks, sections = _planned_tasks(args, registry, config, experiment)
-    resolved, user = config.to_dict(), config.differing()
+    resolved, user = config.to_dict(), user_settings(config)
     read = {section: resolved[section] for section in sections}
     fingerprint = json.dumps(read, sort_keys=True)
     keys = [task.key for task in tasks]

@@ -78,6 +78,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from ..errors import FELL_BACK_STATUSES
+from .after_view_term import AfterViewMeasurement, innovation, linearisation, passes_gate
 from .correspondences import (
     Correspondences,
     PointIndex,
@@ -167,6 +168,8 @@ class GraspContacts:
         pad_errors_m: ``(M, 3)`` the error along its normal that each taxel shares with the
             rest of its pad in the reported covariance, as its std times the normal (m);
             None for none.
+        after_view: the camera's view after the grasp as a measurement of the bias
+            (:mod:`.after_view_term`), fused before the taxels; None without one.
     """
 
     positions_m: np.ndarray
@@ -176,6 +179,7 @@ class GraspContacts:
     normals: np.ndarray | None = None
     reported_noise: np.ndarray | None = None
     pad_errors_m: np.ndarray | None = None
+    after_view: AfterViewMeasurement | None = None
 
     def reported_noise_matrix(self, measurement: FrozenMeasurement) -> np.ndarray:
         """The ``(3B, 3B)`` noise the reported covariance counts ``measurement``'s blocks
@@ -406,6 +410,35 @@ def update_grasp(
     )
 
 
+def fuse_after_view(
+    covariances: tuple[CovarianceModel, ...],
+    index: PointIndex | None,
+    g: np.ndarray,
+    points: np.ndarray,
+    measurement: AfterViewMeasurement,
+    with_points: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Condition a grasp's prior ``g``, ``points`` and each of ``covariances`` (the
+    filter's and the reported one) on its after-view; unchanged when the innovation is
+    outside the gate. The measurement is linear in ``g``: one Kalman update, no iteration.
+    Points move only through their covariance with ``g`` (Stage 2, a later grasp); they
+    are noted in ``index``. ``with_points`` keeps the downdate's point columns."""
+    if not passes_gate(measurement, g, covariances[0].bias_plane()):
+        return g, points
+    lin = linearisation(measurement, g)
+    noise = measurement.noise[None]
+    gains = [covariance.gain(lin, noise) for covariance in covariances]
+    delta_g, moved, delta_p = gains[0].step(innovation(measurement, g))
+    for covariance, gain in zip(covariances, gains, strict=True):
+        covariance.commit(gain, with_points)
+    if moved.size:
+        points = points.copy()
+        points[moved] += delta_p
+        if index is not None:
+            index.note_moved(moved)
+    return g + delta_g, points
+
+
 def worst_status(statuses: list[GraspStatus]) -> GraspStatus:
     """The most severe status; ``no_correspondence`` when there was no grasp at all."""
     return max(statuses, key=_SEVERITY.index) if statuses else "no_correspondence"
@@ -435,6 +468,10 @@ def run_stage(
         if k > 0:
             covariance.add_bias_plane_noise(problem.regrasp_noise)
             reported.add_bias_plane_noise(problem.regrasp_noise)
+        if contacts.after_view is not None:
+            g, points = fuse_after_view(
+                (covariance, reported), index, g, points, contacts.after_view, stage == 2
+            )
         if stage == 1:
             g_start, gate = g, covariance.bias_plane()
             if k == 0 and problem.g_start is not None:
@@ -521,7 +558,8 @@ def fuse(
     if settings.start_search and problem.g_start is None:
         from .bias_search import SearchSettings, search_start
 
-        problem = replace(problem, g_start=search_start(problem, SearchSettings()))
+        searched = _after_first_view(problem, covariance_model)
+        problem = replace(problem, g_start=search_start(searched, SearchSettings()))
     index = PointIndex(problem.points_m)
     build_seconds = time.perf_counter() - started
     stage_one = run_stage(problem, settings, 1, index, covariance_model)
@@ -539,6 +577,21 @@ def fuse(
             trace=stage_two.trace,
         )
     return stage_one, stage_two
+
+
+def _after_first_view(
+    problem: FusionProblem,
+    covariance_model: Callable[[np.ndarray, np.ndarray], CovarianceModel],
+) -> FusionProblem:
+    """``problem`` with its prior conditioned on the first grasp's after-view, where the
+    start search looks (the filter conditions its own prior in :func:`run_stage`)."""
+    if not problem.grasps or problem.grasps[0].after_view is None:
+        return problem
+    covariance = covariance_model(problem.covariance_init, np.zeros(0))
+    g, _ = fuse_after_view(
+        (covariance,), None, problem.g_init, problem.points_m, problem.grasps[0].after_view, False
+    )
+    return replace(problem, g_init=g, covariance_init=covariance.bias_plane())
 
 
 def _with_seconds(outcome: StageOutcome, seconds: float) -> StageOutcome:

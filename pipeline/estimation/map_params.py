@@ -9,7 +9,7 @@ parameters add to :class:`MapParams`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -25,6 +25,7 @@ from .problem import (
 )
 
 if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
+    from .after_view_term import AfterViewSettings
     from .consistency import ConsistencySettings
     from .iekf import FusionProblem
 
@@ -118,12 +119,14 @@ def fusion_problem(
     estimator: str,
     window_std_m: tuple[float, float],
     facing_filter: bool,
+    after_view: AfterViewSettings | None = None,
 ) -> FusionProblem:
     """The kernels' view of ``problem`` under ``params``: the pivot is the cloud's
     centroid; each grasp's taxels carry the correspondence window ``C_t`` of
     ``window_std_m`` (along, across the normal; m) and, with ``facing_filter``, their
-    normals. Raises :class:`~pipeline.errors.StageFailure` (naming ``estimator``) on an
-    empty cloud."""
+    normals; with ``after_view``, each grasp's after-view (when the problem has one and
+    it registers) as a measurement of the bias. Raises
+    :class:`~pipeline.errors.StageFailure` (naming ``estimator``) on an empty cloud."""
     from .iekf import FusionProblem
 
     p = params
@@ -133,13 +136,22 @@ def fusion_problem(
     xy = p.prior_b_xy_m
     g_init = initial_state(problem, pivot)
     stds = (p.prior_b_theta_rad, xy, xy, p.prior_b_z_m, p.prior_m_r_m, p.prior_m_theta_rad)
+    grasps = [grasp_contacts(c, window_std_m, noise, facing_filter) for c in problem.grasps]
+    if after_view is not None:
+        from .after_view_term import after_view_measurement
+
+        for k, contacts in enumerate(grasps):
+            view = problem.after_view(k)
+            if view is not None:
+                measured = after_view_measurement(view, points, pivot, after_view)
+                grasps[k] = replace(contacts, after_view=measured)
     return FusionProblem(
         points_m=points,
         pivot_m=pivot,
         g_init=g_init,
         covariance_init=bias_plane_covariance(stds, g_init[5], pivot),
         point_variance_m2=np.full(len(points), p.point_std_m**2),
-        grasps=tuple(grasp_contacts(c, window_std_m, noise, facing_filter) for c in problem.grasps),
+        grasps=tuple(grasps),
         regrasp_noise=regrasp_noise(p),
     )
 

@@ -173,16 +173,25 @@ PAPER_SEGMENTATION = (
 )
 
 
+def paper_view(params: Mapping[str, Any]) -> tuple[str, ...]:
+    """The paper's single view (no after-view, docs/after-view.md) for a reproduction
+    whose user config does not choose ``trial.after_view`` itself."""
+    chosen = "after_view" in params.get("config", {}).get("trial", {})
+    return () if chosen else ("trial.after_view=false",)
+
+
 def trial_overrides(params: Mapping[str, Any]) -> list[str]:
     """The ``--set`` strings that turn the sweep's config into the trial of ``params``: its
-    object, hand, seed, yaw and initialiser, the paper's grasp strategy and segmentation
-    (:data:`PAPER_GRASP`, :data:`PAPER_SEGMENTATION`, unless ``paper_grasp`` is false: the
-    shipped defaults), the experiment's overrides and the estimator."""
+    object, hand, seed, yaw and initialiser, the paper's grasp strategy, segmentation and
+    single view (:data:`PAPER_GRASP`, :data:`PAPER_SEGMENTATION`, :func:`paper_view`,
+    unless ``paper_grasp`` is false: the shipped defaults), the experiment's overrides and
+    the estimator."""
     estimator = params["estimator"]
+    paper = params.get("paper_grasp", True)
     overrides = [
         f"trial.object={toml_value(params['object'])}",
         f"trial.gripper={params['gripper']}",
-        *(PAPER_GRASP + PAPER_SEGMENTATION if params.get("paper_grasp", True) else ()),
+        *(PAPER_GRASP + PAPER_SEGMENTATION + paper_view(params) if paper else ()),
         f"trial.seed={int(params['seed'])}",
         f"trial.yaw_deg={toml_value(float(params['yaw_deg']))}",
         f"initialiser.use={params['init']}",

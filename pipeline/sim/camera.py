@@ -213,9 +213,12 @@ def observe(
     world: World,
     params: CameraParams,
     corrupt: Callable[[np.ndarray, CameraIntrinsics, np.random.Generator], SimulatedDepth],
+    again: DepthObservation | None = None,
 ) -> DepthObservation:
     """Render ``world`` from the viewpoint in ``params`` and pass the true depth through the
-    sensor model ``corrupt`` (skipped when ``params.noise`` is False).
+    sensor model ``corrupt`` (skipped when ``params.noise`` is False). With ``again`` (an
+    earlier observation of this sensor) the camera stays where it took that one, with the
+    same calibration error, however the object has moved since.
 
     Uses only the :class:`~pipeline.stages.World` contract (``render``, ``object_pose``,
     ``table_height_m``, ``rng``), so it works in any world. The observation carries the
@@ -231,6 +234,9 @@ def observe(
         np.deg2rad(params.elevation_deg),
         np.deg2rad(params.azimuth_deg),
     )
+    if again is not None:
+        error = np.eye(4) if again.calibration_error is None else again.calibration_error
+        T_robot_camera = np.linalg.inv(error) @ again.T_robot_camera
     intrinsics = params.intrinsics
     image = world.render(intrinsics, T_robot_camera, params.near_m, params.far_m)
     object_mask = image.object_mask
@@ -245,6 +251,8 @@ def observe(
         np.array(params.calibration_translation_m),
         target_robot,
     )
+    if again is not None:
+        T_believed = again.T_robot_camera
     return DepthObservation(
         depth_m=depth_m,
         rgb=image.rgb,

@@ -24,6 +24,9 @@ and ``world/<folder>`` for each object of a multi-object run (its plots under
 ``OBJ/truth``                  the object's true mesh after the grasp (simulation)
 ``OBJ/hand/<link>``            the hand's link shapes at the grasp (URDF, joint positions
                                after closing)
+``OBJ/after_view``             what the camera saw while the hand held the object
+                               (``after_depth.npy`` of each grasp, within 50 mm of the
+                               cloud; docs/after-view.md)
 ``OBJ/taxels``                 the taxels in contact, coloured by their distance to the
                                current model (0 mm green, 10 mm red)
 ``plots/plane/theta_deg``,     the IEKF state after every iteration
@@ -79,6 +82,10 @@ PLANE_RGBA = (255, 190, 0, 90)
 
 
 CLOUD_RGB = (90, 150, 230)
+#: The after-view's points: the same camera, later, in orange.
+AFTER_VIEW_RGB = (240, 150, 60)
+#: The after-view is shown this far around the first view's cloud (m).
+AFTER_VIEW_MARGIN_M = 0.05
 
 
 MODEL_RGB = (240, 140, 40)
@@ -230,6 +237,7 @@ class _RunFiles:
     truth: Any
     grasps: tuple[Contacts, ...]
     plans: tuple[Any, ...]
+    after_views: tuple[np.ndarray, ...] = ()
 
     @property
     def reference(self) -> np.ndarray | None:
@@ -252,15 +260,38 @@ class _RunFiles:
             for stage in document.get("stages", [])
             if (path := folder / f"completed_stage{stage['stage']}.ply").is_file()
         }
+        cloud = read_cloud(cloud_path).points if cloud_path else None
         return cls(
             folder=folder,
             document=document,
-            cloud=read_cloud(cloud_path).points if cloud_path else None,
+            cloud=cloud,
             models=models,
             truth=trimesh.load(truth_path, force="mesh") if truth_path.is_file() else None,
             grasps=recorded.contacts if recorded else (),
             plans=recorded.plans if recorded else (),
+            after_views=_after_view_points(recorded, cloud) if recorded else (),
         )
+
+
+def _after_view_points(recorded, cloud: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    """Each grasp's after-view back-projected (its ``camera.json`` beside it), within
+    :data:`AFTER_VIEW_MARGIN_M` of the cloud's bounding box; the grasps with one that is
+    there and placed in the robot frame."""
+    from ..perception.depth import backproject_depth
+
+    if cloud is None or not len(cloud):
+        return ()
+    low, high = cloud.min(axis=0) - AFTER_VIEW_MARGIN_M, cloud.max(axis=0) + AFTER_VIEW_MARGIN_M
+    views = []
+    for path in recorded.after_depth:
+        if path is None or not path.is_file():
+            continue
+        capture = read_depth_image(path, None, None)
+        if capture.T_robot_camera is None:
+            continue
+        points, _ = backproject_depth(capture.depth_m, capture.intrinsics, capture.T_robot_camera)
+        views.append(points[np.all((points >= low) & (points <= high), axis=1)])
+    return tuple(views)
 
 
 def _existing(local: Path, recorded: str | None) -> Path | None:
@@ -395,6 +426,11 @@ class _RunRecorder:
             )
         if 0 in files.models:
             self._log_taxels(files.models[0])
+        if files.after_views:
+            self.recording.log(
+                f"{self.entity}/after_view",
+                self.rr.Points3D(np.vstack(files.after_views), colors=AFTER_VIEW_RGB, radii=0.0008),
+            )
         for link, (vertices, faces, normals) in self._hand_links().items():
             self.recording.log(
                 f"{self.entity}/hand/{link}",
