@@ -296,9 +296,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_options(config)
     config.set_defaults(run=_cmd_config)
 
-    from . import cli_complete, cli_fuse, cli_objects, cli_sweep, cli_trial, cli_view
+    from . import cli_complete, cli_fuse, cli_objects, cli_sweep, cli_symmetry, cli_trial, cli_view
 
-    for verb in (cli_fuse, cli_trial, cli_sweep, cli_complete, cli_objects, cli_view):
+    for verb in (cli_fuse, cli_trial, cli_sweep, cli_complete, cli_objects, cli_symmetry, cli_view):
         verb.add_parser(verbs).set_defaults(run=verb.run)
     return parser
 

@@ -48,6 +48,7 @@ from .formats import (
     plan_to_json,
     plane_to_json,
     selection_to_json,
+    symmetry_to_json,
     write_cloud,
     write_completed_clouds,
     write_json,
@@ -64,6 +65,7 @@ from .next_grasp import (
 from .registry import StageRegistry
 from .runner import estimate
 from .stages import World
+from .symmetry.truth_file import true_symmetries
 from .types import (
     Contacts,
     DepthObservation,
@@ -167,6 +169,7 @@ def ground_truth(
         thickness_m=dims.get("thickness") if obj.kind == "box" else None,
         diameter_m=dims.get("diameter") if obj.kind == "cylinder" else None,
         cloud_motion=cloud_motion,
+        symmetries=tuple(s.transformed(T) for s in true_symmetries(obj)),
     )
 
 
@@ -718,6 +721,8 @@ def _initial_state(
         init = stages["initialiser"].refine(proposal, cloud, plan, contacts)
     document["init"] = {
         "plane": plane_to_json(init.plane),
+        "symmetry": symmetry_to_json(init.proposed),
+        "kind_scores": init.kind_scores,
         "bias": bias_to_json(init.bias),
         "status": init.status,
         "hypotheses": [

@@ -1,0 +1,7 @@
+"""Symmetry beyond the paper's vertical plane: mirror planes of any orientation and rotation
+axes (:class:`pipeline.types.Symmetry`).
+
+* :mod:`.search` - the symmetries of a mesh, found by search (the ground truth of scans);
+* :mod:`.truth_file` - ``symmetry.json``, the true symmetries stored beside a mesh file;
+* :mod:`.scoring` - an estimated plane or axis against the true ones (angle, offset).
+"""
