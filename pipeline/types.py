@@ -492,7 +492,8 @@ class SymmetryInit:
         symmetry: the symmetry the initialiser found when it looks beyond the vertical
             plane (:mod:`pipeline.symmetry`); None: the ``"vertical-plane"`` ``plane``.
             The estimator fuses ``plane``; an ``"axis"`` or ``"plane"`` here is what the
-            view alone supports, and its completion is :func:`pipeline.symmetry.complete`'s.
+            view alone supports, and its completion is
+            :func:`pipeline.symmetry.kinds.complete`'s.
         kind_scores: the evidence each kind of symmetry had when the initialiser chose
             between them (kind -> penalised violation score, lower is better); empty when
             it did not choose.

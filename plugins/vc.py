@@ -13,6 +13,7 @@ from pipeline.params import param
 from pipeline.perception.principal_axes import table_axes
 from pipeline.perception.visibility import plane_grid, visibility_violations
 from pipeline.stages import SymmetryInitialiser
+from pipeline.symmetry.kinds import choose_kind, plane_through_axis
 from pipeline.types import (
     Bias,
     DepthObservation,
@@ -42,6 +43,11 @@ class VcInitialiser(SymmetryInitialiser):
     holds every hypothesis, best first, with ``score`` = fraction of violating points. When
     even the best one exceeds ``max_violation_fraction`` the result is ``"rejected"``.
     ``refine`` keeps the proposal (zero bias, pivot at the cloud's centroid).
+
+    With ``kind = "evidence"`` VC also fits a vertical rotation axis to the view and proposes
+    it when the view supports it at least as well as the best plane
+    (:func:`pipeline.symmetry.kinds.choose_kind`); the plane it hands the estimator then
+    passes through the axis, facing the camera.
     """
 
     name = "vc"
@@ -78,6 +84,25 @@ class VcInitialiser(SymmetryInitialiser):
         max_violation_fraction: float = param(
             0.2,
             "reject when the best hypothesis has a larger fraction of violating points",
+            at_least=0.0,
+            at_most=1.0,
+        )
+        kind: Literal["vertical-plane", "evidence"] = param(
+            "vertical-plane",
+            "the kind of symmetry proposed: 'vertical-plane' (the paper's) or 'evidence' "
+            "(the vertical plane or a vertical rotation axis, whichever the view supports: "
+            "docs/symmetry.md)",
+        )
+        max_profile_rms_m: float = param(
+            0.0025,
+            "kind = 'evidence': the largest RMS of the view's slices about an axis candidate's "
+            "circles (m)",
+            above=0.0,
+        )
+        kind_margin: float = param(
+            0.02,
+            "kind = 'evidence': how much larger a share of points in seen free space the "
+            "axis completion may have than the plane's and still be chosen",
             at_least=0.0,
             at_most=1.0,
         )
@@ -160,7 +185,22 @@ class VcInitialiser(SymmetryInitialiser):
                     "viewing direction"
                 ),
             )
-        return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+        if p.kind == "vertical-plane":
+            return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+        choice = choose_kind(
+            cloud.points,
+            observation,
+            best.plane,
+            tolerance_m=p.tolerance_m,
+            max_profile_rms_m=p.max_profile_rms_m,
+            margin=p.kind_margin,
+        )
+        if choice.symmetry.kind != "axis":
+            return SymmetryInit(best.plane, bias, hypotheses, kind_scores=choice.scores)
+        plane = plane_through_axis(choice.symmetry, camera)
+        return SymmetryInit(
+            plane, bias, hypotheses, symmetry=choice.symmetry, kind_scores=choice.scores
+        )
 
 
 #: Least share of the cloud on the camera's side of a plane hypothesis: a plane in front of
