@@ -13,7 +13,6 @@ from pipeline.params import param
 from pipeline.perception.principal_axes import table_axes
 from pipeline.perception.visibility import plane_grid, visibility_violations
 from pipeline.stages import SymmetryInitialiser
-from pipeline.symmetry.kinds import choose_kind, plane_through_axis
 from pipeline.types import (
     Bias,
     DepthObservation,
@@ -187,6 +186,9 @@ class VcInitialiser(SymmetryInitialiser):
             )
         if p.kind == "vertical-plane":
             return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+        # The axis fit needs scipy: listing the plugins must not load it.
+        from pipeline.symmetry.kinds import choose_kind, plane_through_axis
+
         choice = choose_kind(
             cloud.points,
             observation,
