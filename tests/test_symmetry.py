@@ -218,3 +218,15 @@ def test_searched_symmetries_are_kept_in_the_cache(tmp_path, monkeypatch):
     again = truth_file.searched_symmetries(box.vertices, box.faces)
     assert [s.kind for s in again] == [s.kind for s in first]
     assert all(np.allclose(a.direction, b.direction) for a, b in zip(again, first, strict=True))
+
+
+def test_a_sphere_is_symmetric_about_every_axis_and_plane_through_its_centre():
+    centre = np.array([0.1, 0.0, 0.05])
+    truths = [Symmetry("axis", [1.0, 0.0, 0.0], centre), Symmetry("axis", [0.0, 1.0, 0.0], centre)]
+    tilted = Symmetry("axis", unit(1.0, 2.0, 3.0), centre + np.array([0.0, 0.0, 0.002]))
+    errors = symmetry_errors(tilted, truths, centre)
+    assert errors["symmetry_angle_error_deg"] == pytest.approx(0.0, abs=1e-6)
+    offset = np.linalg.norm(np.cross([0.0, 0.0, 0.002], tilted.direction)) * 1e3
+    assert errors["symmetry_offset_error_mm"] == pytest.approx(offset)
+    plane = Symmetry("plane", unit(0.0, 1.0, 1.0), centre)
+    assert symmetry_errors(plane, truths, centre)["symmetry_angle_error_deg"] == pytest.approx(0.0)

@@ -9,7 +9,8 @@ both ways, by the plane's mirror image and by sweeping it about the fitted axis,
 completion's Chamfer distance to the true surface is measured.
 
 The report splits the objects by their true kind (a body of revolution standing upright
-has a vertical axis among its true symmetries, :mod:`pipeline.symmetry.truth_file`) and the
+has a vertical axis among its true symmetries, :mod:`pipeline.symmetry.truth_file`, and a
+sphere several axes) and the
 scans into the half the rule was tuned on (even positions in name order) and the half it
 was checked on (odd positions).
 """
@@ -79,7 +80,7 @@ def run_one(params: Mapping[str, Any]) -> dict[str, Any]:
     from ..metrics import mesh_deviation
     from ..symmetry.axis_fit import fit_axis
     from ..symmetry.kinds import complete, free_space_share
-    from ..symmetry.scoring import symmetry_errors
+    from ..symmetry.scoring import round_centre, symmetry_errors
     from ..symmetry.truth_file import true_symmetries
     from ..types import SceneSetup, Symmetry
     from .common import plugin_registry
@@ -106,7 +107,7 @@ def run_one(params: Mapping[str, Any]) -> dict[str, Any]:
     vertices = np.asarray(obj.mesh.vertices) @ T[:3, :3].T + T[:3, 3]
     truth = GroundTruth(vertices, np.asarray(obj.mesh.faces), obj.symmetry, None, T[:2, 3])
     centre = vertices.min(axis=0) / 2.0 + vertices.max(axis=0) / 2.0
-    upright = any(
+    upright = round_centre(truths) is not None or any(
         not s.is_plane and abs(s.direction[2]) >= math.cos(math.radians(UPRIGHT_DEG))
         for s in truths
     )

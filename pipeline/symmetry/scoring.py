@@ -6,6 +6,7 @@ A plane is a symmetry of a body of revolution when it contains the axis, so an e
 plane is compared with a true axis by how far it is from containing it; an estimated axis
 is compared with true axes only (a mirror plane does not make a body of revolution).
 
+A sphere (two true axes apart) is symmetric about every axis and plane through its centre.
 The offset error is measured where the object is: the distance from the estimate of the true
 symmetry's point nearest the object's centre (its projection on the true plane or axis).
 """
@@ -34,6 +35,20 @@ def distance_to(symmetry: Symmetry, point_m: np.ndarray) -> float:
     return float(
         np.linalg.norm(np.asarray(point_m, dtype=np.float64) - nearest_point(symmetry, point_m))
     )
+
+
+def round_centre(truths: Sequence[Symmetry], distinct_deg: float = 10.0) -> np.ndarray | None:
+    """The centre of a sphere, when two of the true axes differ in direction by more than
+    ``distinct_deg`` (the search lists a few of a sphere's infinitely many axes); else
+    None. The centre is the point of the first axis nearest the second's point."""
+    axes = [truth for truth in truths if not truth.is_plane]
+    for index, first in enumerate(axes):
+        for second in axes[index + 1 :]:
+            if abs(float(first.direction @ second.direction)) < math.cos(
+                math.radians(distinct_deg)
+            ):
+                return nearest_point(first, second.point_m)
+    return None
 
 
 def pair_errors(
@@ -65,6 +80,11 @@ def symmetry_errors(
         truths: the object's true symmetries in the same frame.
         centre_m: ``(3,)`` the object's centre (m), where offsets are measured.
     """
+    centre = round_centre(truths)
+    if centre is not None:
+        # A sphere: every axis through its centre, and every plane, is a symmetry.
+        along = estimated.direction if not estimated.is_plane else estimated.across_axes()[0]
+        truths = [*truths, Symmetry("axis", along, centre)]
     scored = []
     for truth in truths:
         errors = pair_errors(estimated, truth, centre_m)
