@@ -93,7 +93,7 @@ class VcInitialiser(SymmetryInitialiser):
             "docs/symmetry.md)",
         )
         max_profile_rms_m: float = param(
-            0.0025,
+            0.003,
             "kind = 'evidence': the largest RMS of the view's slices about an axis candidate's "
             "circles (m)",
             above=0.0,
