@@ -46,7 +46,9 @@ class VcInitialiser(SymmetryInitialiser):
     With ``kind = "evidence"`` VC also fits a vertical rotation axis to the view and proposes
     it when the view supports it at least as well as the best plane
     (:func:`pipeline.symmetry.kinds.choose_kind`); the plane it hands the estimator then
-    passes through the axis, facing the camera.
+    passes through the axis, facing the camera. An axis refuted by a part off it (a mug's
+    handle) proposes the plane through the axis and that part instead of the best plane,
+    when the camera accepts it as well.
     """
 
     name = "vc"
@@ -187,7 +189,7 @@ class VcInitialiser(SymmetryInitialiser):
         if p.kind == "vertical-plane":
             return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
         # The axis fit needs scipy: listing the plugins must not load it.
-        from pipeline.symmetry.kinds import choose_kind, plane_through_axis
+        from pipeline.symmetry.kinds import choose_kind
 
         choice = choose_kind(
             cloud.points,
@@ -197,11 +199,9 @@ class VcInitialiser(SymmetryInitialiser):
             max_profile_rms_m=p.max_profile_rms_m,
             margin=p.kind_margin,
         )
-        if choice.symmetry.kind != "axis":
-            return SymmetryInit(best.plane, bias, hypotheses, kind_scores=choice.scores)
-        plane = plane_through_axis(choice.symmetry, camera)
+        symmetry = choice.symmetry if choice.symmetry.kind == "axis" else None
         return SymmetryInit(
-            plane, bias, hypotheses, symmetry=choice.symmetry, kind_scores=choice.scores
+            choice.plane, bias, hypotheses, symmetry=symmetry, kind_scores=choice.scores
         )
 
 

@@ -13,6 +13,7 @@ from pipeline.symmetry.kinds import (
     complete,
     free_space_share,
     plane_through_axis,
+    plane_through_part,
     sweep,
 )
 from pipeline.synthetic import box_object, cylinder_object, synthetic_observation
@@ -124,3 +125,25 @@ def test_choose_kind_scores_a_misplaced_axis_by_free_space():
     # The same view swept about an axis moved 5 cm toward the camera lands in free space.
     moved = Symmetry("axis", [0.0, 0.0, 1.0], choice.symmetry.point_m - [0.05, 0.0, 0.0])
     assert free_space_share(sweep(cloud.points, moved), observation, 0.01) > 0.2
+
+
+def test_the_plane_through_the_axis_and_a_handle_off_it():
+    rng = np.random.default_rng(5)
+    body = half_cylinder((0.6, 0.05), 0.04, rng, noise=0.0005)
+    # A handle sticking out 30-45 mm from the axis, toward (-1, 1) / sqrt(2).
+    reach = rng.uniform(0.045, 0.06, 200)
+    handle = np.column_stack(
+        [0.6 - reach / math.sqrt(2), 0.05 + reach / math.sqrt(2), rng.uniform(0.03, 0.07, 200)]
+    )
+    points = np.vstack([body, handle])
+    fit = fit_axis(points)
+    plane = plane_through_part(points, fit)
+    assert plane is not None and plane.kind == "vertical-plane"
+    assert abs(plane.direction @ unit_xy(-1.0, 1.0)) < math.sin(math.radians(3.0))
+    assert abs(plane.direction @ (np.array([0.6, 0.05, 0.0]) - plane.point_m)) < 0.002
+    # The body alone has no part off its axis.
+    assert plane_through_part(body, fit_axis(body)) is None
+
+
+def unit_xy(x, y):
+    return np.array([x, y, 0.0]) / math.hypot(x, y)

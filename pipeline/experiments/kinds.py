@@ -119,6 +119,8 @@ def run_one(params: Mapping[str, Any]) -> dict[str, Any]:
         "status": init.status,
         **{f"score_{kind}": value for kind, value in init.kind_scores.items()},
     }
+    for name, value in symmetry_errors(init.proposed, truths, centre).items():
+        row[f"chosen_{name}"] = value
     plane = Symmetry.from_plane(init.hypotheses[0].plane) if init.hypotheses else init.proposed
     fit = fit_axis(cloud.points)
     completions = {"vertical-plane": plane}

@@ -27,6 +27,8 @@ FIT_POINTS = 800
 #: Residuals beyond this scale (m) count less than quadratically in the fit: the top face
 #: seen from above shares its slice with the rim, at every radius from 0 to the rim's.
 ROBUST_SCALE_M = 0.002
+#: The slices' thickness along the axis (m).
+SLICE_M = 0.01
 #: The axis of an object standing on the table.
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -71,7 +73,7 @@ def fit_axis(
     points_m: np.ndarray,
     direction: np.ndarray = UP,
     *,
-    slice_m: float = 0.01,
+    slice_m: float = SLICE_M,
     min_points: int = 12,
 ) -> AxisFit | None:
     """The axis along ``direction`` (default +z: an object standing on the table) whose

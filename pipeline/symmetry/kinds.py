@@ -9,6 +9,9 @@ also fit: its slices must be circles to within ``max_profile_rms_m``
 visible handle). The axis is chosen when it fits and its completion has no larger share of
 points in free space than the plane's plus ``margin``: both make the same number of
 assumptions about the hidden side (two parameters each), and the sweep says more about it.
+When the axis fits the body but its sweep is refuted, the points off the axis are a part
+(a mug's handle): the plane through the axis and that part is proposed when the camera
+accepts it as well as the best plane.
 
 Pure numeric but for the depth image it is given.
 """
@@ -22,7 +25,7 @@ import numpy as np
 
 from ..perception.visibility import free_space_depths
 from ..types import DepthObservation, Symmetry, SymmetryPlane
-from .axis_fit import AxisFit, fit_axis
+from .axis_fit import SLICE_M, AxisFit, fit_axis, profile_residuals
 
 #: Turns of the visible profile a sweep completion holds (the view itself among them).
 SWEEP_TURNS = 12
@@ -36,12 +39,15 @@ class KindChoice:
 
     Attributes:
         symmetry: the chosen symmetry (``"vertical-plane"`` or ``"axis"``), frame R.
+        plane: the vertical plane the estimator fuses: the chosen one, or for an axis the
+            one through it facing the camera (:func:`plane_through_axis`).
         scores: kind -> share of its completion in seen free space (inf for an axis that
             does not fit); lower is better.
         axis_fit: the axis fit, None when the view had too few slices.
     """
 
     symmetry: Symmetry
+    plane: SymmetryPlane
     scores: dict[str, float]
     axis_fit: AxisFit | None
 
@@ -99,7 +105,42 @@ def choose_kind(
     fit = fit_axis(points_m)
     if fit is None or fit.profile_rms_m > max_profile_rms_m:
         scores["axis"] = math.inf
-    else:
-        scores["axis"] = free_space_share(sweep(points_m, fit.axis), view, tolerance_m)
-    chosen = fit.axis if scores["axis"] <= scores["vertical-plane"] + margin else vertical
-    return KindChoice(chosen, scores, fit)
+        return KindChoice(vertical, plane, scores, fit)
+    scores["axis"] = free_space_share(sweep(points_m, fit.axis), view, tolerance_m)
+    if scores["axis"] <= scores["vertical-plane"] + margin:
+        camera = np.asarray(view.T_robot_camera)[:3, 3]
+        return KindChoice(fit.axis, plane_through_axis(fit.axis, camera), scores, fit)
+    # The body fits the axis but its sweep is refuted: a part off the axis (a handle, a
+    # spout) the sweep threw into free space. Its plane is the one through the axis and
+    # that part, when the camera accepts it as well as the best plane.
+    through = plane_through_part(points_m, fit)
+    if through is not None:
+        share = free_space_share(complete(points_m, through), view, tolerance_m)
+        if share <= scores["vertical-plane"] + margin:
+            scores["vertical-plane"] = share
+            normal = through.direction[:2]
+            return KindChoice(
+                through, SymmetryPlane.from_normal(normal, through.offset_m), scores, fit
+            )
+    return KindChoice(vertical, plane, scores, fit)
+
+
+#: Points farther than this many profile RMS from their slice's radius lie off the axis.
+OFF_AXIS_RMS = 4.0
+#: Least share of the view off the axis that makes a part (a handle) rather than noise.
+MIN_PART_SHARE = 0.02
+
+
+def plane_through_part(points_m: np.ndarray, fit: AxisFit) -> Symmetry | None:
+    """The vertical plane through the fitted axis and the view's points off it (more than
+    :data:`OFF_AXIS_RMS` profile RMS outside their slice's radius), or None when fewer
+    than :data:`MIN_PART_SHARE` of the points are off it."""
+    residuals = profile_residuals(points_m, fit.axis.direction, fit.axis.point_m, SLICE_M, 1)
+    outside = residuals > OFF_AXIS_RMS * fit.profile_rms_m
+    if np.mean(outside) < MIN_PART_SHARE:
+        return None
+    towards = points_m[outside].mean(axis=0)[:2] - fit.axis.point_m[:2]
+    if np.linalg.norm(towards) == 0.0:
+        return None
+    normal = np.array([-towards[1], towards[0], 0.0])
+    return Symmetry("vertical-plane", normal, fit.axis.point_m)
