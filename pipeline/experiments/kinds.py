@@ -180,8 +180,8 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
     lines += [
         "",
         "| object | part | true kind | views | axis chosen | profile RMS mm "
-        "| Chamfer plane | Chamfer axis |",
-        "|---|---|---|---|---|---|---|---|",
+        "| Chamfer plane | Chamfer axis | proposal's angle error (deg) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     by_object: dict[str, list[dict]] = {}
     for row in done:
@@ -193,7 +193,8 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             f"| {label} | {first['part']} | {first['true_kind']} | {len(group)} "
             f"| {chosen}/{len(group)} | {_median(group, 'profile_rms_mm')} "
             f"| {_median(group, 'chamfer_vertical-plane_mm')} "
-            f"| {_median(group, 'chamfer_axis_mm')} |"
+            f"| {_median(group, 'chamfer_axis_mm')} "
+            f"| {_median(group, 'chosen_symmetry_angle_error_deg')} |"
         )
     report_path = out_dir / "report.md"
     report_path.write_text("\n".join(lines) + "\n")
