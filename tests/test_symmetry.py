@@ -230,3 +230,14 @@ def test_a_sphere_is_symmetric_about_every_axis_and_plane_through_its_centre():
     assert errors["symmetry_offset_error_mm"] == pytest.approx(offset)
     plane = Symmetry("plane", unit(0.0, 1.0, 1.0), centre)
     assert symmetry_errors(plane, truths, centre)["symmetry_angle_error_deg"] == pytest.approx(0.0)
+
+
+def test_plane_parameters_name_the_plane_whichever_the_normals_sign():
+    normal = unit(1.0, 1.0, -math.sqrt(2.0))  # 45 deg below the table, azimuth 45 deg
+    plane = Symmetry("plane", normal, 0.1 * normal)
+    flipped = Symmetry("plane", -normal, 0.1 * normal)
+    offset, azimuth, elevation = plane.values
+    assert offset == pytest.approx(-0.1)
+    assert math.degrees(azimuth) == pytest.approx(-135.0)
+    assert math.degrees(elevation) == pytest.approx(45.0)
+    assert np.allclose(flipped.values, plane.values)
