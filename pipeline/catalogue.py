@@ -34,7 +34,8 @@ from objects import ROOT as OBJECTS_ROOT
 
 from .catalogue_shapes import GENERATORS
 from .errors import ConfigError, InputError
-from .types import SymmetryPlane
+from .symmetry import truth_file
+from .types import Symmetry, SymmetryPlane
 from .units import MILLIMETRES_HINT, check_extent, check_not_metres, scale_of
 
 _log = logging.getLogger(__name__)
@@ -48,7 +49,7 @@ DEFAULT_MASS_KG = 0.3
 #: Friction coefficient given to a mesh loaded from a file (-).
 DEFAULT_FRICTION = 0.6
 
-Symmetry = Literal["planar", "rotational", "none"]
+SymmetryClass = Literal["planar", "rotational", "none"]
 _SYMMETRIES = ("planar", "rotational", "none")
 
 
@@ -78,7 +79,7 @@ class CatalogueObjectInfo:
     paper_set: str
     mass_kg: float
     friction: float
-    symmetry: Symmetry
+    symmetry: SymmetryClass
     symmetry_plane: SymmetryPlane | None
     dimensions_m: Mapping[str, float]
 
@@ -105,13 +106,17 @@ class CatalogueObject:
         urdf_path: for an object given as a URDF, the file: the simulator loads the body
             (collision shapes, inertia) from it, and ``mesh`` is its visual geometry in the
             URDF's base frame.
+        symmetries: the true mirror planes and rotation axes in the object frame that its
+            source states (``--symmetry``, a ``symmetry.json`` beside the mesh file:
+            :mod:`pipeline.symmetry.truth_file`); empty: the evaluation finds them by
+            search (:func:`pipeline.symmetry.truth_file.true_symmetries`).
     """
 
     name: str
     mesh: trimesh.Trimesh
     mass_kg: float
     friction: float
-    symmetry: Symmetry
+    symmetry: SymmetryClass
     symmetry_plane: SymmetryPlane | None
     dimensions_m: dict[str, float]
     description: str
@@ -119,6 +124,7 @@ class CatalogueObject:
     watertight: bool = True
     source: str = "catalogue"
     urdf_path: str | None = None
+    symmetries: tuple[Symmetry, ...] = ()
 
 
 # ---------------------------------------------------------------- specification
@@ -308,7 +314,15 @@ def _load_mesh_file(
     lower = mesh.bounds[0]
     if recentre:
         mesh = place_on_table(mesh)
-    plane = _user_plane(symmetry, scale, (mesh.bounds[0] - lower)[:2]) if symmetry else None
+    shift = mesh.bounds[0] - lower
+    plane = _user_plane(symmetry, scale, shift[:2]) if symmetry else None
+    symmetries: tuple[Symmetry, ...] = ()
+    if plane is not None:
+        symmetries = (Symmetry.from_plane(plane),)
+    elif (stated := truth_file.beside(path)) is not None:
+        symmetries = tuple(_moved(s, shift) for s in truth_file.read_symmetries(stated)[0])
+        level = [found for found in map(_vertical_plane, symmetries) if found is not None]
+        plane = level[0] if level else None
     watertight = bool(mesh.is_watertight)
     if not watertight:
         _log.warning("%s: mesh is not watertight; accepted, volumes and inside tests are off", path)
@@ -325,7 +339,24 @@ def _load_mesh_file(
         kind="mesh",
         watertight=watertight,
         source=str(path),
+        symmetries=symmetries,
     )
+
+
+def _moved(symmetry: Symmetry, shift_m: np.ndarray) -> Symmetry:
+    """A symmetry of a mesh file's frame in the object frame, the mesh moved by ``shift_m``."""
+    return Symmetry(
+        symmetry.kind, symmetry.direction, symmetry.point_m + shift_m, None, symmetry.residual_m
+    )
+
+
+def _vertical_plane(symmetry: Symmetry) -> SymmetryPlane | None:
+    """The symmetry as the paper's vertical plane, when it is a plane with a level normal:
+    the plane errors of the evaluation (:func:`pipeline.evaluation.plane_errors`) score it."""
+    normal = symmetry.direction
+    if not symmetry.is_plane or abs(normal[2]) > 1e-6:
+        return None
+    return SymmetryPlane.from_normal(normal[:2], float(normal @ symmetry.point_m))
 
 
 def _load_urdf(path: Path) -> CatalogueObject:

@@ -35,7 +35,8 @@ from .metrics import (
     solid_grid,
     surface_scores,
 )
-from .types import Bias, Contacts, ObjectPose, StageEstimate, SymmetryPlane
+from .symmetry.scoring import symmetry_errors
+from .types import Bias, Contacts, ObjectPose, StageEstimate, Symmetry, SymmetryPlane
 
 if TYPE_CHECKING:
     import trimesh
@@ -59,6 +60,9 @@ class GroundTruth:
             object after the grasp (the object's motion since the view, after undoing the
             camera's calibration error): the bias the estimator should find. None when the
             sensor does not know its calibration error.
+        symmetries: every true mirror plane and rotation axis after the grasp
+            (:mod:`pipeline.symmetry`), frame R; the estimated plane is scored against the
+            nearest (``symmetry_angle_error_deg``, ``symmetry_offset_error_mm``).
 
     The surface samples and the solid every stage is scored against are computed once, on
     first use.
@@ -72,6 +76,7 @@ class GroundTruth:
     thickness_m: float | None = None
     diameter_m: float | None = None
     cloud_motion: np.ndarray | None = None
+    symmetries: tuple[Symmetry, ...] = ()
 
     @functools.cached_property
     def surface_samples(self) -> np.ndarray:
@@ -119,16 +124,19 @@ def evaluate_stage(
 ) -> tuple[dict[str, Any], np.ndarray]:
     """Metrics of one stage and each completed point's distance to the true surface (m).
 
-    The metrics are the deviation summary (m), the plane errors, the shape scores
+    The metrics are the deviation summary (m), the plane errors (against the paper's one
+    vertical plane, and against the nearest of every true symmetry), the shape scores
     (:func:`shape_scores`), and the object's measure (thickness or diameter, with the error
     in mm and percent) where defined: thickness by robust lines through the grasp centre,
     diameter by a circle fit to the side wall.
     """
     plane = plane_after_bias(stage.plane, stage.bias)
     distances, deviation = mesh_deviation(stage.completed, truth.vertices, truth.faces)
+    centre = truth.vertices.min(axis=0) / 2.0 + truth.vertices.max(axis=0) / 2.0
     metrics: dict[str, Any] = {
         "deviation_m": deviation.as_dict(),
         **plane_errors(plane, truth),
+        **symmetry_errors(Symmetry.from_plane(plane), truth.symmetries, centre),
         **shape_scores(stage.completed, distances, truth),
     }
     if truth.cloud_motion is not None:

@@ -46,6 +46,7 @@ from .types import (
     Hypothesis,
     PointCloud,
     StageEstimate,
+    Symmetry,
     SymmetryPlane,
 )
 from .units import (
@@ -540,6 +541,19 @@ def plane_to_json(plane: SymmetryPlane) -> dict[str, Any]:
     }
 
 
+def symmetry_to_json(symmetry: Symmetry) -> dict[str, Any]:
+    """A symmetry's kind, its plane normal (or axis direction) and point (m), its parameters
+    by name (m, rad) and their covariance (None when unknown)."""
+    vector = "normal" if symmetry.is_plane else "direction"
+    return {
+        "kind": symmetry.kind,
+        vector: [float(v) for v in symmetry.direction],
+        "point": [float(v) for v in symmetry.point_m],
+        "parameters": dict(zip(symmetry.parameters, map(float, symmetry.values), strict=True)),
+        "covariance": None if symmetry.covariance is None else symmetry.covariance.tolist(),
+    }
+
+
 def bias_to_json(bias: Bias) -> dict[str, Any]:
     """Yaw (rad and deg), translation (m) and the pivot it rotates about (m)."""
     return {
@@ -555,6 +569,11 @@ def stage_to_json(stage: StageEstimate) -> dict[str, Any]:
     return {
         "stage": stage.stage,
         "plane": plane_to_json(stage.plane),
+        # The estimator's state is the paper's: its plane as a symmetry of that kind, with
+        # the (m_r, m_theta) block of the covariance.
+        "symmetry": symmetry_to_json(
+            Symmetry.from_plane(stage.plane, np.asarray(stage.covariance)[4:, 4:])
+        ),
         "bias": bias_to_json(stage.bias),
         "covariance": np.asarray(stage.covariance).tolist(),
         "status": stage.status,

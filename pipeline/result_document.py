@@ -26,6 +26,7 @@ from .formats import (
     estimate_to_json,
     plane_to_json,
     selection_to_json,
+    symmetry_to_json,
     write_completed_clouds,
     write_json,
 )
@@ -50,7 +51,12 @@ def init_to_json(
     name or an option, when the command names it), the plane and bias, the initialiser's
     status (``status``) and its best ``hypotheses`` ranked hypotheses (0: none)."""
     entry: dict[str, Any] = {} if source is None else {"source": source}
-    entry |= {"plane": plane_to_json(init.plane), "bias": bias_to_json(init.bias)}
+    entry |= {
+        "plane": plane_to_json(init.plane),
+        "symmetry": symmetry_to_json(init.proposed),
+        "kind_scores": init.kind_scores,
+        "bias": bias_to_json(init.bias),
+    }
     if status:
         entry["status"] = init.status
     if hypotheses:

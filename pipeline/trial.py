@@ -69,6 +69,7 @@ from .stages import (
     TactileModel,
     World,
 )
+from .symmetry.truth_file import true_symmetries
 from .trial_document import TrialDocument, pose_to_json
 from .types import (
     AfterView,
@@ -168,6 +169,7 @@ def ground_truth(
         thickness_m=dims.get("thickness") if obj.kind == "box" else None,
         diameter_m=dims.get("diameter") if obj.kind == "cylinder" else None,
         cloud_motion=cloud_motion,
+        symmetries=tuple(s.transformed(T) for s in true_symmetries(obj)),
     )
 
 

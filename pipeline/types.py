@@ -179,6 +179,136 @@ class SymmetryPlane:
         return points - 2.0 * (points @ n - self.offset_m)[:, None] * n[None, :]
 
 
+#: The kinds of symmetry: the paper's mirror plane perpendicular to the table, a mirror plane
+#: of any orientation, and a rotation axis (a body of revolution).
+SymmetryKind = Literal["vertical-plane", "plane", "axis"]
+SYMMETRY_KINDS: tuple[SymmetryKind, ...] = ("vertical-plane", "plane", "axis")
+
+#: The parameters each kind of :class:`Symmetry` is estimated in, in covariance order: the
+#: vertical plane's offset and normal angle about +z (docs/method.md §1); a general plane's
+#: offset, its normal's azimuth about +z and elevation above the table; an axis' direction
+#: (azimuth, elevation) and the two coordinates of its points across it, along
+#: :meth:`Symmetry.across_axes`.
+SYMMETRY_PARAMETERS: dict[str, tuple[str, ...]] = {
+    "vertical-plane": ("m_r", "m_theta"),
+    "plane": ("m_r", "m_azimuth", "m_elevation"),
+    "axis": ("a_azimuth", "a_elevation", "a_u", "a_v"),
+}
+
+
+@dataclass(frozen=True)
+class Symmetry:
+    """One symmetry of an object, in the frame its holder names (frame ``R`` at a stage
+    boundary, the object frame in a catalogue entry or a ``symmetry.json``).
+
+    Attributes:
+        kind: ``"vertical-plane"`` / ``"plane"``: the mirror plane through ``point_m`` with
+            unit normal ``direction`` (horizontal for ``"vertical-plane"``); ``"axis"``: the
+            object is a body of revolution about the line through ``point_m`` along
+            ``direction``.
+        direction: ``(3,)`` unit normal of the plane, or unit direction of the axis. Its
+            sign carries no meaning.
+        point_m: ``(3,)`` a point of the plane or of the axis (m).
+        covariance: covariance of :attr:`parameters`, in that order (m, rad), or None when
+            its source does not give one.
+        residual_m: how far the object is from being symmetric about it (the mesh search's
+            mean distance of the moved surface from the surface, m); NaN when not measured.
+    """
+
+    kind: SymmetryKind
+    direction: np.ndarray
+    point_m: np.ndarray
+    covariance: np.ndarray | None = None
+    residual_m: float = math.nan
+
+    def __post_init__(self) -> None:
+        if self.kind not in SYMMETRY_KINDS:
+            raise ValueError(f"symmetry kind must be one of {', '.join(SYMMETRY_KINDS)}")
+        direction = np.asarray(self.direction, dtype=np.float64).reshape(3)
+        length = float(np.linalg.norm(direction))
+        if not np.isfinite(length) or length == 0.0:
+            raise ValueError("a symmetry's direction must be a finite, non-zero (3,) vector")
+        point = np.asarray(self.point_m, dtype=np.float64).reshape(3)
+        if not np.isfinite(point).all():
+            raise ValueError("a symmetry's point must be a finite (3,) position")
+        object.__setattr__(self, "direction", direction / length)
+        object.__setattr__(self, "point_m", point)
+        if self.covariance is not None:
+            size = len(SYMMETRY_PARAMETERS[self.kind])
+            covariance = np.asarray(self.covariance, dtype=np.float64)
+            if covariance.shape != (size, size):
+                raise ValueError(f"a {self.kind} covariance must be {size}x{size}")
+            object.__setattr__(self, "covariance", covariance)
+
+    @classmethod
+    def from_plane(cls, plane: SymmetryPlane, covariance: np.ndarray | None = None) -> Symmetry:
+        """The paper's vertical plane as a ``"vertical-plane"`` symmetry; ``covariance`` is
+        that of ``(m_r, m_theta)``."""
+        normal = plane.normal
+        return cls("vertical-plane", normal, normal * plane.offset_m, covariance)
+
+    @property
+    def is_plane(self) -> bool:
+        return self.kind != "axis"
+
+    @property
+    def offset_m(self) -> float:
+        """A plane's offset ``d`` in ``{p : n . p = d}`` (m)."""
+        return float(self.direction @ self.point_m)
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        """The names of the kind's parameters (:data:`SYMMETRY_PARAMETERS`)."""
+        return SYMMETRY_PARAMETERS[self.kind]
+
+    @property
+    def values(self) -> np.ndarray:
+        """The parameters' values, in the order of :attr:`parameters` (m, rad)."""
+        d = self.direction
+        if self.kind == "vertical-plane":
+            return np.array([self.offset_m, np.arctan2(d[1], d[0])])
+        # The sign is free: the one with the upper-half direction (or, level, the one with a
+        # non-negative azimuth in (-pi/2, pi/2]) names the same plane or axis.
+        if d[2] < 0.0 or (d[2] == 0.0 and (d[0] < 0.0 or (d[0] == 0.0 and d[1] < 0.0))):
+            d = -d
+        azimuth, elevation = np.arctan2(d[1], d[0]), np.arcsin(np.clip(d[2], -1.0, 1.0))
+        if self.kind == "plane":
+            return np.array([float(d @ self.point_m), azimuth, elevation])
+        u, v = self.across_axes()
+        return np.array([azimuth, elevation, u @ self.point_m, v @ self.point_m])
+
+    def across_axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Two unit vectors ``(u, v)`` completing ``direction`` to a right-handed basis:
+        ``u`` horizontal (along +x when the direction is vertical)."""
+        d = self.direction
+        u = np.cross([0.0, 0.0, 1.0], d)
+        u = np.array([1.0, 0.0, 0.0]) if np.linalg.norm(u) < 1e-9 else u / np.linalg.norm(u)
+        return u, np.cross(d, u)
+
+    def transformed(self, T: np.ndarray) -> Symmetry:
+        """The same symmetry after the rigid motion ``T`` (4x4), without a covariance (its
+        parameters are frame-dependent); a moved vertical plane is a general one unless the
+        motion keeps it vertical."""
+        T = np.asarray(T, dtype=np.float64)
+        direction = T[:3, :3] @ self.direction
+        kind = self.kind
+        if kind == "vertical-plane" and abs(direction[2]) > 1e-9:
+            kind = "plane"
+        return Symmetry(kind, direction, T[:3, :3] @ self.point_m + T[:3, 3], None, self.residual_m)
+
+    def apply(self, points: np.ndarray, angle_rad: float = math.pi) -> np.ndarray:
+        """Mirror ``(N, 3)`` points across the plane, or turn them by ``angle_rad`` about the
+        axis (right-handed about ``direction``)."""
+        points = np.asarray(points, dtype=np.float64)
+        d, relative = self.direction, points - self.point_m
+        if self.is_plane:
+            return points - 2.0 * (relative @ d)[:, None] * d[None, :]
+        along = (relative @ d)[:, None] * d[None, :]
+        across = relative - along
+        turned = math.cos(angle_rad) * across + math.sin(angle_rad) * np.cross(d, across)
+        return self.point_m + along + turned
+
+
 @dataclass(frozen=True)
 class Bias:
     """Rigid planar motion between the camera's view and the hand's frame (docs/method.md §1).
@@ -401,6 +531,14 @@ class SymmetryInit:
         hypotheses: ranked hypotheses, best first (empty when not applicable).
         status: ``"ok"`` or ``"rejected"`` (every hypothesis was hopeless).
         reason: explanation for a rejection, else empty.
+        symmetry: the symmetry the initialiser found when it looks beyond the vertical
+            plane (:mod:`pipeline.symmetry`); None: the ``"vertical-plane"`` ``plane``.
+            The estimator fuses ``plane``; an ``"axis"`` or ``"plane"`` here is what the
+            view alone supports, and its completion is
+            :func:`pipeline.symmetry.kinds.complete`'s.
+        kind_scores: the evidence each kind of symmetry had when the initialiser chose
+            between them (kind -> penalised violation score, lower is better); empty when
+            it did not choose.
     """
 
     plane: SymmetryPlane
@@ -408,6 +546,19 @@ class SymmetryInit:
     hypotheses: tuple[SymmetryHypothesis, ...] = ()
     status: Literal["ok", "rejected"] = "ok"
     reason: str = ""
+    symmetry: Symmetry | None = None
+    kind_scores: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def kind(self) -> SymmetryKind:
+        """The kind of symmetry the initialiser proposes (``"vertical-plane"`` unless
+        :attr:`symmetry` says otherwise)."""
+        return "vertical-plane" if self.symmetry is None else self.symmetry.kind
+
+    @property
+    def proposed(self) -> Symmetry:
+        """The proposed symmetry: :attr:`symmetry`, or :attr:`plane` as a vertical plane."""
+        return Symmetry.from_plane(self.plane) if self.symmetry is None else self.symmetry
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,13 @@ class VcInitialiser(SymmetryInitialiser):
     holds every hypothesis, best first, with ``score`` = fraction of violating points. When
     even the best one exceeds ``max_violation_fraction`` the result is ``"rejected"``.
     ``refine`` keeps the proposal (zero bias, pivot at the cloud's centroid).
+
+    With ``kind = "evidence"`` VC also fits a vertical rotation axis to the view and proposes
+    it when the view supports it at least as well as the best plane
+    (:func:`pipeline.symmetry.kinds.choose_kind`); the plane it hands the estimator then
+    passes through the axis, facing the camera. An axis refuted by a part off it (a mug's
+    handle) proposes the plane through the axis and that part instead of the best plane,
+    when the camera accepts it as well.
     """
 
     name = "vc"
@@ -77,6 +84,25 @@ class VcInitialiser(SymmetryInitialiser):
         max_violation_fraction: float = param(
             0.2,
             "reject when the best hypothesis has a larger fraction of violating points",
+            at_least=0.0,
+            at_most=1.0,
+        )
+        kind: Literal["vertical-plane", "evidence"] = param(
+            "vertical-plane",
+            "the kind of symmetry proposed: 'vertical-plane' (the paper's) or 'evidence' "
+            "(the vertical plane or a vertical rotation axis, whichever the view supports: "
+            "docs/symmetry.md)",
+        )
+        max_profile_rms_m: float = param(
+            0.003,
+            "kind = 'evidence': the largest RMS of the view's slices about an axis candidate's "
+            "circles (m)",
+            above=0.0,
+        )
+        kind_margin: float = param(
+            0.02,
+            "kind = 'evidence': how much larger a share of points in seen free space the "
+            "axis completion may have than the plane's and still be chosen",
             at_least=0.0,
             at_most=1.0,
         )
@@ -160,7 +186,23 @@ class VcInitialiser(SymmetryInitialiser):
                     "viewing direction"
                 ),
             )
-        return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+        if p.kind == "vertical-plane":
+            return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+        # The axis fit needs scipy: listing the plugins must not load it.
+        from pipeline.symmetry.kinds import choose_kind
+
+        choice = choose_kind(
+            cloud.points,
+            observation,
+            best.plane,
+            tolerance_m=p.tolerance_m,
+            max_profile_rms_m=p.max_profile_rms_m,
+            margin=p.kind_margin,
+        )
+        symmetry = choice.symmetry if choice.symmetry.kind == "axis" else None
+        return SymmetryInit(
+            choice.plane, bias, hypotheses, symmetry=symmetry, kind_scores=choice.scores
+        )
 
 
 #: Least share of the cloud on the camera's side of a plane hypothesis: a plane in front of

@@ -263,9 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_options(config)
     config.set_defaults(run=_cmd_config)
 
-    from . import complete, fuse, objects, sweep, trial, view
+    from . import complete, fuse, objects, sweep, symmetry, trial, view
 
-    for verb in (fuse, trial, sweep, complete, objects, view):
+    for verb in (fuse, trial, sweep, complete, objects, symmetry, view):
         verb.add_parser(verbs).set_defaults(run=verb.run)
     return parser
 

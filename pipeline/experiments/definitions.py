@@ -294,6 +294,7 @@ _ROWS: tuple[Experiment, ...] = (
     ModuleExperiment("explore", "pipeline.experiments.explore"),
     ModuleExperiment("scenes", "pipeline.experiments.scenes"),
     ModuleExperiment("objects", "pipeline.experiments.objects"),
+    ModuleExperiment("kinds", "pipeline.experiments.kinds"),
 )
 
 #: Experiment name -> its definition.

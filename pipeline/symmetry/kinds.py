@@ -1,0 +1,146 @@
+"""The kind of symmetry one view supports: the paper's vertical plane or a vertical axis.
+
+Each kind completes the view its own way (:func:`complete`): a plane mirrors the cloud, an
+axis sweeps the visible profile about itself. The camera judges both completions alike: the
+share of completed points it saw free space at (in front of the measured surface by more
+than a tolerance, :func:`pipeline.perception.visibility.free_space_depths`). An axis must
+also fit: its slices must be circles to within ``max_profile_rms_m``
+(:mod:`pipeline.symmetry.axis_fit`), else it is not a candidate (a box's corner, a mug's
+visible handle). The axis is chosen when it fits and its completion has no larger share of
+points in free space than the plane's plus ``margin``: both make the same number of
+assumptions about the hidden side (two parameters each), and the sweep says more about it.
+When the axis fits the body but its sweep is refuted, the points off the axis are a part
+(a mug's handle): the plane through the axis and that part is proposed when the camera
+accepts it as well as the best plane.
+
+Pure numeric but for the depth image it is given.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..perception.visibility import free_space_depths
+from ..types import DepthObservation, Symmetry, SymmetryPlane
+from .axis_fit import SLICE_M, AxisFit, fit_axis, profile_residuals
+
+#: Turns of the visible profile a sweep completion holds (the view itself among them).
+SWEEP_TURNS = 12
+#: Points of a completion the camera checks (an even subsample).
+CHECK_POINTS = 3000
+
+
+@dataclass(frozen=True)
+class KindChoice:
+    """The kind chosen and the evidence.
+
+    Attributes:
+        symmetry: the chosen symmetry (``"vertical-plane"`` or ``"axis"``), frame R.
+        plane: the vertical plane the estimator fuses: the chosen one, or for an axis the
+            one through it facing the camera (:func:`plane_through_axis`).
+        scores: kind -> share of its completion in seen free space (inf for an axis that
+            does not fit); lower is better.
+        axis_fit: the axis fit, None when the view had too few slices.
+    """
+
+    symmetry: Symmetry
+    plane: SymmetryPlane
+    scores: dict[str, float]
+    axis_fit: AxisFit | None
+
+
+def sweep(points_m: np.ndarray, axis: Symmetry, turns: int = SWEEP_TURNS) -> np.ndarray:
+    """``(turns * N, 3)`` the points turned about the axis by ``turns`` even steps of a full
+    turn (the first step is the points themselves)."""
+    return np.vstack([axis.apply(points_m, 2.0 * math.pi * k / turns) for k in range(turns)])
+
+
+def complete(points_m: np.ndarray, symmetry: Symmetry) -> np.ndarray:
+    """The completed model of a view: the points and their mirror image for a plane, the
+    swept profile for an axis."""
+    if symmetry.is_plane:
+        return np.vstack([points_m, symmetry.apply(points_m)])
+    return sweep(points_m, symmetry)
+
+
+def free_space_share(model_m: np.ndarray, view: DepthObservation, tolerance_m: float) -> float:
+    """Share of the model's points (an even subsample) lying more than ``tolerance_m`` in
+    front of the surface the camera measured on their ray."""
+    sample = model_m[:: max(1, len(model_m) // CHECK_POINTS)]
+    depths = free_space_depths(sample, view.depth_m, view.intrinsics, view.T_robot_camera)
+    return float(np.mean(depths > tolerance_m))
+
+
+def plane_through_axis(axis: Symmetry, camera_m: np.ndarray) -> SymmetryPlane:
+    """The vertical plane through a vertical axis facing the camera: its mirror image of the
+    seen front is the hidden back (the estimator fuses a plane; every plane through the axis
+    of a body of revolution is a mirror plane)."""
+    view = axis.point_m[:2] - np.asarray(camera_m)[:2]
+    return SymmetryPlane.from_normal(view, float(view @ axis.point_m[:2]))
+
+
+def choose_kind(
+    points_m: np.ndarray,
+    view: DepthObservation,
+    plane: SymmetryPlane,
+    *,
+    tolerance_m: float,
+    max_profile_rms_m: float,
+    margin: float,
+) -> KindChoice:
+    """The kind of symmetry the view of ``points_m`` (frame R) supports best.
+
+    Args:
+        plane: the best vertical plane (VC's).
+        tolerance_m: how far in front of the measured surface a completed point may lie.
+        max_profile_rms_m: the largest profile RMS of an axis candidate (m).
+        margin: how much larger a share of free-space points the axis completion may have
+            than the plane's and still be chosen.
+    """
+    vertical = Symmetry.from_plane(plane)
+    scores = {"vertical-plane": free_space_share(complete(points_m, vertical), view, tolerance_m)}
+    fit = fit_axis(points_m)
+    if fit is None or fit.profile_rms_m > max_profile_rms_m:
+        scores["axis"] = math.inf
+        return KindChoice(vertical, plane, scores, fit)
+    scores["axis"] = free_space_share(sweep(points_m, fit.axis), view, tolerance_m)
+    if scores["axis"] <= scores["vertical-plane"] + margin:
+        camera = np.asarray(view.T_robot_camera)[:3, 3]
+        return KindChoice(fit.axis, plane_through_axis(fit.axis, camera), scores, fit)
+    # The body fits the axis but its sweep is refuted: a part off the axis (a handle, a
+    # spout) the sweep threw into free space. Its plane is the one through the axis and
+    # that part, when the camera accepts it as well as the best plane.
+    through = plane_through_part(points_m, fit)
+    if through is not None:
+        share = free_space_share(complete(points_m, through), view, tolerance_m)
+        if share <= scores["vertical-plane"] + margin:
+            scores["vertical-plane"] = share
+            normal = through.direction[:2]
+            return KindChoice(
+                through, SymmetryPlane.from_normal(normal, through.offset_m), scores, fit
+            )
+    return KindChoice(vertical, plane, scores, fit)
+
+
+#: Points farther than this many profile RMS from their slice's radius lie off the axis.
+OFF_AXIS_RMS = 4.0
+#: Least share of the view off the axis that makes a part (a handle) rather than noise.
+MIN_PART_SHARE = 0.02
+
+
+def plane_through_part(points_m: np.ndarray, fit: AxisFit) -> Symmetry | None:
+    """The vertical plane through the fitted axis and the view's points off it (more than
+    :data:`OFF_AXIS_RMS` profile RMS outside their slice's radius), or None when fewer
+    than :data:`MIN_PART_SHARE` of the points are off it."""
+    residuals = profile_residuals(points_m, fit.axis.direction, fit.axis.point_m, SLICE_M, 1)
+    outside = residuals > OFF_AXIS_RMS * fit.profile_rms_m
+    if np.mean(outside) < MIN_PART_SHARE:
+        return None
+    towards = points_m[outside].mean(axis=0)[:2] - fit.axis.point_m[:2]
+    if np.linalg.norm(towards) == 0.0:
+        return None
+    normal = np.array([-towards[1], towards[0], 0.0])
+    return Symmetry("vertical-plane", normal, fit.axis.point_m)
