@@ -23,6 +23,7 @@ from pipeline.types import (
     GraspOutcome,
     GraspPlan,
     GripperSpec,
+    LiftOutcome,
     ObjectPose,
     SceneSetup,
     TaxelState,
@@ -129,6 +130,10 @@ class Mujoco(World):
         if outcome.executed:
             self._opening_m = plan.opening_m
         return outcome
+
+    def lift(self, height_m: float, hold_s: float) -> LiftOutcome:
+        self._hand()
+        return self.sim.lift(height_m, hold_s)
 
     def release(self) -> ObjectPose:
         self._hand()

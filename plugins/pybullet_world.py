@@ -24,6 +24,7 @@ from pipeline.types import (
     GraspOutcome,
     GraspPlan,
     GripperSpec,
+    LiftOutcome,
     ObjectPose,
     SceneObject,
     SceneSetup,
@@ -158,6 +159,11 @@ class Pybullet(World):
         if outcome.executed:
             self._opening_m = plan.opening_m
         return outcome
+
+    def lift(self, height_m: float, hold_s: float) -> LiftOutcome:
+        from pipeline.sim.grasping import lift
+
+        return lift(self.sim.client, self._hand(), self.sim.object_id, height_m, hold_s)
 
     def release(self) -> ObjectPose:
         from pipeline.sim.grasping import release

@@ -33,6 +33,10 @@ Sequence (:func:`execute_grasp`):
    and does not press (:func:`opposed_fingers`);
 6. let everything settle for ``settle_s`` and report.
 
+A grasp that was executed can then be lifted (:func:`lift`): the palm rises straight up
+with the fingers held as the close left them, holds still, and the object counts as held
+when it rose with the hand and lies between the fingers (:func:`held`).
+
 The hand closes along the x axis of ``plan.T_robot_hand`` (``plan.closing_direction`` is
 not used here). The object is free: it slides or turns when one finger reaches it before
 the others, which is the motion the estimator's bias has to absorb. The true object poses
@@ -57,7 +61,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import ConfigError
-from ..types import GraspOutcome, GraspPlan, ObjectPose
+from ..types import GraspOutcome, GraspPlan, LiftOutcome, ObjectPose
 from .hand_models import SimHand
 
 
@@ -93,6 +97,10 @@ class GraspSettings:
         release_lift_m: how far the palm backs off along its -z when releasing.
         press_together: fingers in contact wait (no squeeze) until every finger has
             stopped, then all press at once; otherwise each presses as soon as it stops.
+        lift_speed_m_s: palm speed of :func:`lift`, straight up.
+        lift_slip_m: how far the object may end below the lift's height and still count
+            as held (:func:`held`): slipping in the pads and swinging about them, not
+            falling.
     """
 
     timestep_s: float = 1.0 / 240.0
@@ -113,6 +121,8 @@ class GraspSettings:
     release_s: float = 0.2
     release_lift_m: float = 0.05
     press_together: bool = False
+    lift_speed_m_s: float = 0.1
+    lift_slip_m: float = 0.02
 
 
 #: Default settings per hand name (:func:`execute_grasp` falls back to ``GraspSettings()``).
@@ -390,12 +400,14 @@ def _move_palm(
     T_to: np.ndarray,
     guard_N: float,
     s: GraspSettings,
+    speed_m_s: float | None = None,
 ) -> bool:
     """Move the palm in a straight line from ``T_from`` to ``T_to`` (same orientation) at
-    ``descent_speed_m_s``; True when the hand bore down on the object with ``guard_N`` on
-    the way and stopped (0: no guard)."""
+    ``speed_m_s`` (default ``descent_speed_m_s``); True when the hand bore down on the
+    object with ``guard_N`` on the way and stopped (0: no guard)."""
+    speed = s.descent_speed_m_s if speed_m_s is None else speed_m_s
     travel = T_to[:3, 3] - T_from[:3, 3]
-    steps = max(1, math.ceil(np.linalg.norm(travel) / (s.descent_speed_m_s * s.timestep_s)))
+    steps = max(1, math.ceil(np.linalg.norm(travel) / (speed * s.timestep_s)))
     for step in range(1, steps + 1):
         target = T_to.copy()
         target[:3, 3] = T_from[:3, 3] + travel * step / steps
@@ -404,3 +416,47 @@ def _move_palm(
         if guard_N > 0.0 and hand.bearing_down(physics.object_id)[1] >= guard_N:
             return True
     return False
+
+
+def held(rise_m: float, height_m: float, fingers_touching: int, slip_m: float) -> bool:
+    """Whether a lift of ``height_m`` held the object: it rose at least ``height_m -
+    slip_m`` (it went up with the hand and did not fall or slide out; the table is
+    ``height_m`` below) and at least two fingers still touch it (it lies between them;
+    an object hanging on one finger, or balanced on the palm, is not held)."""
+    return rise_m >= height_m - slip_m and fingers_touching >= 2
+
+
+def lift(
+    physics: Physics,
+    hand: SimHand,
+    height_m: float,
+    hold_s: float,
+    settings: GraspSettings | None = None,
+) -> LiftOutcome:
+    """Raise the palm ``height_m`` straight up (+z of frame R) at ``lift_speed_m_s``, the
+    fingers holding the targets the close left them at (pressing with their force caps),
+    hold it still for ``hold_s`` and report whether the object is still held
+    (:func:`held`). A hand that holds nothing rises all the same; the object then stays
+    on the table (not held)."""
+    s = settings or HAND_GRASP_SETTINGS.get(hand.spec.name, GraspSettings())
+    before = physics.object_pose()
+    T_start = hand.pose()
+    with physics.timestep(s.timestep_s):
+        # Without the guard (0 N) the palm moves to the end whatever it carries.
+        T_top = T_start.copy()
+        T_top[2, 3] += height_m
+        _move_palm(physics, hand, T_start, T_top, 0.0, s, speed_m_s=s.lift_speed_m_s)
+        for _ in range(max(1, round(hold_s / s.timestep_s))):
+            hand.move_to(T_top)
+            physics.step()
+    after = physics.object_pose()
+    touching = int((hand.finger_contact_forces(physics.object_id) > 0.0).sum())
+    rise_m = float(after.position_m[2] - before.position_m[2])
+    return LiftOutcome(
+        held=held(rise_m, height_m, touching, s.lift_slip_m),
+        rise_m=rise_m,
+        hand_rise_m=float(hand.pose()[2, 3] - T_start[2, 3]),
+        fingers_touching=touching,
+        object_before=before,
+        object_after=after,
+    )

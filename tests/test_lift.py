@@ -1,0 +1,99 @@
+"""Lifting a grasped object (:meth:`pipeline.stages.World.lift`) in both simulated worlds:
+a box grasped across its thin side by the PG-70 is held 10 cm up for 2 s, a grasp whose
+jaws touch one side only leaves it on the table, and a world without the method says
+it cannot lift."""
+
+from __future__ import annotations
+
+import importlib.util
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipeline.errors import ConfigError
+from pipeline.sim.grasp_sequence import held
+from pipeline.testing import AnalyticWorld
+from pipeline.types import GraspPlan, SceneSetup
+
+PAD_CENTRE_DEPTH_M = 0.125  # PG-70 pad centres below the palm (robots/pg70.urdf)
+LIFT_M, HOLD_S = 0.10, 2.0
+WORLDS = [
+    "pybullet",
+    pytest.param(
+        "mujoco",
+        marks=pytest.mark.skipif(
+            importlib.util.find_spec("mujoco") is None, reason="needs the mujoco package"
+        ),
+    ),
+]
+
+
+def _box(size_m) -> SimpleNamespace:
+    mesh = trimesh.creation.box(size_m)
+    mesh.apply_translation((0.0, 0.0, size_m[2] / 2))
+    return SimpleNamespace(name="box", mesh=mesh, mass_kg=0.2, friction=0.8, urdf_path=None)
+
+
+def _top_grasp(x: float, y: float, pad_height_m: float) -> GraspPlan:
+    """PG-70 from above, jaws closing along x, pad centres at ``pad_height_m``."""
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = [x, y, pad_height_m + PAD_CENTRE_DEPTH_M]
+    return GraspPlan("pg70", "ok", T, 0.06, 0.065, T[:3, 0].copy())
+
+
+def _world(name: str, size_m):
+    if name == "mujoco":
+        from plugins.mujoco_world import Mujoco as world_class
+    else:
+        from plugins.pybullet_world import Pybullet as world_class
+    world = world_class()
+    world.load_scene(SceneSetup(_box(size_m), 0.4, 0.0, 0.0, seed=1))
+    world.add_hand("pg70")
+    return world
+
+
+@pytest.mark.parametrize("name", WORLDS)
+def test_a_box_grasped_across_its_thin_side_is_lifted_and_held(name):
+    size = (0.042, 0.08, 0.12)
+    with _world(name, size) as world:
+        box = world.object_pose().position_m
+        grasp = world.execute_grasp(_top_grasp(box[0], box[1], 0.65 * size[2]))
+        assert grasp.executed, grasp.reason
+        lifted = world.lift(LIFT_M, HOLD_S)
+    assert lifted.held
+    assert lifted.fingers_touching == 2
+    # The palm rose the full height; the box rose with it, slipping less than 5 mm.
+    assert lifted.hand_rise_m == pytest.approx(LIFT_M, abs=2e-3)
+    assert lifted.rise_m == pytest.approx(LIFT_M, abs=5e-3)
+
+
+@pytest.mark.parametrize("name", WORLDS)
+def test_a_grasp_touching_one_side_only_leaves_the_box_on_the_table(name):
+    # A 12 mm slab 12 mm right of the palm: the left jaw closes to the palm's centre line,
+    # 6 mm short of it, and only the right jaw touches.
+    size = (0.012, 0.08, 0.10)
+    with _world(name, size) as world:
+        box = world.object_pose().position_m
+        grasp = world.execute_grasp(_top_grasp(box[0] - 0.012, box[1], 0.6 * size[2]))
+        assert grasp.executed, grasp.reason
+        lifted = world.lift(LIFT_M, HOLD_S)
+    assert not lifted.held
+    assert lifted.fingers_touching <= 1
+    assert lifted.rise_m < 0.01
+    assert lifted.hand_rise_m == pytest.approx(LIFT_M, abs=2e-3)
+
+
+def test_the_held_rule():
+    assert held(0.099, 0.1, 2, 0.02)
+    assert held(0.08, 0.1, 3, 0.02)
+    assert not held(0.079, 0.1, 2, 0.02)  # slid out (or fell) more than the slip allowed
+    assert not held(0.1, 0.1, 1, 0.02)  # hangs on one finger
+
+
+def test_a_world_without_lift_says_it_cannot_lift():
+    world = AnalyticWorld()
+    with pytest.raises(ConfigError, match="world 'analytic' cannot lift"):
+        world.lift(LIFT_M, HOLD_S)
