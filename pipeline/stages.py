@@ -189,7 +189,7 @@ class World(StageImplementation):
         """
 
     def lift(self, height_m: float, hold_s: float) -> LiftOutcome:
-        """Raise the hand, with what it grasped, ``height_m`` straight up (+z of frame R),
+        """Grip, raise the hand with what it grasped ``height_m`` straight up (+z of frame R),
         hold it still for ``hold_s`` (s) and report whether the object is still held
         (:class:`LiftOutcome`). Optional: ``symfuse sweep graspability`` needs it; the
         simulated worlds implement it with the grasp sequence's

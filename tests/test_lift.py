@@ -6,6 +6,7 @@ it cannot lift."""
 from __future__ import annotations
 
 import importlib.util
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -13,6 +14,7 @@ import pytest
 import trimesh
 
 from pipeline.errors import ConfigError
+from pipeline.poses import rotation_z
 from pipeline.sim.grasp_sequence import held
 from pipeline.testing import AnalyticWorld
 from pipeline.types import GraspPlan, SceneSetup
@@ -71,13 +73,31 @@ def test_a_box_grasped_across_its_thin_side_is_lifted_and_held(name):
 
 
 @pytest.mark.parametrize("name", WORLDS)
+def test_a_box_grasped_askew_turns_square_in_the_grip_and_is_held(name):
+    # Closing 15 deg off the thin side, the jaws first meet two edges; the box turns
+    # square to them as they press, and the grip keeps them pressing.
+    size = (0.042, 0.08, 0.12)
+    with _world(name, size) as world:
+        box = world.object_pose().position_m
+        plan = _top_grasp(box[0], box[1], 0.65 * size[2])
+        turn = rotation_z(np.radians(15.0))
+        plan = replace(plan, T_robot_hand=plan.T_robot_hand.copy())
+        plan.T_robot_hand[:3, :3] = turn @ plan.T_robot_hand[:3, :3]
+        grasp = world.execute_grasp(plan)
+        assert grasp.executed, grasp.reason
+        lifted = world.lift(LIFT_M, HOLD_S)
+    assert lifted.held
+    assert lifted.rise_m == pytest.approx(LIFT_M, abs=5e-3)
+
+
+@pytest.mark.parametrize("name", WORLDS)
 def test_a_grasp_touching_one_side_only_leaves_the_box_on_the_table(name):
-    # A 12 mm slab 12 mm right of the palm: the left jaw closes to the palm's centre line,
-    # 6 mm short of it, and only the right jaw touches.
+    # A 12 mm slab 16 mm right of the palm: the left jaw closes to the palm's centre line,
+    # 10 mm short of it (beyond the grip's reach), and only the right jaw touches.
     size = (0.012, 0.08, 0.10)
     with _world(name, size) as world:
         box = world.object_pose().position_m
-        grasp = world.execute_grasp(_top_grasp(box[0] - 0.012, box[1], 0.6 * size[2]))
+        grasp = world.execute_grasp(_top_grasp(box[0] - 0.016, box[1], 0.6 * size[2]))
         assert grasp.executed, grasp.reason
         lifted = world.lift(LIFT_M, HOLD_S)
     assert not lifted.held

@@ -33,8 +33,8 @@ Sequence (:func:`execute_grasp`):
    and does not press (:func:`opposed_fingers`);
 6. let everything settle for ``settle_s`` and report.
 
-A grasp that was executed can then be lifted (:func:`lift`): the palm rises straight up
-with the fingers held as the close left them, holds still, and the object counts as held
+A grasp that was executed can then be lifted (:func:`lift`): the fingers grip, the palm
+rises straight up and holds still, and the object counts as held
 when it rose with the hand and lies between the fingers (:func:`held`).
 
 The hand closes along the x axis of ``plan.T_robot_hand`` (``plan.closing_direction`` is
@@ -98,6 +98,8 @@ class GraspSettings:
         press_together: fingers in contact wait (no squeeze) until every finger has
             stopped, then all press at once; otherwise each presses as soon as it stops.
         lift_speed_m_s: palm speed of :func:`lift`, straight up.
+        grip_reach_m: a finger grips before a lift (:func:`lift`) when its pads are
+            within this distance of the object.
         lift_slip_m: how far the object may end below the lift's height and still count
             as held (:func:`held`): slipping in the pads and swinging about them, not
             falling.
@@ -121,6 +123,7 @@ class GraspSettings:
     release_s: float = 0.2
     release_lift_m: float = 0.05
     press_together: bool = False
+    grip_reach_m: float = 0.005
     lift_speed_m_s: float = 0.1
     lift_slip_m: float = 0.02
 
@@ -426,6 +429,28 @@ def held(rise_m: float, height_m: float, fingers_touching: int, slip_m: float) -
     return rise_m >= height_m - slip_m and fingers_touching >= 2
 
 
+def _grip(hand: SimHand, object_id: int, s: GraspSettings) -> None:
+    """Before a lift, close every finger within ``grip_reach_m`` of the object (its taxel
+    probes) to its joint limit, pressing with its force cap - what a gripper's grip
+    command does - when at least two are. The grasp's own press moves the targets only
+    ``FingerDrive.squeeze`` past the first touch, so an object that turns in the pads
+    (a box grasped 15 deg off its faces turns square to them) leaves them untouched. With
+    fewer than two fingers near it, the hand stays as the grasp left it: one finger
+    pressing alone would only push the object (the press's own rule, :func:`_close`)."""
+    frames, gaps = hand.taxel_gaps(object_id, s.probe_behind_m, s.grip_reach_m)
+    near = frames.pads[gaps <= s.grip_reach_m]
+    fingers = [f for f in hand.model.fingers if np.isin(near, f.pads).any()]
+    if len(fingers) < 2:
+        return
+    now = hand.joint_positions()
+    targets = dict(now)
+    for finger in fingers:
+        room = hand.closure_limit(finger, now)
+        for joint, ratio in zip(finger.joints, finger.ratios, strict=True):
+            targets[joint] = now[joint] + ratio * room
+    hand.command(targets, s.force_fraction)
+
+
 def lift(
     physics: Physics,
     hand: SimHand,
@@ -433,14 +458,14 @@ def lift(
     hold_s: float,
     settings: GraspSettings | None = None,
 ) -> LiftOutcome:
-    """Raise the palm ``height_m`` straight up (+z of frame R) at ``lift_speed_m_s``, the
-    fingers holding the targets the close left them at (pressing with their force caps),
-    hold it still for ``hold_s`` and report whether the object is still held
+    """Grip (:func:`_grip`), raise the palm ``height_m`` straight up (+z of frame R) at
+    ``lift_speed_m_s``, hold it still for ``hold_s`` and report whether the object is still held
     (:func:`held`). A hand that holds nothing rises all the same; the object then stays
     on the table (not held)."""
     s = settings or HAND_GRASP_SETTINGS.get(hand.spec.name, GraspSettings())
     before = physics.object_pose()
     T_start = hand.pose()
+    _grip(hand, physics.object_id, s)
     with physics.timestep(s.timestep_s):
         # Without the guard (0 N) the palm moves to the end whatever it carries.
         T_top = T_start.copy()
