@@ -294,6 +294,7 @@ _ROWS: tuple[Experiment, ...] = (
     ModuleExperiment("explore", "pipeline.experiments.explore"),
     ModuleExperiment("scenes", "pipeline.experiments.scenes"),
     ModuleExperiment("objects", "pipeline.experiments.objects"),
+    ModuleExperiment("graspability", "pipeline.experiments.graspability"),
 )
 
 #: Experiment name -> its definition.
