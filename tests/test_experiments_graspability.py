@@ -3,6 +3,8 @@ hand-made rows."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -100,3 +102,58 @@ def test_a_world_that_cannot_lift_is_refused_before_any_trial(monkeypatch):
     options = ExperimentOptions(quick=True, config={"world": {"use": "analytic"}})
     with pytest.raises(ConfigError, match="world 'analytic' cannot lift"):
         graspability.tasks(options)
+
+
+def test_the_models_are_carried_to_the_resting_pose_and_the_truth_lies_on_the_mesh():
+    import trimesh
+
+    from pipeline.catalogue import load_object
+    from pipeline.types import ObjectPose
+
+    obj = load_object("cd_drive")
+    after = ObjectPose(
+        np.array([0.41, 0.02, 0.0]), np.array([0.0, 0.0, np.sin(0.05), np.cos(0.05)])
+    )
+    resting = ObjectPose(np.array([0.40, 0.0, 0.0]), np.array([0.0, 0.0, 0.0, 1.0]))
+    completed = np.array([[0.41, 0.02, 0.05], [0.45, 0.0, 0.1]])
+    plane = SymmetryPlane.from_normal(np.array([1.0, 0.0]), 0.41)
+    stage = SimpleNamespace(completed=completed, plane=plane)
+    record = SimpleNamespace(
+        result=SimpleNamespace(stages=(stage,), selected=stage),
+        document={
+            "object_pose_after": {
+                "position": after.position_m.tolist(),
+                "quaternion_xyzw": after.quaternion_xyzw.tolist(),
+            }
+        },
+    )
+    models = graspability.planning_models(record, obj, resting, seed=3)
+    # By hand: each point's offset from the drive's origin after the grasp, turned back by
+    # 0.1 rad, from the resting origin.
+    c, s = np.cos(-0.1), np.sin(-0.1)
+    offsets = completed - [0.41, 0.02, 0.0]
+    expected = np.column_stack(
+        [
+            0.40 + c * offsets[:, 0] - s * offsets[:, 1],
+            s * offsets[:, 0] + c * offsets[:, 1],
+            offsets[:, 2],
+        ]
+    )
+    np.testing.assert_allclose(expected[0], [0.40, 0.0, 0.05], atol=1e-12)
+    np.testing.assert_allclose(models["stage0"].points, expected, atol=1e-12)
+    np.testing.assert_allclose(models["fused"].points, expected, atol=1e-12)
+    # The plane x = 0.41 through the drive's origin after the grasp: through the resting
+    # origin, turned back by 0.1 rad.
+    moved = models["fused"].plane
+    np.testing.assert_allclose(moved.normal[:2], [c, s], atol=1e-12)
+    np.testing.assert_allclose(np.array([0.40, 0.0, 0.0]) @ moved.normal, moved.offset_m)
+    # The true model: points on the mesh where it rests, none on the face it stands on,
+    # with the catalogue's mirror plane (x = 0.40 at this pose; the drive's plane is x = 0).
+    truth = obj.mesh.copy().apply_transform(resting.transform)
+    points = models["true"].points
+    assert len(points) == len(completed)
+    _, distance, _ = trimesh.proximity.closest_point(truth, points)
+    assert np.all(distance < 1e-9)
+    assert np.all(points[:, 2] > 1e-6)
+    np.testing.assert_allclose(abs(models["true"].plane.normal[0]), 1.0, atol=1e-12)
+    np.testing.assert_allclose(abs(models["true"].plane.offset_m), 0.40, atol=1e-12)
