@@ -16,13 +16,20 @@ from pipeline.types import SymmetryPlane
 
 
 def test_the_trials_are_those_of_sweep_objects_with_the_grasps_to_make():
-    options = ExperimentOptions(quick=True)
+    options = ExperimentOptions(repeats=2)
     tasks = graspability.tasks(options)
-    same = objects.tasks(options)
-    assert [t.key for t in tasks] == [t.key for t in same]
-    for task, trial in zip(tasks, same, strict=True):
-        assert task.params == {**trial.params, "grasps": graspability.GRASPS}
-        assert task.settings == trial.settings
+    same = {t.key: t for t in objects.tasks(options)}
+    assert sorted(t.key for t in tasks) == sorted(same)
+    for task in tasks:
+        assert task.params == {**same[task.key].params, "grasps": graspability.GRASPS}
+        assert task.settings == same[task.key].settings
+    # Yaw by yaw, the objects of each yaw in a seeded random order, the same every time.
+    yaws = [t.key.split("/")[1] for t in tasks]
+    assert yaws == sorted(yaws)
+    assert [t.key for t in tasks] == [t.key for t in graspability.tasks(options)]
+    labels = [t.params["label"] for t in tasks]
+    half = len(labels) // 2
+    assert labels[:half] != [t.params["label"] for t in objects.tasks(options)][:half]
     assert EXPERIMENTS["graspability"].reads_scans
 
 

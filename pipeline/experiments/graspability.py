@@ -75,7 +75,10 @@ CEILING_GAP_POINTS = 10.0
 
 
 def tasks(options: ExperimentOptions) -> list[SweepTask]:
-    """The trials of ``sweep objects`` (same keys and seeds), each with the grasps to make.
+    """The trials of ``sweep objects`` (same keys and seeds), each with the grasps to make,
+    yaw by yaw and, within a yaw, the objects in a random order (seeded by the sweep's
+    seed): a sweep stopped early has graded a random sample of the objects, catalogue and
+    scans alike, rather than the first of the list.
 
     Raises:
         ConfigError: the configured world cannot lift (:meth:`World.lift
@@ -88,9 +91,14 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
     world = load_config(plugin_registry(), settings=user_settings(options)).choices["world"]
     if plugin_registry().get("world", world).cls.lift is World.lift:
         raise ConfigError(f"world '{world}' cannot lift: sweep graspability needs World.lift")
+    trials = objects.tasks(options)
+    rng = np.random.default_rng(options.seed)
+    ordered = []
+    for yaw in dict.fromkeys(task.key.rpartition("/")[2] for task in trials):
+        group = [task for task in trials if task.key.rpartition("/")[2] == yaw]
+        ordered += [group[i] for i in rng.permutation(len(group))]
     return [
-        SweepTask(task.key, {**task.params, "grasps": GRASPS}, task.settings)
-        for task in objects.tasks(options)
+        SweepTask(task.key, {**task.params, "grasps": GRASPS}, task.settings) for task in ordered
     ]
 
 
