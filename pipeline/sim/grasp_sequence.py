@@ -33,8 +33,8 @@ Sequence (:func:`execute_grasp`):
    and does not press (:func:`opposed_fingers`);
 6. let everything settle for ``settle_s`` and report.
 
-A grasp that was executed can then be lifted (:func:`lift`): the fingers grip, the palm
-rises straight up and holds still, and the object counts as held
+A grasp that was executed can then be lifted (:func:`lift`): the opposed fingers near the
+object press again, the palm rises straight up and holds still, and the object counts as held
 when it rose with the hand and lies between the fingers (:func:`held`).
 
 The hand closes along the x axis of ``plan.T_robot_hand`` (``plan.closing_direction`` is
@@ -62,7 +62,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..types import GraspOutcome, GraspPlan, LiftOutcome, ObjectPose
-from .hand_models import SimHand
+from .hand_models import FingerDrive, SimHand
 
 
 @dataclass(frozen=True)
@@ -98,8 +98,8 @@ class GraspSettings:
         press_together: fingers in contact wait (no squeeze) until every finger has
             stopped, then all press at once; otherwise each presses as soon as it stops.
         lift_speed_m_s: palm speed of :func:`lift`, straight up.
-        grip_reach_m: a finger grips before a lift (:func:`lift`) when its pads are
-            within this distance of the object.
+        grip_reach_m: a finger grips in a lift (:func:`lift`) when its pads are within
+            this distance of the object.
         lift_slip_m: how far the object may end below the lift's height and still count
             as held (:func:`held`): slipping in the pads and swinging about them, not
             falling.
@@ -403,14 +403,12 @@ def _move_palm(
     T_to: np.ndarray,
     guard_N: float,
     s: GraspSettings,
-    speed_m_s: float | None = None,
 ) -> bool:
     """Move the palm in a straight line from ``T_from`` to ``T_to`` (same orientation) at
-    ``speed_m_s`` (default ``descent_speed_m_s``); True when the hand bore down on the
-    object with ``guard_N`` on the way and stopped (0: no guard)."""
-    speed = s.descent_speed_m_s if speed_m_s is None else speed_m_s
+    ``descent_speed_m_s``; True when the hand bore down on the object with ``guard_N`` on
+    the way and stopped (0: no guard)."""
     travel = T_to[:3, 3] - T_from[:3, 3]
-    steps = max(1, math.ceil(np.linalg.norm(travel) / (speed * s.timestep_s)))
+    steps = max(1, math.ceil(np.linalg.norm(travel) / (s.descent_speed_m_s * s.timestep_s)))
     for step in range(1, steps + 1):
         target = T_to.copy()
         target[:3, 3] = T_from[:3, 3] + travel * step / steps
@@ -429,25 +427,47 @@ def held(rise_m: float, height_m: float, fingers_touching: int, slip_m: float) -
     return rise_m >= height_m - slip_m and fingers_touching >= 2
 
 
-def _grip(hand: SimHand, object_id: int, s: GraspSettings) -> None:
-    """Before a lift, close every finger within ``grip_reach_m`` of the object (its taxel
-    probes) to its joint limit, pressing with its force cap - what a gripper's grip
-    command does - when at least two are. The grasp's own press moves the targets only
-    ``FingerDrive.squeeze`` past the first touch, so an object that turns in the pads
-    (a box grasped 15 deg off its faces turns square to them) leaves them untouched. With
-    fewer than two fingers near it, the hand stays as the grasp left it: one finger
-    pressing alone would only push the object (the press's own rule, :func:`_close`)."""
+#: Two fingers near the object oppose each other in a grip when the mean normals of
+#: their near taxels have at most this cosine (about 105 deg apart): the SDH-2's tripod
+#: (120 deg) and the PG-70's jaws (180 deg) grip, the thumb beside a pinch of fingers 1
+#: and 2 across it (90 deg to both) does not; measured normals leave a tripod just short
+#: of :func:`opposed_fingers`'s 120 deg.
+GRIP_OPPOSED_COS = -0.25
+
+
+def gripping_fingers(hand: SimHand, object_id: int, s: GraspSettings) -> list[FingerDrive]:
+    """The fingers that grip in a lift: those within ``grip_reach_m`` of the object (their
+    taxel probes) that another such finger opposes (the mean normals of their near taxels
+    :data:`GRIP_OPPOSED_COS` apart about the vertical); none when no two oppose, as in
+    the grasp's press (:func:`_close`): a finger pressing alone only pushes the object."""
     frames, gaps = hand.taxel_gaps(object_id, s.probe_behind_m, s.grip_reach_m)
-    near = frames.pads[gaps <= s.grip_reach_m]
-    fingers = [f for f in hand.model.fingers if np.isin(near, f.pads).any()]
+    near = gaps <= s.grip_reach_m
+    fingers, facings = [], []
+    for finger in hand.model.fingers:
+        facing = frames.normals[near & np.isin(frames.pads, finger.pads), :2].sum(axis=0)
+        if np.linalg.norm(facing) > 0.0:
+            fingers.append(finger)
+            facings.append(facing / np.linalg.norm(facing))
     if len(fingers) < 2:
+        return []
+    dots = np.array(facings) @ np.array(facings).T
+    np.fill_diagonal(dots, 1.0)
+    return [f for f, cos in zip(fingers, dots.min(axis=1), strict=True) if cos <= GRIP_OPPOSED_COS]
+
+
+def _grip(hand: SimHand, fingers: list[FingerDrive], s: GraspSettings) -> None:
+    """Press ``fingers`` again as the lift starts: each joint's target its squeeze
+    (``FingerDrive.squeeze``) beyond where it is now, under its force cap. The grasp's
+    press set the targets a squeeze past the first touch; an object that then turned
+    square in the pads (a box grasped 15 deg off its faces) was left untouched by them.
+    Pressing every step instead would roll the SDH-2's distal links on along the
+    surface until they let go."""
+    if not fingers:
         return
-    now = hand.joint_positions()
-    targets = dict(now)
+    targets = hand.joint_positions()
     for finger in fingers:
-        room = hand.closure_limit(finger, now)
-        for joint, ratio in zip(finger.joints, finger.ratios, strict=True):
-            targets[joint] = now[joint] + ratio * room
+        for joint, squeeze in zip(finger.joints, finger.squeeze, strict=True):
+            targets[joint] += squeeze
     hand.command(targets, s.force_fraction)
 
 
@@ -458,21 +478,22 @@ def lift(
     hold_s: float,
     settings: GraspSettings | None = None,
 ) -> LiftOutcome:
-    """Grip (:func:`_grip`), raise the palm ``height_m`` straight up (+z of frame R) at
-    ``lift_speed_m_s``, hold it still for ``hold_s`` and report whether the object is still held
-    (:func:`held`). A hand that holds nothing rises all the same; the object then stays
-    on the table (not held)."""
+    """Press the :func:`gripping_fingers` again (:func:`_grip`), raise the palm
+    ``height_m`` straight up (+z of frame R) at ``lift_speed_m_s``, hold it still for
+    ``hold_s`` and report whether the object is still held (:func:`held`). A hand that
+    holds nothing rises all the same; the object then stays on the table (not held)."""
     s = settings or HAND_GRASP_SETTINGS.get(hand.spec.name, GraspSettings())
     before = physics.object_pose()
     T_start = hand.pose()
-    _grip(hand, physics.object_id, s)
+    fingers = gripping_fingers(hand, physics.object_id, s)
+    rise_steps = max(1, math.ceil(height_m / (s.lift_speed_m_s * s.timestep_s)))
+    hold_steps = max(1, round(hold_s / s.timestep_s))
+    _grip(hand, fingers, s)
     with physics.timestep(s.timestep_s):
-        # Without the guard (0 N) the palm moves to the end whatever it carries.
-        T_top = T_start.copy()
-        T_top[2, 3] += height_m
-        _move_palm(physics, hand, T_start, T_top, 0.0, s, speed_m_s=s.lift_speed_m_s)
-        for _ in range(max(1, round(hold_s / s.timestep_s))):
-            hand.move_to(T_top)
+        for step in range(1, rise_steps + hold_steps + 1):
+            target = T_start.copy()
+            target[2, 3] += height_m * min(step, rise_steps) / rise_steps
+            hand.move_to(target)
             physics.step()
     after = physics.object_pose()
     touching = int((hand.finger_contact_forces(physics.object_id) > 0.0).sum())
