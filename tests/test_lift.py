@@ -6,7 +6,6 @@ it cannot lift."""
 from __future__ import annotations
 
 import importlib.util
-from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -38,33 +37,29 @@ def _box(size_m) -> SimpleNamespace:
     return SimpleNamespace(name="box", mesh=mesh, mass_kg=0.2, friction=0.8, urdf_path=None)
 
 
-def _top_grasp(x: float, y: float, pad_height_m: float) -> GraspPlan:
-    """PG-70 from above, jaws closing along x, pad centres at ``pad_height_m``."""
-    T = np.eye(4)
-    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
-    T[:3, 3] = [x, y, pad_height_m + PAD_CENTRE_DEPTH_M]
-    return GraspPlan("pg70", "ok", T, 0.06, 0.065, T[:3, 0].copy())
-
-
-def _world(name: str, size_m):
+def _grasp_and_lift(name: str, size_m, pad_height_m: float, *, shift_m=0.0, turn_deg=0.0):
+    """A box of ``size_m`` in the world ``name``, grasped by the PG-70 from above, jaws
+    closing along x (turned ``turn_deg`` about z), palm ``shift_m`` along x from the box's
+    centre, pad centres at ``pad_height_m``; then lifted and held."""
     if name == "mujoco":
         from plugins.mujoco_world import Mujoco as world_class
     else:
         from plugins.pybullet_world import Pybullet as world_class
-    world = world_class()
-    world.load_scene(SceneSetup(_box(size_m), 0.4, 0.0, 0.0, seed=1))
-    world.add_hand("pg70")
-    return world
+    with world_class() as world:
+        world.load_scene(SceneSetup(_box(size_m), 0.4, 0.0, 0.0, seed=1))
+        world.add_hand("pg70")
+        box = world.object_pose().position_m
+        T = np.eye(4)
+        T[:3, :3] = rotation_z(np.radians(turn_deg)) @ np.diag([1.0, -1.0, -1.0])
+        T[:3, 3] = [box[0] + shift_m, box[1], pad_height_m + PAD_CENTRE_DEPTH_M]
+        grasp = world.execute_grasp(GraspPlan("pg70", "ok", T, 0.06, 0.065, T[:3, 0].copy()))
+        assert grasp.executed, grasp.reason
+        return world.lift(LIFT_M, HOLD_S)
 
 
 @pytest.mark.parametrize("name", WORLDS)
 def test_a_box_grasped_across_its_thin_side_is_lifted_and_held(name):
-    size = (0.042, 0.08, 0.12)
-    with _world(name, size) as world:
-        box = world.object_pose().position_m
-        grasp = world.execute_grasp(_top_grasp(box[0], box[1], 0.65 * size[2]))
-        assert grasp.executed, grasp.reason
-        lifted = world.lift(LIFT_M, HOLD_S)
+    lifted = _grasp_and_lift(name, (0.042, 0.08, 0.12), 0.65 * 0.12)
     assert lifted.held
     assert lifted.fingers_touching == 2
     # The palm rose the full height; the box rose with it, slipping less than 5 mm.
@@ -76,16 +71,7 @@ def test_a_box_grasped_across_its_thin_side_is_lifted_and_held(name):
 def test_a_box_grasped_askew_turns_square_in_the_grip_and_is_held(name):
     # Closing 10 deg off the thin side, the jaws first meet two edges; the box turns
     # square to them as they press, and the grip presses them on.
-    size = (0.042, 0.08, 0.12)
-    with _world(name, size) as world:
-        box = world.object_pose().position_m
-        plan = _top_grasp(box[0], box[1], 0.65 * size[2])
-        turn = rotation_z(np.radians(10.0))
-        plan = replace(plan, T_robot_hand=plan.T_robot_hand.copy())
-        plan.T_robot_hand[:3, :3] = turn @ plan.T_robot_hand[:3, :3]
-        grasp = world.execute_grasp(plan)
-        assert grasp.executed, grasp.reason
-        lifted = world.lift(LIFT_M, HOLD_S)
+    lifted = _grasp_and_lift(name, (0.042, 0.08, 0.12), 0.65 * 0.12, turn_deg=10.0)
     assert lifted.held
     assert lifted.rise_m == pytest.approx(LIFT_M, abs=5e-3)
 
@@ -94,12 +80,7 @@ def test_a_box_grasped_askew_turns_square_in_the_grip_and_is_held(name):
 def test_a_grasp_touching_one_side_only_leaves_the_box_on_the_table(name):
     # A 12 mm slab 16 mm right of the palm: the left jaw closes to the palm's centre line,
     # 10 mm short of it (beyond the grip's reach), and only the right jaw touches.
-    size = (0.012, 0.08, 0.10)
-    with _world(name, size) as world:
-        box = world.object_pose().position_m
-        grasp = world.execute_grasp(_top_grasp(box[0] - 0.016, box[1], 0.6 * size[2]))
-        assert grasp.executed, grasp.reason
-        lifted = world.lift(LIFT_M, HOLD_S)
+    lifted = _grasp_and_lift(name, (0.012, 0.08, 0.10), 0.06, shift_m=-0.016)
     assert not lifted.held
     assert lifted.fingers_touching <= 1
     assert lifted.rise_m < 0.01
