@@ -343,3 +343,31 @@ def dot_figure(
     axes[0].set_yticklabels(labels, fontsize=8)
     figure.suptitle(title)
     return _save(figure, out_path)
+
+
+@dataclass(frozen=True)
+class BarGroups:
+    """Grouped bars: for each of ``labels``, one bar per series (NaN left out)."""
+
+    labels: Sequence[str]
+    series: dict[str, Sequence[float]]
+    y_label: str
+
+
+def bar_figure(groups: BarGroups, out_path: Path, title: str) -> Path:
+    """A grouped bar chart, the groups side by side along x, each with its series' bars."""
+    from matplotlib.figure import Figure
+
+    x = np.arange(len(groups.labels))
+    width = 0.8 / max(1, len(groups.series))
+    figure = Figure(figsize=(2.0 + 0.6 * len(groups.labels), 4.0), layout="constrained")
+    ax = figure.subplots()
+    for k, (name, values) in enumerate(groups.series.items()):
+        ax.bar(x + (k - (len(groups.series) - 1) / 2) * width, values, width, label=name)
+    ax.set_xticks(x)
+    ax.set_xticklabels(groups.labels, rotation=60, ha="right", fontsize=8)
+    ax.set_ylabel(groups.y_label)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    figure.suptitle(title)
+    return _save(figure, out_path)

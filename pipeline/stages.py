@@ -38,6 +38,7 @@ from .types import (
     GraspOutcome,
     GraspPlan,
     GripperSpec,
+    LiftOutcome,
     ObjectPose,
     PointCloud,
     SceneSetup,
@@ -99,7 +100,7 @@ class World(StageImplementation):
         world.load_scene(SceneSetup(obj, x_m, y_m, yaw_rad, seed))
         try:
             ...sense, world.add_hand(name), world.execute_grasp(plan), world.taxels(...)
-            ...world.release(), world.execute_grasp(another_plan), ...
+            ...world.release(), world.execute_grasp(another_plan), world.lift(0.1, 2.0), ...
             ...world.release(), world.remove_hand(), world.add_hand(other), ...
         finally:
             world.close()
@@ -201,6 +202,18 @@ class World(StageImplementation):
         Raises:
             ConfigError: no hand, or the plan is for another hand.
         """
+
+    def lift(self, height_m: float, hold_s: float) -> LiftOutcome:
+        """Grip, raise the hand with what it grasped ``height_m`` straight up (+z of frame R),
+        hold it still for ``hold_s`` (s) and report whether the object is still held
+        (:class:`LiftOutcome`). Optional: ``symfuse sweep graspability`` needs it; the
+        simulated worlds implement it with the grasp sequence's
+        :func:`pipeline.sim.grasp_sequence.lift`.
+
+        Raises:
+            ConfigError: the world cannot lift (the default), or it has no hand.
+        """
+        raise ConfigError(f"world '{self.name}' cannot lift")
 
     @classmethod
     def hand_meshes(

@@ -825,6 +825,30 @@ class GraspOutcome:
     reapproaches: int = 0
 
 
+@dataclass(frozen=True)
+class LiftOutcome:
+    """What lifting a grasped object did (:meth:`pipeline.stages.World.lift`).
+
+    Attributes:
+        held: whether the hand still held the object after the hold: it rose with the hand
+            and lies between the fingers (the rule: :func:`pipeline.sim.grasp_sequence.held`).
+        rise_m: how far the object's origin rose, from before the lift to the end of the
+            hold, along +z of frame R (m).
+        hand_rise_m: how far the palm rose over the same time (m).
+        fingers_touching: fingers (of the hand's ``fingers``) in contact with the object at
+            the end of the hold.
+        object_before: the object's true pose before the lift.
+        object_after: the object's true pose at the end of the hold.
+    """
+
+    held: bool
+    rise_m: float
+    hand_rise_m: float
+    fingers_touching: int
+    object_before: ObjectPose
+    object_after: ObjectPose
+
+
 class SceneObject(Protocol):
     """What a world needs to place an object (a :class:`pipeline.catalogue.CatalogueObject`
     satisfies it).

@@ -19,6 +19,7 @@ from pipeline.shipped_hands import ShippedHandsWorld
 from pipeline.types import (
     CameraImage,
     CameraIntrinsics,
+    LiftOutcome,
     ObjectPose,
     SceneSetup,
     TaxelState,
@@ -83,6 +84,10 @@ class Mujoco(ShippedHandsWorld):
 
     def taxels(self, behind_m: float, beyond_m: float) -> TaxelState:
         return self._hand().taxel_state(self.sim.object_body, behind_m, beyond_m)
+
+    def lift(self, height_m: float, hold_s: float) -> LiftOutcome:
+        self._hand()
+        return self.sim.lift(height_m, hold_s)
 
     def release(self) -> ObjectPose:
         self._hand()

@@ -19,6 +19,7 @@ from pipeline.shipped_hands import ShippedHandsWorld
 from pipeline.types import (
     CameraImage,
     CameraIntrinsics,
+    LiftOutcome,
     ObjectPose,
     SceneObject,
     SceneSetup,
@@ -111,6 +112,11 @@ class Pybullet(ShippedHandsWorld):
 
     def taxels(self, behind_m: float, beyond_m: float) -> TaxelState:
         return self._hand().taxel_state(self.sim.object_id, behind_m, beyond_m)
+
+    def lift(self, height_m: float, hold_s: float) -> LiftOutcome:
+        from pipeline.sim.grasping import lift
+
+        return lift(self.sim.client, self._hand(), self.sim.object_id, height_m, hold_s)
 
     def release(self) -> ObjectPose:
         from pipeline.sim.grasping import release

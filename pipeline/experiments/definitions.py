@@ -295,6 +295,7 @@ _ROWS: tuple[Experiment, ...] = (
     ModuleExperiment("scenes", "pipeline.experiments.scenes"),
     ModuleExperiment("objects", "pipeline.experiments.objects"),
     ModuleExperiment("kinds", "pipeline.experiments.kinds"),
+    ModuleExperiment("graspability", "pipeline.experiments.graspability"),
 )
 
 #: Experiment name -> its definition.

@@ -22,15 +22,19 @@ import contextlib
 import json
 import tempfile
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..errors import StageFailure
 from ..formats import consistency_fields, hypothesis_field
 from .common import plugin_registry
 from .paper_tasks import trial_config
 from .rows import STAGES
+
+if TYPE_CHECKING:
+    from ..trial import TrialRecord
 
 #: Where a trial can stop short of an estimate (:func:`failure_fields`), in pipeline order;
 #: a finished trial whose estimate is worse than vision's counts as ``estimator``.
@@ -48,6 +52,17 @@ def run_paper_trial(params: Mapping[str, Any]) -> dict[str, Any]:
     mixes files of two runs). A :class:`StageFailure` becomes a row with ``failed`` set; any other
     exception propagates (the sweep engine records it as an error row).
     """
+    with paper_trial(params) as (row, _):
+        return row
+
+
+@contextlib.contextmanager
+def paper_trial(
+    params: Mapping[str, Any],
+) -> Iterator[tuple[dict[str, Any], TrialRecord | None]]:
+    """:func:`run_paper_trial`'s row and the finished trial's record (None when a stage
+    refused), with the trial's folder (``record.out_dir``) kept until the block ends, also
+    when ``trial_dir`` is None (a temporary folder)."""
     from ..outdir import staged_output
     from ..trial import run_trial
 
@@ -64,16 +79,18 @@ def run_paper_trial(params: Mapping[str, Any]) -> dict[str, Any]:
         except StageFailure as exc:
             recorded = Path(trial_dir) / "result.json"
             document = json.loads(recorded.read_text()) if recorded.exists() else {}
-            return {
+            failed = {
                 "failed": str(exc),
                 "status": "failed",
                 "diverged": False,
                 **failure_fields(document),
                 "seconds": time.perf_counter() - started,
             }
+            yield failed, None
+            return
         row = trial_row(record.document, record.metrics)
-    row["seconds"] = time.perf_counter() - started
-    return row
+        row["seconds"] = time.perf_counter() - started
+        yield row, replace(record, out_dir=Path(trial_dir))
 
 
 def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]]) -> dict[str, Any]:

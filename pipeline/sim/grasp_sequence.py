@@ -33,6 +33,10 @@ Sequence (:func:`execute_grasp`):
    and does not press (:func:`opposed_fingers`);
 6. let everything settle for ``settle_s`` and report.
 
+A grasp that was executed can then be lifted (:func:`lift`): the opposed fingers near the
+object press again, the palm rises straight up and holds still, and the object counts as held
+when it rose with the hand and lies between the fingers (:func:`held`).
+
 The hand closes along the x axis of ``plan.T_robot_hand`` (``plan.closing_direction`` is
 not used here). The object is free: it slides or turns when one finger reaches it before
 the others, which is the motion the estimator's bias has to absorb. The true object poses
@@ -57,8 +61,8 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import ConfigError
-from ..types import GraspOutcome, GraspPlan, ObjectPose
-from .hand_models import SimHand
+from ..types import GraspOutcome, GraspPlan, LiftOutcome, ObjectPose
+from .hand_models import FingerDrive, SimHand
 
 
 @dataclass(frozen=True)
@@ -93,6 +97,12 @@ class GraspSettings:
         release_lift_m: how far the palm backs off along its -z when releasing.
         press_together: fingers in contact wait (no squeeze) until every finger has
             stopped, then all press at once; otherwise each presses as soon as it stops.
+        lift_speed_m_s: palm speed of :func:`lift`, straight up.
+        grip_reach_m: a finger grips in a lift (:func:`lift`) when its pads are within
+            this distance of the object.
+        lift_slip_m: how far the object may end below the lift's height and still count
+            as held (:func:`held`): slipping in the pads and swinging about them, not
+            falling.
     """
 
     timestep_s: float = 1.0 / 240.0
@@ -113,6 +123,9 @@ class GraspSettings:
     release_s: float = 0.2
     release_lift_m: float = 0.05
     press_together: bool = False
+    grip_reach_m: float = 0.005
+    lift_speed_m_s: float = 0.1
+    lift_slip_m: float = 0.02
 
 
 #: Default settings per hand name (:func:`execute_grasp` falls back to ``GraspSettings()``).
@@ -404,3 +417,92 @@ def _move_palm(
         if guard_N > 0.0 and hand.bearing_down(physics.object_id)[1] >= guard_N:
             return True
     return False
+
+
+def held(rise_m: float, height_m: float, fingers_touching: int, slip_m: float) -> bool:
+    """Whether a lift of ``height_m`` held the object: it rose at least ``height_m -
+    slip_m`` (it went up with the hand and did not fall or slide out; the table is
+    ``height_m`` below) and at least two fingers still touch it (it lies between them;
+    an object hanging on one finger, or balanced on the palm, is not held)."""
+    return rise_m >= height_m - slip_m and fingers_touching >= 2
+
+
+#: Two fingers near the object oppose each other in a grip when the mean normals of
+#: their near taxels have at most this cosine (about 105 deg apart): the SDH-2's tripod
+#: (120 deg) and the PG-70's jaws (180 deg) grip, the thumb beside a pinch of fingers 1
+#: and 2 across it (90 deg to both) does not; measured normals leave a tripod just short
+#: of :func:`opposed_fingers`'s 120 deg.
+GRIP_OPPOSED_COS = -0.25
+
+
+def gripping_fingers(hand: SimHand, object_id: int, s: GraspSettings) -> list[FingerDrive]:
+    """The fingers that grip in a lift: those within ``grip_reach_m`` of the object (their
+    taxel probes) that another such finger opposes (the mean normals of their near taxels
+    :data:`GRIP_OPPOSED_COS` apart about the vertical); none when no two oppose, as in
+    the grasp's press (:func:`_close`): a finger pressing alone only pushes the object."""
+    frames, gaps = hand.taxel_gaps(object_id, s.probe_behind_m, s.grip_reach_m)
+    near = gaps <= s.grip_reach_m
+    fingers, facings = [], []
+    for finger in hand.model.fingers:
+        facing = frames.normals[near & np.isin(frames.pads, finger.pads), :2].sum(axis=0)
+        if np.linalg.norm(facing) > 0.0:
+            fingers.append(finger)
+            facings.append(facing / np.linalg.norm(facing))
+    if len(fingers) < 2:
+        return []
+    dots = np.array(facings) @ np.array(facings).T
+    np.fill_diagonal(dots, 1.0)
+    return [f for f, cos in zip(fingers, dots.min(axis=1), strict=True) if cos <= GRIP_OPPOSED_COS]
+
+
+def _grip(hand: SimHand, fingers: list[FingerDrive], s: GraspSettings) -> None:
+    """Press ``fingers`` again as the lift starts: each joint's target its squeeze
+    (``FingerDrive.squeeze``) beyond where it is now, under its force cap. The grasp's
+    press set the targets a squeeze past the first touch; an object that then turned
+    square in the pads (a box grasped 15 deg off its faces) was left untouched by them.
+    Pressing every step instead would roll the SDH-2's distal links on along the
+    surface until they let go."""
+    if not fingers:
+        return
+    targets = hand.joint_positions()
+    for finger in fingers:
+        for joint, squeeze in zip(finger.joints, finger.squeeze, strict=True):
+            targets[joint] += squeeze
+    hand.command(targets, s.force_fraction)
+
+
+def lift(
+    physics: Physics,
+    hand: SimHand,
+    height_m: float,
+    hold_s: float,
+    settings: GraspSettings | None = None,
+) -> LiftOutcome:
+    """Press the :func:`gripping_fingers` again (:func:`_grip`), raise the palm
+    ``height_m`` straight up (+z of frame R) at ``lift_speed_m_s``, hold it still for
+    ``hold_s`` and report whether the object is still held (:func:`held`). A hand that
+    holds nothing rises all the same; the object then stays on the table (not held)."""
+    s = settings or HAND_GRASP_SETTINGS.get(hand.spec.name, GraspSettings())
+    before = physics.object_pose()
+    T_start = hand.pose()
+    fingers = gripping_fingers(hand, physics.object_id, s)
+    rise_steps = max(1, math.ceil(height_m / (s.lift_speed_m_s * s.timestep_s)))
+    hold_steps = max(1, round(hold_s / s.timestep_s))
+    _grip(hand, fingers, s)
+    with physics.timestep(s.timestep_s):
+        for step in range(1, rise_steps + hold_steps + 1):
+            target = T_start.copy()
+            target[2, 3] += height_m * min(step, rise_steps) / rise_steps
+            hand.move_to(target)
+            physics.step()
+    after = physics.object_pose()
+    touching = int((hand.finger_contact_forces(physics.object_id) > 0.0).sum())
+    rise_m = float(after.position_m[2] - before.position_m[2])
+    return LiftOutcome(
+        held=held(rise_m, height_m, touching, s.lift_slip_m),
+        rise_m=rise_m,
+        hand_rise_m=float(hand.pose()[2, 3] - T_start[2, 3]),
+        fingers_touching=touching,
+        object_before=before,
+        object_after=after,
+    )

@@ -10,7 +10,7 @@ from contextlib import contextmanager
 import numpy as np
 import pybullet as pb
 
-from ..types import GraspOutcome, GraspPlan, ObjectPose
+from ..types import GraspOutcome, GraspPlan, LiftOutcome, ObjectPose
 from . import grasp_sequence
 from .grasp_sequence import HAND_GRASP_SETTINGS, GraspSettings, opposed_fingers
 from .hands import Hand
@@ -20,6 +20,7 @@ __all__ = [
     "GraspSettings",
     "PybulletPhysics",
     "execute_grasp",
+    "lift",
     "object_pose",
     "opposed_fingers",
     "release",
@@ -74,6 +75,18 @@ def release(
 ) -> ObjectPose:
     """:func:`pipeline.sim.grasp_sequence.release` in a PyBullet client."""
     return grasp_sequence.release(PybulletPhysics(client, object_id), hand, opening_m, settings)
+
+
+def lift(
+    client: int,
+    hand: Hand,
+    object_id: int,
+    height_m: float,
+    hold_s: float,
+    settings: GraspSettings | None = None,
+) -> LiftOutcome:
+    """:func:`pipeline.sim.grasp_sequence.lift` in a PyBullet client."""
+    return grasp_sequence.lift(PybulletPhysics(client, object_id), hand, height_m, hold_s, settings)
 
 
 def execute_grasp(

@@ -18,7 +18,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ...errors import ConfigError
-from ...types import CameraImage, CameraIntrinsics, GraspOutcome, GraspPlan, ObjectPose, SceneObject
+from ...types import (
+    CameraImage,
+    CameraIntrinsics,
+    GraspOutcome,
+    GraspPlan,
+    LiftOutcome,
+    ObjectPose,
+    SceneObject,
+)
 from .. import grasp_sequence
 from ..bodies import MAX_SETTLE_STEPS, REST_SPEED_M_S, REST_SPIN_RAD_S, SETTLE_STEPS
 from ..grasp_sequence import GraspSettings
@@ -186,3 +194,10 @@ class MujocoWorld:
         (:func:`pipeline.sim.grasp_sequence.release`); the object's pose then."""
         hand = self._require_hand()
         return grasp_sequence.release(MujocoPhysics(self), hand, opening_m, settings)
+
+    def lift(
+        self, height_m: float, hold_s: float, settings: GraspSettings | None = None
+    ) -> LiftOutcome:
+        """Lift and hold what the hand grasped (:func:`pipeline.sim.grasp_sequence.lift`)."""
+        hand = self._require_hand()
+        return grasp_sequence.lift(MujocoPhysics(self), hand, height_m, hold_s, settings)

@@ -1,0 +1,391 @@
+"""Grasp success as the model's score: does fusing the touch make a model a robot grasps
+better with?
+
+The trials are those of ``symfuse sweep objects`` (:mod:`.objects`: every catalogue
+object, and every ``DIR/*/textured.obj`` of ``--scans DIR``, at seeded yaws, one full
+trial each, the same seeds and keys). After a trial, the trial's hand and planner plan
+:data:`GRASPS` grasps (the planner's best, :meth:`~pipeline.stages.GraspPlanner.alternatives`)
+on each of three models (:data:`MODELS`):
+
+- ``stage0``: Stage 0's completed cloud (vision and the initial plane);
+- ``fused``: the completed cloud of the stage the estimator selected;
+- ``true``: as many points drawn evenly on the true mesh but the face it stands on (the
+  ceiling), with the true mirror plane where the object has one (the selected stage's
+  plane otherwise: the planner completes a cloud by its plane).
+
+Each model is the planner's cloud with its own plane (a completed cloud mirrors onto
+itself), moved by the object's true motion from where the model was scored (the object
+after the trial's grasps) to its resting pose, so that the three differ by their shape
+and by where the estimate put it, not by the trial's grasp. Each grasp is executed on the
+true object in a freshly built scene (the object at its resting pose, every attempt
+alike), then lifted :data:`LIFT_M` and held :data:`HOLD_S` (:meth:`World.lift
+<pipeline.stages.World.lift>`): it succeeds when the object is still held
+(:func:`pipeline.sim.grasp_sequence.held`: it rose with the hand to within the slip
+allowance and at least two fingers touch it). A model's success in a trial is its held
+grasps over :data:`GRASPS`: a grasp the planner could not offer on the model, or the
+hand could not execute, counts as failed.
+
+Rows: the trial's row (:mod:`.paper_trial`: Chamfer, F-score and IoU per stage) and per
+model ``<model>_plans``, ``<model>_executed``, ``<model>_held`` (counts),
+``<model>_success`` (held / :data:`GRASPS`) and ``<model>_first_miss`` (the first attempt
+that was not held and why); ``fused_stage``. A trial that stopped before an estimate
+has no model and no grasp counts (the report counts it apart).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..sweep import write_csv
+from . import ExperimentOptions, SweepTask, objects
+from .common import fmt, plugin_registry
+from .paper_tasks import trial_config, user_settings
+from .paper_trial import paper_trial
+
+if TYPE_CHECKING:
+    from ..trial import TrialRecord
+    from ..types import GraspPlan, ObjectPose, SymmetryPlane
+
+NAME = "graspability"
+DESCRIPTION = (
+    "every object (catalogue, and --scans DIR) at 10 seeded yaws: 5 grasps planned on "
+    "Stage 0's, the fused and the true model, each lifted 10 cm and held 2 s"
+)
+#: The experiment reads the sweep's ``--scans`` folder.
+READS_SCANS = True
+#: Grasps planned and executed per model and trial.
+GRASPS = 5
+#: How high a grasp lifts the object (m), and how long it holds it there (s).
+LIFT_M = 0.10
+HOLD_S = 2.0
+#: The models each trial's grasps are planned on, in report order.
+MODELS = ("stage0", "fused", "true")
+MODEL_LABELS = {"stage0": "Stage 0", "fused": "fused", "true": "true mesh"}
+#: The claims checked: fused at least Stage 0 on average, and within this many
+#: percentage points of the true mesh.
+CEILING_GAP_POINTS = 10.0
+
+
+def tasks(options: ExperimentOptions) -> list[SweepTask]:
+    """The trials of ``sweep objects`` (same keys and seeds), each with the grasps to make,
+    yaw by yaw and, within a yaw, the objects in a random order (seeded by the sweep's
+    seed): a sweep stopped early has graded a random sample of the objects, catalogue and
+    scans alike, rather than the first of the list.
+
+    Raises:
+        ConfigError: the configured world cannot lift (:meth:`World.lift
+            <pipeline.stages.World.lift>` not implemented), checked before any trial runs.
+    """
+    from ..config import load_config
+    from ..errors import ConfigError
+    from ..stages import World
+
+    world = load_config(plugin_registry(), settings=user_settings(options)).choices["world"]
+    if plugin_registry().get("world", world).cls.lift is World.lift:
+        raise ConfigError(f"world '{world}' cannot lift: sweep graspability needs World.lift")
+    trials = objects.tasks(options)
+    rng = np.random.default_rng(options.seed)
+    ordered = []
+    for yaw in dict.fromkeys(task.key.rpartition("/")[2] for task in trials):
+        group = [task for task in trials if task.key.rpartition("/")[2] == yaw]
+        ordered += [group[i] for i in rng.permutation(len(group))]
+    return [
+        SweepTask(task.key, {**task.params, "grasps": GRASPS}, task.settings) for task in ordered
+    ]
+
+
+def run_one(params: dict) -> dict[str, Any]:
+    with paper_trial(params) as (row, record):
+        if record is not None:
+            row.update(grasp_models(params, record))
+    return row
+
+
+# ---------------------------------------------------------------- models and attempts
+
+
+@dataclass(frozen=True)
+class PlanningModel:
+    """What the planner is given for one model: completed points (frame R, the object at
+    its resting pose) and their mirror plane."""
+
+    points: np.ndarray
+    plane: SymmetryPlane
+
+
+def _pose(entry: Mapping[str, Any]) -> ObjectPose:
+    from ..types import ObjectPose
+
+    return ObjectPose(np.asarray(entry["position"]), np.asarray(entry["quaternion_xyzw"]))
+
+
+def moved_plane(plane: SymmetryPlane, motion: np.ndarray) -> SymmetryPlane:
+    """``plane`` carried by the rigid ``motion`` (4x4, frame R); its normal kept
+    horizontal (the motion of an object resting on the table is a turn about the
+    vertical and a shift, up to the millimetres a grasp tilts it)."""
+    from ..types import SymmetryPlane
+
+    normal = motion[:3, :3] @ plane.normal
+    point = motion[:3, :3] @ (plane.normal * plane.offset_m) + motion[:3, 3]
+    return SymmetryPlane.from_normal(normal[:2], float(normal[:2] @ point[:2]))
+
+
+def planning_models(
+    record: TrialRecord, obj: Any, resting: ObjectPose, seed: int
+) -> dict[str, PlanningModel]:
+    """:data:`MODELS` for the planner, the object at ``resting`` (see the module doc)."""
+    from ..metrics.shape_scores import sample_surface
+    from ..trial import ground_truth
+
+    result = record.result
+    scored_at = _pose(record.document["object_pose_after"])
+    motion = resting.transform @ np.linalg.inv(scored_at.transform)
+
+    def moved(points: np.ndarray) -> np.ndarray:
+        return points @ motion[:3, :3].T + motion[:3, 3]
+
+    stage0, fused = result.stages[0], result.selected
+    T = resting.transform
+    # The true surface but the face it stands on, which no model has either.
+    samples = sample_surface(obj.mesh.vertices, obj.mesh.faces, len(fused.completed), seed=seed)
+    truth_plane = ground_truth(obj, resting, resting, None).plane
+    return {
+        "stage0": PlanningModel(moved(stage0.completed), moved_plane(stage0.plane, motion)),
+        "fused": PlanningModel(moved(fused.completed), moved_plane(fused.plane, motion)),
+        "true": PlanningModel(
+            samples @ T[:3, :3].T + T[:3, 3],
+            truth_plane if truth_plane is not None else moved_plane(fused.plane, motion),
+        ),
+    }
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One grasp of a model on the true object: executed, held after the lift, and why
+    not (empty when held)."""
+
+    executed: bool
+    held: bool
+    reason: str
+
+
+def attempt(world: Any, setup: Any, gripper: str, plan: GraspPlan) -> Attempt:
+    """Build the scene afresh, grasp with ``plan``, lift and hold (module doc)."""
+    world.load_scene(setup)
+    world.add_hand(gripper)
+    outcome = world.execute_grasp(plan)
+    if not outcome.executed:
+        return Attempt(False, False, f"not executed: {outcome.reason}")
+    lifted = world.lift(LIFT_M, HOLD_S)
+    if lifted.held:
+        return Attempt(True, True, "")
+    return Attempt(
+        True,
+        False,
+        f"dropped: rose {round(1e3 * lifted.rise_m)} mm of {1e3 * LIFT_M:.0f}, "
+        f"{lifted.fingers_touching} finger(s) touching",
+    )
+
+
+def grasp_models(params: Mapping[str, Any], record: TrialRecord) -> dict[str, Any]:
+    """Plan ``params["grasps"]`` grasps on each model and execute each; the row fields
+    (module doc)."""
+    from ..catalogue import load_object
+    from ..hand_choice import create_planner
+    from ..types import Bias, PointCloud, SceneSetup, SymmetryInit
+
+    config = trial_config(params)
+    registry = plugin_registry()
+    settings = config.trial
+    document = record.document
+    gripper = document["gripper"]
+    planner = create_planner(config, registry, document["stages_used"]["planner"])
+    obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
+    setup = SceneSetup(
+        obj, settings.x_m, settings.y_m, float(np.radians(settings.yaw_deg)), settings.seed
+    )
+    camera = json.loads((record.out_dir / "camera.json").read_text())
+    viewpoint = np.asarray(camera["T_robot_camera"])[:3, 3]
+    count = int(params["grasps"])
+    fields: dict[str, Any] = {"fused_stage": record.result.selected.stage}
+    with contextlib.closing(config.create(registry, "world")) as world:
+        world.load_scene(setup)
+        resting = world.object_pose()
+        spec = world.gripper_spec(gripper)
+        models = planning_models(record, obj, resting, settings.seed)
+        for name, model in models.items():
+            cloud = PointCloud(model.points, "robot", None, viewpoint)
+            plans = planner.alternatives(cloud, SymmetryInit(model.plane, Bias()), spec)[:count]
+            attempts = [attempt(world, setup, gripper, plan) for plan in plans]
+            misses = [a.reason for a in attempts if not a.held]
+            if len(plans) < count:
+                misses.append(f"the planner offered {len(plans)} grasp(s) of {count}")
+            held = sum(a.held for a in attempts)
+            fields.update(
+                {
+                    f"{name}_plans": len(plans),
+                    f"{name}_executed": sum(a.executed for a in attempts),
+                    f"{name}_held": held,
+                    f"{name}_success": held / count,
+                    f"{name}_first_miss": misses[0] if misses else "",
+                }
+            )
+    return fields
+
+
+# ---------------------------------------------------------------- the report
+
+
+def graded(row: Mapping[str, Any]) -> bool:
+    """Whether the trial reached an estimate and its models were grasped."""
+    return "error" not in row and f"{MODELS[0]}_success" in row
+
+
+def mean_success(rows: Sequence[Mapping[str, Any]], model: str) -> float:
+    """The mean over graded rows of ``model``'s success (%); NaN without any."""
+    values = [float(row[f"{model}_success"]) for row in rows if graded(row)]
+    return 100.0 * float(np.mean(values)) if values else math.nan
+
+
+def _percent(value: float) -> str:
+    return "-" if math.isnan(value) else f"{value:.0f} %"
+
+
+def _median(rows: Sequence[Mapping[str, Any]], field: str) -> float:
+    values = np.asarray([row.get(field, math.nan) for row in rows], dtype=float)
+    values = values[np.isfinite(values)]
+    return float(np.median(values)) if values.size else math.nan
+
+
+def _shape_cells(rows: Sequence[Mapping[str, Any]], metric: str, digits: int) -> str:
+    """Medians of ``metric`` of Stage 0 and of the selected stage over ``rows``."""
+    stage0 = _median(rows, f"stage0_{metric}")
+    chosen = np.asarray(
+        [row.get(f"stage{row['fused_stage']}_{metric}", math.nan) for row in rows], dtype=float
+    )
+    chosen = chosen[np.isfinite(chosen)]
+    fused = float(np.median(chosen)) if chosen.size else math.nan
+    return f"{fmt(stage0, digits)} / {fmt(fused, digits)}"
+
+
+def claims(rows: Sequence[Mapping[str, Any]]) -> dict[str, bool]:
+    """The two claims over every graded trial (module doc)."""
+    stage0, fused, true = (mean_success(rows, model) for model in MODELS)
+    return {
+        "fused >= Stage 0": bool(fused >= stage0),
+        f"fused within {CEILING_GAP_POINTS:g} points of the true mesh": bool(
+            true - fused <= CEILING_GAP_POINTS
+        ),
+    }
+
+
+def summary_lines(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The headline table: mean success per model over the graded trials, the shares of
+    trials where fusion lost grasps, and the claims."""
+    done = [row for row in rows if graded(row)]
+    worse = sum(row["fused_success"] < row["stage0_success"] for row in done)
+    better = sum(row["fused_success"] > row["stage0_success"] for row in done)
+    checks = claims(rows) if done else {}
+    return [
+        "| trials | graded | success: Stage 0 | fused | true mesh | fused better / worse "
+        "than Stage 0 (trials) |",
+        "|---|---|---|---|---|---|",
+        f"| {len(rows)} | {len(done)} | "
+        + " | ".join(_percent(mean_success(rows, m)) for m in MODELS)
+        + f" | {better} / {worse} |",
+        "",
+        *(f"- {claim}: {'met' if ok else 'NOT met'}" for claim, ok in checks.items()),
+    ]
+
+
+def report(rows: list[dict], out_dir: Path) -> list[Path]:
+    """``results.csv``, ``graspability.png`` and ``report.md`` (see the module doc)."""
+    out_dir = Path(out_dir)
+    csv_path = write_csv(rows, out_dir / "results.csv")
+    by_object: dict[str, list[Mapping[str, Any]]] = {}
+    for row in rows:
+        by_object.setdefault(row["params"]["label"], []).append(row)
+    lines = [
+        "# Grasp success per model",
+        "",
+        f"Each trial's hand plans {GRASPS} grasps (its planner's best) on each model: Stage "
+        "0's completed cloud, the fused (selected) stage's, and the true mesh's surface (the "
+        "ceiling). Each grasp is executed on the true object, from its resting pose every "
+        f"time, lifted {100 * LIFT_M:.0f} cm and held {HOLD_S:g} s; it succeeds when the "
+        "object rose with the hand (within the slip allowance) and lies between at least "
+        f"two fingers. Success: held grasps over {GRASPS}, a grasp the planner did not "
+        "offer counted as failed; means over the trials that reached an estimate (graded).",
+        "",
+        *summary_lines(rows),
+        "",
+        "## Per object",
+        "",
+        "Success: mean over the object's graded trials. Chamfer (mm), F-score at 5 mm and "
+        "IoU of the completed cloud: medians, Stage 0 / fused.",
+        "",
+        "| object | graded / trials | Stage 0 | fused | true mesh | Chamfer (mm) "
+        "| F-score 5 mm | IoU |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for label, group in by_object.items():
+        done = [row for row in group if graded(row)]
+        successes = " | ".join(_percent(mean_success(group, m)) for m in MODELS)
+        lines.append(
+            f"| {label} | {len(done)} / {len(group)} | {successes} "
+            f"| {_shape_cells(done, 'chamfer_mm', 1)} | {_shape_cells(done, 'fscore_5mm', 2)} "
+            f"| {_shape_cells(done, 'iou', 2)} |"
+        )
+    lines += miss_lines(rows)
+    report_path = out_dir / "report.md"
+    report_path.write_text("\n".join(lines) + "\n")
+    figure = success_figure(by_object, out_dir / "graspability.png")
+    return [csv_path, figure, report_path]
+
+
+def miss_lines(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The trials without an estimate, and each model's first missed grasp per trial."""
+    lines = []
+    ungraded = [row for row in rows if not graded(row)]
+    if ungraded:
+        lines += ["", f"## Trials without an estimate ({len(ungraded)})", ""]
+        lines += [
+            f"- `{row['key']}`: {row.get('error') or row.get('failed') or '-'}"
+            for row in ungraded[:20]
+        ]
+    missed = [
+        (row["key"], model, row[f"{model}_first_miss"])
+        for row in rows
+        if graded(row)
+        for model in MODELS
+        if row[f"{model}_first_miss"]
+    ]
+    if missed:
+        lines += ["", f"## First missed grasp per trial and model ({len(missed)})", ""]
+        lines += [f"- `{key}` {MODEL_LABELS[model]}: {why}" for key, model, why in missed[:40]]
+        if len(missed) > 40:
+            lines.append(f"- ... and {len(missed) - 40} more (see results.csv)")
+    return lines
+
+
+def success_figure(by_object: Mapping[str, Sequence[Mapping[str, Any]]], out_path: Path) -> Path:
+    """``graspability.png``: grasp success per model (bars), per object and over all."""
+    from ..figures import BarGroups, bar_figure
+
+    labels = [*by_object, "all"]
+    groups = [*by_object.values(), [row for group in by_object.values() for row in group]]
+    series = {
+        MODEL_LABELS[model]: [mean_success(group, model) for group in groups] for model in MODELS
+    }
+    return bar_figure(
+        BarGroups(labels, series, "grasp success (%)"),
+        out_path,
+        title=f"Grasps lifted {100 * LIFT_M:.0f} cm and held {HOLD_S:g} s, per model",
+    )

@@ -1,0 +1,166 @@
+"""`symfuse sweep graspability`: its tasks, the models' placement and its report on
+hand-made rows."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from pipeline.errors import ConfigError
+from pipeline.experiments import EXPERIMENTS, ExperimentOptions, graspability, objects
+from pipeline.poses import rotation_z
+from pipeline.testing import AnalyticWorld, registry_with
+from pipeline.types import SymmetryPlane
+
+
+def test_the_trials_are_those_of_sweep_objects_with_the_grasps_to_make():
+    options = ExperimentOptions(repeats=2)
+    tasks = graspability.tasks(options)
+    same = {t.key: t for t in objects.tasks(options)}
+    assert sorted(t.key for t in tasks) == sorted(same)
+    for task in tasks:
+        assert task.params == {**same[task.key].params, "grasps": graspability.GRASPS}
+        assert task.settings == same[task.key].settings
+    # Yaw by yaw, the objects of each yaw in a seeded random order, the same every time.
+    yaws = [t.key.split("/")[1] for t in tasks]
+    assert yaws == sorted(yaws)
+    assert [t.key for t in tasks] == [t.key for t in graspability.tasks(options)]
+    labels = [t.params["label"] for t in tasks]
+    half = len(labels) // 2
+    assert labels[:half] != [t.params["label"] for t in objects.tasks(options)][:half]
+    assert EXPERIMENTS["graspability"].reads_scans
+
+
+def test_a_plane_moves_with_the_object():
+    plane = SymmetryPlane.from_normal(np.array([1.0, 0.0]), 0.1)  # x = 0.1
+    motion = np.eye(4)
+    motion[:3, :3] = rotation_z(np.pi / 2)
+    motion[:3, 3] = [0.0, 0.2, 0.0]
+    moved = graspability.moved_plane(plane, motion)
+    # Points of the plane map onto the moved plane; its normal turned with the object.
+    on_plane = np.array([[0.1, -0.3, 0.0], [0.1, 0.5, 0.7]])
+    carried = on_plane @ motion[:3, :3].T + motion[:3, 3]
+    np.testing.assert_allclose(carried @ moved.normal, moved.offset_m, atol=1e-12)
+    np.testing.assert_allclose(moved.normal, [0.0, 1.0, 0.0], atol=1e-12)
+
+
+def _row(label, yaw, stage0, fused, true, **fields):
+    grasps = graspability.GRASPS
+    row = {
+        "key": f"{label}/yaw{yaw:02d}",
+        "params": {"label": label},
+        "failed": None,
+        "fused_stage": 2,
+        "stage0_chamfer_mm": 4.0,
+        "stage2_chamfer_mm": 2.0,
+        "stage0_fscore_5mm": 0.6,
+        "stage2_fscore_5mm": 0.8,
+        "stage0_iou": 0.5,
+        "stage2_iou": 0.7,
+    }
+    for model, held in zip(graspability.MODELS, (stage0, fused, true), strict=True):
+        row |= {
+            f"{model}_plans": grasps,
+            f"{model}_executed": grasps,
+            f"{model}_held": held,
+            f"{model}_success": held / grasps,
+            f"{model}_first_miss": "" if held == grasps else "dropped: rose 3 mm of 100",
+        }
+    return row | fields
+
+
+def test_report_gives_success_per_model_and_object_and_checks_the_claims(tmp_path):
+    rows = [
+        _row("box", 0, stage0=2, fused=4, true=5),
+        _row("box", 1, stage0=3, fused=3, true=4),
+        _row("mug", 0, stage0=5, fused=4, true=5),
+        {"key": "mug/yaw01", "params": {"label": "mug"}, "failed": "no grasp", "status": "failed"},
+        {"key": "can/yaw00", "params": {"label": "can"}, "error": "RuntimeError: boom"},
+    ]
+    paths = graspability.report(rows, tmp_path)
+    assert [p.name for p in paths] == ["results.csv", "graspability.png", "report.md"]
+    assert all(p.stat().st_size > 0 for p in paths)
+    text = (tmp_path / "report.md").read_text()
+    # Means over the three graded trials: Stage 0 10/15, fused 11/15, true 14/15.
+    assert "| 5 | 3 | 67 % | 73 % | 93 % | 1 / 1 |" in text
+    assert "- fused >= Stage 0: met" in text
+    assert "- fused within 10 points of the true mesh: NOT met" in text
+    assert "| box | 2 / 2 | 50 % | 70 % | 90 % | 4.0 / 2.0 | 0.60 / 0.80 | 0.50 / 0.70 |" in text
+    assert "| mug | 1 / 2 | 100 % | 80 % | 100 % |" in text
+    assert "| can | 0 / 1 | - | - | - |" in text
+    assert "`mug/yaw01`: no grasp" in text and "`can/yaw00`: RuntimeError: boom" in text
+    assert "`box/yaw00` Stage 0: dropped" in text
+
+
+@pytest.mark.parametrize(
+    ("fused", "true", "expected"),
+    [(3, 3, (True, True)), (2, 2, (False, True)), (3, 5, (True, False))],
+)
+def test_claims(fused, true, expected):
+    rows = [_row("box", 0, stage0=3, fused=fused, true=true)]
+    assert tuple(graspability.claims(rows).values()) == expected
+
+
+def test_a_world_that_cannot_lift_is_refused_before_any_trial(monkeypatch):
+    registry = registry_with(AnalyticWorld)
+    monkeypatch.setattr(graspability, "plugin_registry", lambda: registry)
+    options = ExperimentOptions(quick=True, config={"world": {"use": "analytic"}})
+    with pytest.raises(ConfigError, match="world 'analytic' cannot lift"):
+        graspability.tasks(options)
+
+
+def test_the_models_are_carried_to_the_resting_pose_and_the_truth_lies_on_the_mesh():
+    import trimesh
+
+    from pipeline.catalogue import load_object
+    from pipeline.types import ObjectPose
+
+    obj = load_object("cd_drive")
+    after = ObjectPose(
+        np.array([0.41, 0.02, 0.0]), np.array([0.0, 0.0, np.sin(0.05), np.cos(0.05)])
+    )
+    resting = ObjectPose(np.array([0.40, 0.0, 0.0]), np.array([0.0, 0.0, 0.0, 1.0]))
+    completed = np.array([[0.41, 0.02, 0.05], [0.45, 0.0, 0.1]])
+    plane = SymmetryPlane.from_normal(np.array([1.0, 0.0]), 0.41)
+    stage = SimpleNamespace(completed=completed, plane=plane)
+    record = SimpleNamespace(
+        result=SimpleNamespace(stages=(stage,), selected=stage),
+        document={
+            "object_pose_after": {
+                "position": after.position_m.tolist(),
+                "quaternion_xyzw": after.quaternion_xyzw.tolist(),
+            }
+        },
+    )
+    models = graspability.planning_models(record, obj, resting, seed=3)
+    # By hand: each point's offset from the drive's origin after the grasp, turned back by
+    # 0.1 rad, from the resting origin.
+    c, s = np.cos(-0.1), np.sin(-0.1)
+    offsets = completed - [0.41, 0.02, 0.0]
+    expected = np.column_stack(
+        [
+            0.40 + c * offsets[:, 0] - s * offsets[:, 1],
+            s * offsets[:, 0] + c * offsets[:, 1],
+            offsets[:, 2],
+        ]
+    )
+    np.testing.assert_allclose(expected[0], [0.40, 0.0, 0.05], atol=1e-12)
+    np.testing.assert_allclose(models["stage0"].points, expected, atol=1e-12)
+    np.testing.assert_allclose(models["fused"].points, expected, atol=1e-12)
+    # The plane x = 0.41 through the drive's origin after the grasp: through the resting
+    # origin, turned back by 0.1 rad.
+    moved = models["fused"].plane
+    np.testing.assert_allclose(moved.normal[:2], [c, s], atol=1e-12)
+    np.testing.assert_allclose(np.array([0.40, 0.0, 0.0]) @ moved.normal, moved.offset_m)
+    # The true model: points on the mesh where it rests, none on the face it stands on,
+    # with the catalogue's mirror plane (x = 0.40 at this pose; the drive's plane is x = 0).
+    truth = obj.mesh.copy().apply_transform(resting.transform)
+    points = models["true"].points
+    assert len(points) == len(completed)
+    _, distance, _ = trimesh.proximity.closest_point(truth, points)
+    assert np.all(distance < 1e-9)
+    assert np.all(points[:, 2] > 1e-6)
+    np.testing.assert_allclose(abs(models["true"].plane.normal[0]), 1.0, atol=1e-12)
+    np.testing.assert_allclose(abs(models["true"].plane.offset_m), 0.40, atol=1e-12)
