@@ -241,3 +241,26 @@ def test_plane_parameters_name_the_plane_whichever_the_normals_sign():
     assert math.degrees(azimuth) == pytest.approx(-135.0)
     assert math.degrees(elevation) == pytest.approx(45.0)
     assert np.allclose(flipped.values, plane.values)
+
+
+def test_the_catalogue_ships_the_search_for_every_object(tmp_path, monkeypatch):
+    """Every catalogue mesh's searched symmetries ship in ``objects/symmetry/`` under its
+    digest, so no trial searches a catalogue object: a changed mesh or search version must
+    ship them again (docs/symmetry.md says how)."""
+    from objects import ROOT
+    from pipeline.sim.collision import mesh_hash
+    from pipeline.symmetry.search import SEARCH_VERSION
+    from pipeline.symmetry.truth_file import true_symmetries
+
+    monkeypatch.setenv("SYMFUSE_CACHE", str(tmp_path / "cache"))
+    for info in list_objects():
+        obj = load_object(info.name)
+        digest = mesh_hash(trimesh.Trimesh(obj.mesh.vertices, obj.mesh.faces, process=False))
+        shipped = ROOT / "symmetry" / f"{digest}-v{SEARCH_VERSION}.json"
+        assert shipped.is_file(), f"{info.name}: no shipped symmetries"
+        found, expected = true_symmetries(obj), read_symmetries(shipped)[0]
+        assert len(found) == len(expected)
+        for a, b in zip(found, expected, strict=True):
+            assert a.kind == b.kind
+            assert np.allclose(a.direction, b.direction) and np.allclose(a.point_m, b.point_m)
+    assert not (tmp_path / "cache").exists()  # nothing was searched

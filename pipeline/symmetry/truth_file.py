@@ -135,16 +135,22 @@ def searched_symmetries(vertices: np.ndarray, faces: np.ndarray) -> tuple[Symmet
     """The search's symmetries of a mesh (:func:`~pipeline.symmetry.search.mesh_symmetries`),
     kept as a ``symmetry.json`` in the cache folder (``$SYMFUSE_CACHE/symmetry``, default
     ``~/.cache/symfuse/symmetry``) under the digest of the mesh and the search's version: a
-    mesh is searched once per machine."""
+    mesh is searched once per machine. The catalogue's meshes are searched once for
+    everyone: their results ship in ``objects/symmetry/`` under the same names (the search
+    takes seconds per mesh, and every trial's evaluation asks for them)."""
     import trimesh
+
+    from objects import ROOT as OBJECTS_ROOT
 
     from ..sim.collision import cache_dir, mesh_hash
     from .search import SEARCH_VERSION, mesh_symmetries
 
     digest = mesh_hash(trimesh.Trimesh(vertices, faces, process=False))
-    path = cache_dir() / "symmetry" / f"{digest}-v{SEARCH_VERSION}.json"
-    if path.is_file():
-        return tuple(read_symmetries(path)[0])
+    name = f"{digest}-v{SEARCH_VERSION}.json"
+    for path in (OBJECTS_ROOT / "symmetry" / name, cache_dir() / "symmetry" / name):
+        if path.is_file():
+            return tuple(read_symmetries(path)[0])
+    path = cache_dir() / "symmetry" / name
     found = mesh_symmetries(vertices, faces)
     document = symmetries_to_json(found.symmetries, digest)
     try:
