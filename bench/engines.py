@@ -19,7 +19,7 @@ from pathlib import Path
 
 from summary import record
 
-from pipeline.tables import format_table
+from pipeline.reports.tables import format_table
 
 WORLDS = ("pybullet", "mujoco")
 PHASES = ("scene", "sensor", "grasp", "tactile")
@@ -31,7 +31,7 @@ def timings(objects: tuple[str, ...], repeats: int) -> dict[str, dict[str, list[
     """``world -> phase (and "trial") -> seconds`` of every run."""
     from pipeline.config import load_config
     from pipeline.registry import load_registry
-    from pipeline.trial import run_trial
+    from pipeline.run.trial import run_trial
 
     registry = load_registry()
     seconds: dict[str, dict[str, list[float]]] = {world: {} for world in WORLDS}

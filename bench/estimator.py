@@ -48,7 +48,7 @@ from pipeline.estimation.dense import DenseCovariance  # noqa: E402
 from pipeline.estimation.geometry import apply_bias  # noqa: E402
 from pipeline.estimation.iekf import fuse  # noqa: E402
 from pipeline.estimation.map_params import fusion_problem  # noqa: E402
-from pipeline.poses import rotation_z  # noqa: E402
+from pipeline.geometry.poses import rotation_z  # noqa: E402
 from pipeline.types import (  # noqa: E402
     Bias,
     Contacts,
@@ -57,7 +57,7 @@ from pipeline.types import (  # noqa: E402
     SymmetryInit,
     SymmetryPlane,
 )
-from plugins.iekf import IekfEstimator  # noqa: E402
+from plugins.estimators.iekf import IekfEstimator  # noqa: E402
 
 RADIUS_M, HEIGHT_M, PITCH_M = 0.04, 0.10, 0.0034
 #: Wall-time targets of the whole estimate (Stages 0-2, set-up included), one thread.

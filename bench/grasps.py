@@ -9,7 +9,7 @@ hand (``--gripper``, default ``auto``), grasp, read the taxels. No estimator, no
 re-run resumes).
 
 Prints per object: the hand(s) chosen, the grasps with contacts on two opposing sides
-(:func:`pipeline.evaluation.opposing_contacts`), the median object tilt and shift during the
+(:func:`pipeline.metrics.evaluation.opposing_contacts`), the median object tilt and shift during the
 grasp and the grasps that tilted it less than 5 deg. Targets: opposing contacts in at least
 90 % of the yaws and tilt below 5 deg in at least 95 %, for every object a hand can hold.
 """
@@ -24,16 +24,16 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.catalogue import list_objects, load_object
+from pipeline.catalogue.objects import list_objects, load_object
 from pipeline.config import load_config
 from pipeline.errors import StageFailure
-from pipeline.evaluation import object_motion, opposing_contacts
 from pipeline.experiments import SweepTask
 from pipeline.experiments.scanned import SCANS_ENV, default_scans_dir
-from pipeline.hand_choice import candidate_to_json, choose_grasp
+from pipeline.experiments.sweep import run_sweep
+from pipeline.metrics.evaluation import object_motion, opposing_contacts
+from pipeline.planning.hand_choice import candidate_to_json, choose_grasp
 from pipeline.registry import load_registry
-from pipeline.sweep import run_sweep
-from pipeline.tables import format_table
+from pipeline.reports.tables import format_table
 from pipeline.types import SceneSetup
 
 #: Tilt below which a grasp counts as not tipping the object (deg).

@@ -40,7 +40,7 @@ def trial_phases(repeats: int, folder: Path) -> dict[str, float]:
     from pipeline.asset.files import write_model
     from pipeline.config import load_config
     from pipeline.registry import load_registry
-    from pipeline.trial import run_trial
+    from pipeline.run.trial import run_trial
 
     registry = load_registry()
     config = load_config(registry, overrides=["trial.pictures=false"])

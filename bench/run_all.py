@@ -22,7 +22,7 @@ from pathlib import Path
 
 from summary import SUMMARY_FILE
 
-from pipeline.tables import format_table
+from pipeline.reports.tables import format_table
 
 HERE = Path(__file__).resolve().parent
 DEFAULT = ("commands", "trial", "model", "estimator", "vc", "tactile", "sweep_overhead")

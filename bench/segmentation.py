@@ -17,13 +17,13 @@ import time
 import numpy as np
 from summary import record
 
-from pipeline.catalogue import list_objects, load_object
+from pipeline.catalogue.objects import list_objects, load_object
 from pipeline.params import build
 from pipeline.perception.clustering import dbscan_labels, voxel_subsample_indices
 from pipeline.perception.depth import backproject_depth
 from pipeline.perception.table import fit_table_ransac, table_from_height
-from plugins.pybullet_kinect import PybulletKinect
-from plugins.pybullet_world import Pybullet
+from plugins.sensors.pybullet_kinect import PybulletKinect
+from plugins.worlds.pybullet_world import Pybullet
 
 
 def best_of(repeats: int, function, *args) -> float:

@@ -27,7 +27,7 @@ from pathlib import Path
 from summary import record
 
 from pipeline.experiments import EXPERIMENTS, ExperimentOptions, SweepTask
-from pipeline.sweep import run_sweep
+from pipeline.experiments.sweep import run_sweep
 
 #: ``pipeline.sim.world.REUSE_VARIABLE``, not imported: the workers import this module, and
 #: the simulation's imports would count as their start-up.
@@ -155,7 +155,7 @@ def main() -> None:
         resumed = time_sweep(tasks, folder, "w1", workers=1)
         rows.append(("re-run, all tasks finished", resumed))
 
-    from pipeline import catalogue
+    from pipeline.catalogue import objects as catalogue
 
     start = time.perf_counter()
     for info in catalogue.list_objects():

@@ -20,7 +20,7 @@ from summary import record
 from pipeline.sim.grasping import execute_grasp
 from pipeline.sim.hands import Hand
 from pipeline.types import GraspPlan
-from plugins.pybullet_taxels import PybulletTaxels
+from plugins.tactile.pybullet_taxels import PybulletTaxels
 
 
 def _world(gripper: str) -> tuple[SimpleNamespace, GraspPlan]:

@@ -1,7 +1,7 @@
 """Trial benchmark: every phase of whole trials and of ``symfuse complete``, beside targets.
 
 Run: ``python bench/trial.py [--repeats N]``. In one warm process, the median wall time of
-every phase of ``pipeline.trial.run_trial`` (pictures off, as sweeps run them) for
+every phase of ``pipeline.run.trial.run_trial`` (pictures off, as sweeps run them) for
 
 * the default trial (CD drive, ``--gripper auto``: both hands' planners plan, the PG-70
   grasps), and the same with pictures on (the four PNGs' cost);
@@ -51,7 +51,7 @@ def in_process(repeats: int, overrides: list[str]) -> tuple[dict[str, float], fl
     (after one warm-up trial)."""
     from pipeline.config import load_config
     from pipeline.registry import load_registry
-    from pipeline.trial import run_trial
+    from pipeline.run.trial import run_trial
 
     registry = load_registry()
     config = load_config(registry, overrides=overrides)

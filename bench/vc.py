@@ -23,9 +23,9 @@ import time
 import numpy as np
 from summary import record
 
-from pipeline.perception.grasp_geometry import PadBand, corridor
 from pipeline.perception.principal_axes import table_axes
 from pipeline.perception.visibility import plane_grid, visibility_violations
+from pipeline.planning.grasp_geometry import PadBand, corridor
 from pipeline.synthetic import (
     box_object,
     cylinder_object,
@@ -35,11 +35,11 @@ from pipeline.synthetic import (
     synthetic_observation,
 )
 from pipeline.types import GripperSpec, PadLayout, SymmetryPlane
-from plugins.pca import PcaInitialiser
-from plugins.ps import PsInitialiser
-from plugins.table_cluster import TableCluster
-from plugins.top_parallel import TopParallel
-from plugins.vc import VcInitialiser
+from plugins.initialisers.pca import PcaInitialiser
+from plugins.initialisers.ps import PsInitialiser
+from plugins.initialisers.vc import VcInitialiser
+from plugins.planners.top_parallel import TopParallel
+from plugins.segmenters.table_cluster import TableCluster
 
 PG70 = GripperSpec(
     "pg70",

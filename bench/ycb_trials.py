@@ -31,8 +31,8 @@ from pipeline.experiments.init import yaws_deg
 from pipeline.experiments.paper_report import DEVIATION_TARGET_MM
 from pipeline.experiments.paper_trial import run_paper_trial
 from pipeline.experiments.scanned import SCANS_ENV, default_scans_dir, scan_trial_params
-from pipeline.sweep import run_sweep
-from pipeline.tables import format_table
+from pipeline.experiments.sweep import run_sweep
+from pipeline.reports.tables import format_table
 
 #: How much worse than Stage 0 a model may be and still count as no worse (mm): the
 #: deviation's own spread between repeated renders of one scene.

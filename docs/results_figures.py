@@ -22,8 +22,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Polygon as PolygonPatch
 from scipy.spatial import cKDTree
 
-from pipeline.evaluation import SURFACE_SAMPLES
-from pipeline.formats import read_cloud
+from pipeline.io.formats import read_cloud
 from pipeline.metrics import (
     hull_iou,
     nearest_distances,
@@ -32,6 +31,7 @@ from pipeline.metrics import (
     solid_grid,
     surface_scores,
 )
+from pipeline.metrics.evaluation import SURFACE_SAMPLES
 
 IMAGES = Path(__file__).resolve().parent / "images"
 TRIAL = [
@@ -52,7 +52,7 @@ TAU_M = 0.002
 def run_trial(out_dir: Path) -> Path:
     from pipeline.config import load_config
     from pipeline.registry import load_registry
-    from pipeline.trial import run_trial as run
+    from pipeline.run.trial import run_trial as run
 
     registry = load_registry()
     run(load_config(registry, overrides=TRIAL), registry, out_dir)

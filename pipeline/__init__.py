@@ -17,7 +17,7 @@ __all__ = ["__version__", "hookimpl"]
 
 def __getattr__(name: str) -> Any:
     if name == "hookimpl":
-        from .hookspecs import hookimpl
+        from pipeline.hookspecs import hookimpl
 
         return hookimpl
     if name == "__version__":

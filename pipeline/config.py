@@ -33,10 +33,10 @@ from typing import Any, Literal, get_args, get_type_hints
 
 import tomli_w
 
-from .errors import ConfigError
-from .params import build, param, to_toml
-from .registry import StageRegistry
-from .stages import STAGES, StageImplementation
+from pipeline.errors import ConfigError
+from pipeline.params import build, param, to_toml
+from pipeline.registry import StageRegistry
+from pipeline.stages import STAGES, StageImplementation
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,7 +120,7 @@ class ModelSettings:
     )
 
 
-#: How the grasps after a trial's first may be chosen (:mod:`pipeline.next_grasp`).
+#: How the grasps after a trial's first may be chosen (:mod:`pipeline.planning.next_grasp`).
 NEXT_GRASP_STRATEGIES: tuple[str, ...] = get_args(get_type_hints(TrialSettings)["next_grasp"])
 
 #: Sections that are not stages, and the dataclass each one is validated against.
@@ -265,14 +265,14 @@ class Config:
 
     def check_trial(self, registry: StageRegistry) -> None:
         """The checks across keys a trial makes before it runs: a ``planner.use`` the user
-        chose that would not plan (:func:`pipeline.hand_choice.check_planner_is_read`), and
+        chose that would not plan (:func:`pipeline.planning.hand_choice.check_planner_is_read`), and
         the next-grasp strategy or the stop rule set for a trial of one grasp (neither
         would act).
 
         Raises:
             ConfigError: naming the key (and the option that stands for it) at fault.
         """
-        from .hand_choice import check_planner_is_read
+        from pipeline.planning.hand_choice import check_planner_is_read
 
         check_planner_is_read(self, registry, self.changed)
         if self.trial.grasps > 1:

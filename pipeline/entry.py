@@ -18,7 +18,7 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from .errors import EXIT_INTERRUPTED
+from pipeline.errors import EXIT_INTERRUPTED
 
 _received = False
 
@@ -53,7 +53,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _on_interrupt)
     try:
-        from .cli import main as run
+        from pipeline.cli import main as run
 
         return run(argv)
     except BaseException:

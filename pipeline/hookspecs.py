@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:
-    from .registry import StageRegistry
+    from pipeline.registry import StageRegistry
 
 PROJECT = "symfuse"
 hookspec = pluggy.HookspecMarker(PROJECT)

@@ -24,7 +24,7 @@ import typing
 from collections.abc import Mapping
 from typing import Any, Literal, get_args, get_origin
 
-from .errors import ConfigError
+from pipeline.errors import ConfigError
 
 
 def param(

@@ -20,10 +20,10 @@ from typing import Any
 
 import pluggy
 
-from . import hookspecs
-from .errors import PluginError, PluginRaised, SymfuseError
-from .params import build
-from .stages import CONTRACTS, STAGES, StageImplementation
+from pipeline import hookspecs
+from pipeline.errors import PluginError, PluginRaised, SymfuseError
+from pipeline.params import build
+from pipeline.stages import CONTRACTS, STAGES, StageImplementation
 
 ENTRY_POINT_GROUP = "symfuse"
 

@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ConfigError
-from .params import param
-from .stages import World
-from .types import GraspOutcome, GraspPlan, GripperSpec, ObjectPose
+from pipeline.errors import ConfigError
+from pipeline.params import param
+from pipeline.stages import World
+from pipeline.types import GraspOutcome, GraspPlan, GripperSpec, ObjectPose
 
 
 class ShippedHandsWorld(World):
@@ -55,7 +55,7 @@ class ShippedHandsWorld(World):
         return self._sim
 
     def gripper_spec(self, name: str) -> GripperSpec:
-        from .sim.hand_models import GRIPPERS
+        from pipeline.sim.hand_models import GRIPPERS
 
         if name not in GRIPPERS:
             hands = ", ".join(self.hands)
@@ -92,7 +92,7 @@ class ShippedHandsWorld(World):
     ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Each link of a shipped hand from its URDF
         (:func:`pipeline.sim.hand_models.hand_link_meshes`)."""
-        from .sim.hand_models import hand_link_meshes
+        from pipeline.sim.hand_models import hand_link_meshes
 
         return hand_link_meshes(gripper, joint_positions, T_robot_hand, plan)
 

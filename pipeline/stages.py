@@ -7,7 +7,7 @@ dataclass ``Params`` (see :mod:`pipeline.params`), takes an instance of it in ``
 and implements the contract's method(s). The first paragraph of its docstring is the
 one-line description ``symfuse plugins`` prints: keep it short.
 
-Order in a trial (``pipeline.trial``)::
+Order in a trial (``pipeline.run.trial``)::
 
     world.load_scene -> sensor.observe -> segmenter.segment -> initialiser.propose -> planner.plan
       -> world.execute_grasp -> tactile.read -> initialiser.refine -> estimator.estimate
@@ -26,9 +26,9 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from .errors import ConfigError
-from .params import NoParams, build, check_bounds
-from .types import (
+from pipeline.errors import ConfigError
+from pipeline.params import NoParams, build, check_bounds
+from pipeline.types import (
     CameraImage,
     CameraIntrinsics,
     Contacts,
@@ -47,7 +47,7 @@ from .types import (
 )
 
 if TYPE_CHECKING:
-    from .next_grasp import MeasurementModel
+    from pipeline.planning.next_grasp import MeasurementModel
 
 STAGES = ("world", "sensor", "segmenter", "initialiser", "planner", "tactile", "estimator")
 """The stage kinds, in pipeline order; these are also the config section names."""
@@ -312,7 +312,7 @@ class GraspPlanner(StageImplementation):
     stage = "planner"
     #: Names of the hands this planner plans for. With ``trial.gripper = "auto"`` every
     #: installed planner naming an available hand is asked for its best grasp, and the
-    #: best-scored feasible plan decides the hand (:mod:`pipeline.hand_choice`).
+    #: best-scored feasible plan decides the hand (:mod:`pipeline.planning.hand_choice`).
     grippers: ClassVar[tuple[str, ...]] = ()
 
     @abstractmethod
@@ -323,7 +323,8 @@ class GraspPlanner(StageImplementation):
         self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
     ) -> tuple[GraspPlan, ...]:
         """Every feasible grasp the planner considers, best first, each as a plan: the
-        next grasp of a multi-grasp trial is chosen among them (:mod:`pipeline.next_grasp`).
+        next grasp of a multi-grasp trial is chosen among them
+        (:mod:`pipeline.planning.next_grasp`).
         By default the one plan of :meth:`plan`, when it is feasible."""
         plan = self.plan(cloud, proposal, gripper)
         return (plan,) if plan.status == "ok" else ()
@@ -350,9 +351,9 @@ class Estimator(StageImplementation):
 
     def measurement_model(self) -> MeasurementModel | None:
         """How this estimator weighs taxels, for the next-grasp information score to predict
-        its fusion with (:class:`pipeline.next_grasp.MeasurementModel`); None when it has
+        its fusion with (:class:`pipeline.planning.next_grasp.MeasurementModel`); None when it has
         no taxel model of its own (the score then takes an installed estimator's that
-        has, :func:`pipeline.trial.measurement_model`)."""
+        has, :func:`pipeline.run.trial.measurement_model`)."""
         return None
 
 

@@ -32,14 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from .config import load_config
-from .errors import ConfigError
-from .pad_layout import pad_grid
-from .params import check_ordered, param
-from .registry import Origin, StageRegistry, load_registry
-from .stages import StageImplementation, World
-from .trial import run_trial
-from .types import (
+from pipeline.config import load_config
+from pipeline.errors import ConfigError
+from pipeline.geometry.pad_layout import pad_grid
+from pipeline.params import check_ordered, param
+from pipeline.registry import Origin, StageRegistry, load_registry
+from pipeline.run.trial import run_trial
+from pipeline.stages import StageImplementation, World
+from pipeline.types import (
     Bias,
     CameraImage,
     CameraIntrinsics,
@@ -129,7 +129,7 @@ class AnalyticWorld(World):
     def load_scene(self, setup: SceneSetup) -> None:
         import trimesh
 
-        from .open3d_loader import open3d
+        from pipeline.io.open3d_loader import open3d
 
         p = self.params
         mesh = setup.obj.mesh.copy()
@@ -358,7 +358,7 @@ class AnalyticWorld(World):
 def registry_with(*classes: type[StageImplementation]) -> StageRegistry:
     """The installed plugins' registry with ``classes`` added, as a plugin named
     ``"test"`` would add them (to use with :func:`pipeline.config.load_config`,
-    :func:`pipeline.trial.run_trial` or ``registry.create``). A class that is installed
+    :func:`pipeline.run.trial.run_trial` or ``registry.create``). A class that is installed
     already (your plugin, ``pip install``-ed) is kept as installed.
 
     Raises:

@@ -26,7 +26,7 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
-from .poses import rotation_z
+from pipeline.geometry.poses import rotation_z
 
 BIAS_PLANE_PARAMETERS = ("b_theta", "b_x", "b_y", "b_z", "m_r", "m_theta")
 """Parameter names of the 6x6 bias-and-plane covariance, in order."""
@@ -353,7 +353,7 @@ class PadLayout:
 @dataclass(frozen=True)
 class ClosingPad:
     """A tactile pad that closes on the object horizontally, as the next-grasp scoring
-    predicts its touch (:func:`pipeline.next_grasp.pad_approaches`). Palm frame (the hand
+    predicts its touch (:func:`pipeline.planning.next_grasp.pad_approaches`). Palm frame (the hand
     frame of :attr:`GraspPlan.T_robot_hand`): z along the approach, x the closing
     direction.
 
@@ -410,7 +410,7 @@ class GripperSpec:
 
 @dataclass(frozen=True)
 class GraspCandidate:
-    """A top grasp a planner considered (:mod:`pipeline.perception.grasp_candidates`).
+    """A top grasp a planner considered (:mod:`pipeline.planning.grasp_candidates`).
 
     Attributes:
         closing_angle_deg: closing direction's angle from the proposed plane's normal.
@@ -850,7 +850,7 @@ class LiftOutcome:
 
 
 class SceneObject(Protocol):
-    """What a world needs to place an object (a :class:`pipeline.catalogue.CatalogueObject`
+    """What a world needs to place an object (a :class:`pipeline.catalogue.objects.CatalogueObject`
     satisfies it).
 
     Attributes:

@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
+from pipeline.sim.kinect import KINECT_V1_INTRINSICS as KINECT
 
 
 def ray_cast(boxes, T_robot_camera: np.ndarray, stride: int = 2) -> np.ndarray:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.formats import contacts_to_json, write_cloud, write_json
+from pipeline.io.formats import contacts_to_json, write_cloud, write_json
 from pipeline.synthetic import make_case
 
 

@@ -34,7 +34,7 @@ from pipeline.types import (
     SymmetryInit,
     SymmetryPlane,
 )
-from plugins.iekf import IekfEstimator
+from plugins.estimators.iekf import IekfEstimator
 
 #: The box: across the plane (x), along it (y), height (m).
 SIZE_M = np.array([0.06, 0.04, 0.10])

@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 from pipeline.asset.files import write_model
-from pipeline.catalogue import load_object
+from pipeline.catalogue.objects import load_object
 from pipeline.config import ModelSettings
 from pipeline.types import Bias, EstimateResult, StageEstimate, SymmetryPlane
 

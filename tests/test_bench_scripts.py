@@ -99,7 +99,7 @@ def test_overhead_shares_of_two_workers_by_hand():
 @pytest.mark.slow
 def test_the_scan_benchmark_runs_a_trial_on_a_folder_of_scans(tmp_path):
     # A catalogue mesh stands in for a scan: the script needs only DIR/<name>/textured.obj.
-    from pipeline.catalogue import load_object
+    from pipeline.catalogue.objects import load_object
 
     (tmp_path / "jar").mkdir()
     load_object("jam").mesh.export(tmp_path / "jar" / "textured.obj")

@@ -7,7 +7,13 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from pipeline.images import MISSING_COLOUR, save_depth, save_depth_npy, save_observation, save_rgb
+from pipeline.io.images import (
+    MISSING_COLOUR,
+    save_depth,
+    save_depth_npy,
+    save_observation,
+    save_rgb,
+)
 from pipeline.types import CameraIntrinsics, DepthObservation
 
 

@@ -7,15 +7,16 @@ import pytest
 import trimesh
 from scipy import ndimage
 
-from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
-from pipeline.poses import look_at as look_at_rad
+from pipeline.geometry.poses import look_at as look_at_rad
 from pipeline.sim.camera import calibration_error, render
+from pipeline.sim.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.sim.scene import Scene
 from pipeline.types import CameraIntrinsics
 
 
 def look_at(target_m, distance_m, elevation_deg, azimuth_deg):
-    """:func:`pipeline.poses.look_at` with the angles in degrees, as the sensors take them."""
+    """:func:`pipeline.geometry.poses.look_at` with the angles in degrees, as the sensors take
+    them."""
     return look_at_rad(target_m, distance_m, np.deg2rad(elevation_deg), np.deg2rad(azimuth_deg))
 
 

@@ -11,9 +11,9 @@ import trimesh
 from pipeline.errors import ConfigError
 from pipeline.params import build
 from pipeline.types import GraspPlan
-from plugins.pybullet_kinect import PybulletKinect
-from plugins.pybullet_stereo import PybulletStereo
-from plugins.pybullet_world import Pybullet
+from plugins.sensors.pybullet_kinect import PybulletKinect
+from plugins.sensors.pybullet_stereo import PybulletStereo
+from plugins.worlds.pybullet_world import Pybullet
 
 BOX_SIZE_M = (0.06, 0.15, 0.2)
 BOX_AT = (0.5, 0.05, 0.3)  # x, y (m), yaw (rad)

@@ -7,7 +7,7 @@ import argparse
 import pytest
 import trimesh
 
-from pipeline.catalogue import list_objects
+from pipeline.catalogue.objects import list_objects
 from pipeline.cli import objects as cli_objects
 
 

@@ -9,8 +9,8 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from pipeline import catalogue
-from pipeline.catalogue import list_objects, load_object
+from pipeline.catalogue import objects as catalogue
+from pipeline.catalogue.objects import list_objects, load_object
 from pipeline.errors import InputError
 
 PAPER_OBJECTS = {

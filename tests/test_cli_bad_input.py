@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipeline.camera_file import read_camera
-from pipeline.captures import depth_from_organised, read_capture
-from pipeline.catalogue import load_object
+from pipeline.catalogue.objects import load_object
 from pipeline.cli import main
-from pipeline.completion import select_objects
 from pipeline.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, ConfigError, InputError
-from pipeline.formats import read_contacts, write_cloud
+from pipeline.io.camera_file import read_camera
+from pipeline.io.captures import depth_from_organised, read_capture
+from pipeline.io.formats import read_contacts, write_cloud
+from pipeline.run.completion import select_objects
 
 
 def one_error_line(err: str) -> str:
@@ -400,7 +400,7 @@ def test_an_empty_option_value_is_refused_not_dropped(capsys, argv, option):
 
 
 def test_a_point_too_far_for_any_unit_gets_no_unit_hint_and_no_warning(tmp_path, capsys):
-    from pipeline.units import check_distance
+    from pipeline.io.units import check_distance
 
     with pytest.raises(InputError) as raised:
         check_distance(np.array([[1e308, 0.0, 0.0], [0.0, 1e308, 1e308]]), "c.json")

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.formats import contacts_to_json, read_cloud, write_cloud, write_json
+from pipeline.io.formats import contacts_to_json, read_cloud, write_cloud, write_json
 from pipeline.metrics import fit_circle_taubin
 from pipeline.synthetic import make_case
 

@@ -16,7 +16,7 @@ import pytest
 import trimesh
 
 from pipeline import hookimpl
-from pipeline.catalogue import load_object
+from pipeline.catalogue.objects import load_object
 from pipeline.errors import (
     EXIT_BAD_INPUT,
     EXIT_ESTIMATE_FAILED,
@@ -25,7 +25,7 @@ from pipeline.errors import (
     PluginRaised,
     StageFailure,
 )
-from pipeline.outdir import fresh_folder, staged_output
+from pipeline.io.outdir import fresh_folder, staged_output
 from pipeline.registry import Origin, PluginManager
 from pipeline.stages import Estimator
 

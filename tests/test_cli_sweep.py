@@ -10,7 +10,7 @@ import pytest
 from pipeline.errors import EXIT_BAD_INPUT
 from pipeline.experiments import EXPERIMENTS, ExperimentOptions
 from pipeline.experiments.paper_tasks import trial_config
-from pipeline.sweep import read_rows, settings_section
+from pipeline.experiments.sweep import read_rows, settings_section
 
 QUICK = ["sweep", "fig10", "--quick", "--workers", "1"]
 

@@ -11,9 +11,9 @@ import pytest
 import trimesh
 from shapely import MultiPoint
 
-from pipeline.captures import read_pcd
 from pipeline.cli import main
-from pipeline.formats import read_cloud
+from pipeline.io.captures import read_pcd
+from pipeline.io.formats import read_cloud
 
 KINECT = Path(__file__).parent / "data" / "kinect_laptop_box_floor.pcd"
 

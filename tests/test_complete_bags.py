@@ -15,11 +15,11 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from scipy.spatial.transform import Rotation
 
-from pipeline.bags import camera_intrinsics, read_bag
-from pipeline.captures import read_pcd
 from pipeline.cli import main
 from pipeline.errors import InputError
-from pipeline.open3d_loader import open3d
+from pipeline.io.bags import camera_intrinsics, read_bag
+from pipeline.io.captures import read_pcd
+from pipeline.io.open3d_loader import open3d
 
 KINECT = Path(__file__).parent / "data" / "kinect_laptop_box_floor.pcd"
 FRAME = "kinect_rgb_optical_frame"

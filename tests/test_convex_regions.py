@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from box_scenes import ray_cast
 
-from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
+from pipeline.geometry.poses import look_at
 from pipeline.perception.depth import backproject_depth
 from pipeline.perception.segmentation import segment_image
 from pipeline.perception.surfaces import concave_creases, image_normals
 from pipeline.perception.table import table_from_height
-from pipeline.poses import look_at
+from pipeline.sim.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.types import CameraIntrinsics
 
 TABLE = ((-0.6, -0.6, -0.03), (0.6, 0.6, 0.0))

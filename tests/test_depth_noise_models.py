@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.sim.depth_noise import (
     KinectV1Noise,
     StereoNoise,
@@ -17,6 +16,7 @@ from pipeline.sim.depth_noise import (
     simulate_kinect_v1,
     simulate_stereo,
 )
+from pipeline.sim.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.types import CameraIntrinsics
 
 STEREO = CameraIntrinsics(640, 480, 1600.0, 1600.0, 319.5, 239.5)

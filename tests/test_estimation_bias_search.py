@@ -21,7 +21,7 @@ from pipeline.estimation.hypotheses import HYPOTHESES, held_problem
 from pipeline.estimation.iekf import fuse
 from pipeline.estimation.map_params import fusion_problem
 from pipeline.synthetic import make_case
-from plugins.iekf import IekfEstimator
+from plugins.estimators.iekf import IekfEstimator
 
 
 def test_distance_field_is_within_a_voxel_of_the_brute_force_distance():

@@ -23,7 +23,7 @@ from pipeline.estimation.covariances import normal_ellipsoids
 from pipeline.experiments.synthetic_study import make_estimator
 from pipeline.metrics import diameter_error
 from pipeline.perception.visibility import free_space_depths, visibility_violations
-from pipeline.runner import run_estimator
+from pipeline.run.runner import run_estimator
 from pipeline.synthetic import Cylinder, make_case
 from pipeline.types import (
     Bias,

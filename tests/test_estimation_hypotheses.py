@@ -27,11 +27,11 @@ from pipeline.estimation.iekf import IekfSettings, fuse
 from pipeline.estimation.map_params import consistency_settings
 from pipeline.estimation.map_params import fusion_problem as map_fusion_problem
 from pipeline.estimation.problem import estimate_result
-from pipeline.formats import stage_to_json
+from pipeline.io.formats import stage_to_json
 from pipeline.metrics import diameter_error
 from pipeline.synthetic import make_case
 from pipeline.types import Consistency, StageEstimate
-from plugins.iekf import IekfEstimator
+from plugins.estimators.iekf import IekfEstimator
 
 
 def test_held_plane_fusion_keeps_the_plane_and_still_corrects_the_bias():

@@ -15,9 +15,9 @@ from pipeline.types import (
     SymmetryInit,
     SymmetryPlane,
 )
-from plugins.icp import IcpEstimator
-from plugins.iekf import IekfEstimator
-from plugins.mirror_only import MirrorOnlyEstimator
+from plugins.estimators.icp import IcpEstimator
+from plugins.estimators.iekf import IekfEstimator
+from plugins.estimators.mirror_only import MirrorOnlyEstimator
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +90,7 @@ def test_bad_parameters_and_inputs_are_reported(scene):
 def test_iekf_traces_every_iteration_and_ends_at_the_stage_estimate(scene):
     """One trace entry per iteration; each stage's last entry is that stage's state; the
     taxel counts are bounded by the grasp's taxels; the trace reaches result.json."""
-    from pipeline.formats import estimate_to_json
+    from pipeline.io.formats import estimate_to_json
 
     result = IekfEstimator().estimate(_problem(scene))
     assert result.stage(0).trace == ()

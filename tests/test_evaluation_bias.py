@@ -12,9 +12,9 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from pipeline.config import load_config
-from pipeline.evaluation import BIAS_NEES_BOUND, bias_errors
+from pipeline.metrics.evaluation import BIAS_NEES_BOUND, bias_errors
+from pipeline.run.trial import run_trial
 from pipeline.testing import AnalyticWorld, registry_with
-from pipeline.trial import run_trial
 from pipeline.types import Bias, SymmetryPlane
 
 PIVOT = np.array([0.5, -0.1, 0.12])

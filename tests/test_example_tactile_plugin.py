@@ -53,8 +53,8 @@ def test_its_own_tests_pass_against_the_installed_symfuse(installed):
 
 def test_a_whole_trial_runs_with_it_in_the_analytic_world(installed, tmp_path):
     from pipeline.config import load_config
+    from pipeline.run.trial import run_trial
     from pipeline.testing import AnalyticWorld, registry_with
-    from pipeline.trial import run_trial
 
     registry = registry_with(AnalyticWorld)
     config = load_config(

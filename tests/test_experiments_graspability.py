@@ -10,7 +10,7 @@ import pytest
 
 from pipeline.errors import ConfigError
 from pipeline.experiments import EXPERIMENTS, ExperimentOptions, graspability, objects
-from pipeline.poses import rotation_z
+from pipeline.geometry.poses import rotation_z
 from pipeline.testing import AnalyticWorld, registry_with
 from pipeline.types import SymmetryPlane
 
@@ -114,7 +114,7 @@ def test_a_world_that_cannot_lift_is_refused_before_any_trial(monkeypatch):
 def test_the_models_are_carried_to_the_resting_pose_and_the_truth_lies_on_the_mesh():
     import trimesh
 
-    from pipeline.catalogue import load_object
+    from pipeline.catalogue.objects import load_object
     from pipeline.types import ObjectPose
 
     obj = load_object("cd_drive")

@@ -21,7 +21,7 @@ from pipeline.experiments.deviation_report import report_deviation
 from pipeline.experiments.measure_report import report_measure
 from pipeline.experiments.paper_tasks import object_tasks
 from pipeline.experiments.paper_trial import run_paper_trial
-from pipeline.sweep import run_sweep
+from pipeline.experiments.sweep import run_sweep
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

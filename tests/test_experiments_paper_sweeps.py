@@ -8,7 +8,7 @@ import re
 import pytest
 
 from pipeline.experiments import EXPERIMENTS, ExperimentOptions
-from pipeline.sweep import run_sweep
+from pipeline.experiments.sweep import run_sweep
 
 pytestmark = pytest.mark.slow
 

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.catalogue import list_objects
+from pipeline.catalogue.objects import list_objects
 from pipeline.config import load_config
 from pipeline.experiments import EXPERIMENTS, ExperimentOptions, kth
 from pipeline.experiments.measure_report import measure_statistics
@@ -20,7 +20,7 @@ from pipeline.experiments.paper_tasks import (
 )
 from pipeline.experiments.paper_trial import DIVERGED_GROWTH_MM, is_diverged
 from pipeline.experiments.rows import mean_five_numbers
-from pipeline.perception.grasp_geometry import narrowest_width
+from pipeline.planning.grasp_geometry import narrowest_width
 from pipeline.registry import load_registry
 
 PAPER_EXPERIMENTS = ("table1", "table2", "table3", "spray", "kth")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InputError
-from pipeline.formats import (
+from pipeline.io.formats import (
     contacts_to_json,
     plan_to_json,
     read_cloud,

@@ -26,7 +26,7 @@ from pipeline.estimation.map_params import fusion_problem as map_fusion_problem
 from pipeline.estimation.problem import estimate_result
 from pipeline.metrics import diameter_error
 from pipeline.synthetic import make_case
-from plugins.iekf import IekfEstimator
+from plugins.estimators.iekf import IekfEstimator
 
 COVARIANCE = np.array([[4e-6, 3e-5], [3e-5, 0.04]])
 #: Steps out to 4 posterior stds, searched along whitened directions.

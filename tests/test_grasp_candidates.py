@@ -10,28 +10,28 @@ import pytest
 import yourdfpy
 from test_planners import _true_plane, _view
 
-from pipeline.perception import sdh_candidates
-from pipeline.perception import sdh_geometry as sdh
-from pipeline.perception.candidate import (
+from pipeline.planning import sdh_candidates
+from pipeline.planning import sdh_geometry as sdh
+from pipeline.planning.candidate import (
     BEYOND_CENTRE,
     BLIND_PAD_FACTOR,
     CandidateCloud,
     CandidateSettings,
     height_grid,
 )
-from pipeline.perception.grasp_candidates import common_reason
-from pipeline.perception.grasp_geometry import front_to_back
-from pipeline.perception.pad_contact import (
+from pipeline.planning.grasp_candidates import common_reason
+from pipeline.planning.grasp_geometry import front_to_back
+from pipeline.planning.pad_contact import (
     flat_pad_taxels,
     pad_coverage,
     pad_coverages,
     sdh_distal_taxels,
 )
-from pipeline.perception.parallel_candidates import ParallelHand, front_jaw_gap, parallel_candidate
+from pipeline.planning.parallel_candidates import ParallelHand, front_jaw_gap, parallel_candidate
 from pipeline.synthetic import box_object, cylinder_object
 from pipeline.types import PadLayout
-from plugins.top_parallel import TopParallel
-from plugins.top_three_finger import TopThreeFinger
+from plugins.planners.top_parallel import TopParallel
+from plugins.planners.top_three_finger import TopThreeFinger
 from robots import ROOT
 
 PAD = PadLayout("left", "left_pad", 14, 6, 0.0034)

@@ -14,14 +14,14 @@ import trimesh
 from pipeline.cli import main
 from pipeline.config import load_config
 from pipeline.errors import ConfigError
-from pipeline.evaluation import object_motion, opposing_contacts
-from pipeline.hand_choice import check_planner_is_read, choose_grasp
+from pipeline.metrics.evaluation import object_motion, opposing_contacts
+from pipeline.planning.hand_choice import check_planner_is_read, choose_grasp
 from pipeline.registry import load_registry
 from pipeline.sim.hands import GRIPPERS
 from pipeline.stages import GraspPlanner
 from pipeline.testing import estimation_problem, registry_with
 from pipeline.types import Bias, GraspPlan, SymmetryInit
-from plugins.pybullet_world import Pybullet
+from plugins.worlds.pybullet_world import Pybullet
 
 
 @pytest.fixture(scope="module")

@@ -13,9 +13,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pipeline.next_grasp import pad_approaches
-from pipeline.perception import sdh_geometry
-from pipeline.perception.grasp_geometry import hand_pose
+from pipeline.planning import sdh_geometry
+from pipeline.planning.grasp_geometry import hand_pose
+from pipeline.planning.next_grasp import pad_approaches
 from pipeline.sim.hand_models import GRIPPERS
 from pipeline.types import ClosingPad, GraspPlan
 
@@ -79,8 +79,8 @@ def test_a_hand_that_declares_no_closing_pads_is_predicted_to_touch_nothing():
 
 def test_the_simulated_worlds_share_a_base_that_loads_no_engine():
     code = (
-        "import sys; from plugins.pybullet_world import Pybullet; "
-        "from plugins.mujoco_world import Mujoco; "
+        "import sys; from plugins.worlds.pybullet_world import Pybullet; "
+        "from plugins.worlds.mujoco_world import Mujoco; "
         "from pipeline.shipped_hands import ShippedHandsWorld as B; "
         "assert issubclass(Pybullet, B) and issubclass(Mujoco, B); "
         "print(sorted(m for m in ('pybullet', 'mujoco') if m in sys.modules))"

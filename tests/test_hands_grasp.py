@@ -12,8 +12,8 @@ import pytest
 import yourdfpy
 
 from pipeline.errors import ConfigError
-from pipeline.pad_layout import pad_grid
-from pipeline.perception import sdh_geometry
+from pipeline.geometry.pad_layout import pad_grid
+from pipeline.planning import sdh_geometry
 from pipeline.sim.grasping import (
     HAND_GRASP_SETTINGS,
     execute_grasp,

@@ -44,7 +44,10 @@ def test_listing_plugins_and_config_loads_no_heavy_library(verb):
 
 def test_the_completion_plugins_modules_load_no_scipy():
     """Perception and the simulated sensors defer scipy to the functions that use it."""
-    code = "import pipeline.completion, pipeline.perception, plugins.pybullet_kinect, plugins.vc"
+    code = (
+        "import pipeline.run.completion, pipeline.perception, plugins.sensors.pybullet_kinect, "
+        "plugins.initialisers.vc"
+    )
     assert loaded_after(code, ("scipy", *HEAVY)) == []
 
 
@@ -62,7 +65,7 @@ def test_a_trial_without_pictures_loads_no_plotting_or_statistics(tmp_path):
 def test_the_trial_core_imports_no_physics_engine():
     """The world is a plugin: the trial, its runner and the CLI load neither engine (the
     configured world imports its own when it loads a scene)."""
-    code = "import pipeline.trial, pipeline.runner, pipeline.cli, pipeline.stages"
+    code = "import pipeline.run.trial, pipeline.run.runner, pipeline.cli, pipeline.stages"
     assert loaded_after(code, ("pybullet", "mujoco")) == []
 
 
@@ -70,7 +73,7 @@ def test_the_grasps_picture_is_drawn_without_matplotlib(tmp_path):
     """``grasps.png`` is drawn in image space: a trial's pictures pay for no figure."""
     code = (
         "import numpy as np\nfrom pathlib import Path\n"
-        "from pipeline.trial_pictures import GraspMarks, grasps_picture\n"
+        "from pipeline.reports.trial_pictures import GraspMarks, grasps_picture\n"
         "rng = np.random.default_rng(0)\n"
         "box = np.array([[x, y, z] for x in (-7, 7) for y in (-2, 2) for z in (0, 1)]) / 100\n"
         "marks = [GraspMarks('a', rng.uniform(-0.05, 0.05, (10, 3)), np.repeat(['l', 'r'], 5))]\n"

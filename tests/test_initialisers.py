@@ -21,12 +21,12 @@ from pipeline.types import (
     PointCloud,
     SymmetryPlane,
 )
-from plugins.given import GivenPlane
-from plugins.pca import PcaInitialiser
-from plugins.ps import PsInitialiser
-from plugins.table_cluster import TableCluster
-from plugins.top_parallel import TopParallel
-from plugins.vc import VcInitialiser
+from plugins.initialisers.given import GivenPlane
+from plugins.initialisers.pca import PcaInitialiser
+from plugins.initialisers.ps import PsInitialiser
+from plugins.initialisers.vc import VcInitialiser
+from plugins.planners.top_parallel import TopParallel
+from plugins.segmenters.table_cluster import TableCluster
 
 PG70 = GripperSpec(
     "pg70",
@@ -226,7 +226,7 @@ def test_ps_refine_recovers_offset_and_bias_from_contacts():
 
 
 def test_ties_between_hypotheses_go_to_the_most_compact_completion():
-    from plugins.vc import tie_spread
+    from plugins.initialisers.vc import tie_spread
 
     # Two seen points at x = 0 and x = 0.02 m; planes x = 0.03 and x = 0.05 both without
     # violations (tied), a third at x = 0.01 with three.

@@ -13,7 +13,7 @@ import pytest
 import trimesh
 
 from pipeline.errors import ConfigError
-from pipeline.poses import rotation_z
+from pipeline.geometry.poses import rotation_z
 from pipeline.sim.grasp_sequence import held
 from pipeline.testing import AnalyticWorld
 from pipeline.types import GraspPlan, SceneSetup
@@ -42,9 +42,9 @@ def _grasp_and_lift(name: str, size_m, pad_height_m: float, *, shift_m=0.0, turn
     closing along x (turned ``turn_deg`` about z), palm ``shift_m`` along x from the box's
     centre, pad centres at ``pad_height_m``; then lifted and held."""
     if name == "mujoco":
-        from plugins.mujoco_world import Mujoco as world_class
+        from plugins.worlds.mujoco_world import Mujoco as world_class
     else:
-        from plugins.pybullet_world import Pybullet as world_class
+        from plugins.worlds.pybullet_world import Pybullet as world_class
     with world_class() as world:
         world.load_scene(SceneSetup(_box(size_m), 0.4, 0.0, 0.0, seed=1))
         world.add_hand("pg70")

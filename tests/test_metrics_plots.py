@@ -1,4 +1,5 @@
-"""Deviation pictures and study figures (pipeline.trial_pictures, pipeline.figures)."""
+"""Deviation pictures and study figures (pipeline.reports.trial_pictures,
+pipeline.reports.figures)."""
 
 from __future__ import annotations
 
@@ -6,21 +7,21 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from pipeline.figures import (
+from pipeline.metrics import point_to_mesh_distances
+from pipeline.reports.figures import (
     BoxPanel,
     GridPanel,
     box_plot_figure,
     deviation_histogram,
     error_grid_figure,
 )
-from pipeline.metrics import point_to_mesh_distances
-from pipeline.synthetic import Cylinder, cylinder_mesh, make_case
-from pipeline.trial_pictures import (
+from pipeline.reports.trial_pictures import (
     DeviationPanel,
     deviation_heatmap,
     deviation_scale_m,
     view_projection,
 )
+from pipeline.synthetic import Cylinder, cylinder_mesh, make_case
 
 
 def test_view_projection_axes():

@@ -18,12 +18,12 @@ import trimesh
 pytest.importorskip("mujoco", reason="the mujoco world needs: pip install -e '.[mujoco]'")
 
 from pipeline.errors import ConfigError
-from pipeline.poses import look_at
+from pipeline.geometry.poses import look_at
 from pipeline.registry import load_registry
 from pipeline.sim.hand_models import GRIPPERS, HAND_MODELS
 from pipeline.testing import AnalyticWorld, tiny_scene
 from pipeline.types import CameraIntrinsics, GraspPlan, SceneSetup
-from plugins.mujoco_world import Mujoco
+from plugins.worlds.mujoco_world import Mujoco
 from robots import ROOT
 
 BOX_M = (0.042, 0.08, 0.12)
@@ -209,7 +209,7 @@ def test_symfuse_trial_in_mujoco_writes_what_a_pybullet_trial_writes(tmp_path):
     import json
 
     from pipeline.cli import main
-    from pipeline.trial import PICTURE_FILES, TRIAL_FILES
+    from pipeline.run.trial import PICTURE_FILES, TRIAL_FILES
 
     assert main(["trial", "--set", "world.use=mujoco", "--out", str(tmp_path)]) == 0
     assert [name for name in TRIAL_FILES + PICTURE_FILES if not (tmp_path / name).is_file()] == []

@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.next_grasp import (
+from pipeline.planning.candidate import candidate_score
+from pipeline.planning.grasp_geometry import hand_pose
+from pipeline.planning.next_grasp import (
     PLANNER_FLOOR,
     SAME_PLACE_M,
     TURN_SIGMAS,
@@ -31,10 +33,8 @@ from pipeline.next_grasp import (
     repeats,
     stop_reason,
 )
-from pipeline.perception.candidate import candidate_score
-from pipeline.perception.grasp_geometry import hand_pose
+from pipeline.run.trial import attempt_to_json, unfused_reason
 from pipeline.sim.hands import GRIPPERS
-from pipeline.trial import attempt_to_json, unfused_reason
 from pipeline.types import (
     Bias,
     Contacts,
@@ -117,12 +117,12 @@ def test_fuse_on_a_multi_grasp_contacts_file_reproduces_the_final_estimate(two_g
 def test_a_trial_that_stops_early_says_so_with_the_grasp_it_stopped_on(
     tmp_path, monkeypatch, capsys
 ):
-    import pipeline.trial
+    import pipeline.run.trial
 
     def second_grasp_slipped(k, contacts, shift_m, tilt_rad):
         return "grasp 2 touched one side only (test); not fused" if k == 1 else ""
 
-    monkeypatch.setattr(pipeline.trial, "unfused_reason", second_grasp_slipped)
+    monkeypatch.setattr(pipeline.run.trial, "unfused_reason", second_grasp_slipped)
     out = tmp_path / "early"
     code = main(["trial", "--grasps", "3", "--set", "trial.pictures=false", "--out", str(out)])
     assert code == 0
@@ -161,10 +161,10 @@ def test_until_std_stops_once_the_model_is_known_well_enough(tmp_path, threshold
 def test_a_first_grasp_on_one_side_only_ends_the_trial_with_its_taxels_kept(
     tmp_path, monkeypatch, capsys
 ):
-    import pipeline.trial
+    import pipeline.run.trial
 
     # The default trial's jaws press on both faces; read as one side only, nothing is fused.
-    monkeypatch.setattr(pipeline.trial, "opposing_contacts", lambda contacts: False)
+    monkeypatch.setattr(pipeline.run.trial, "opposing_contacts", lambda contacts: False)
     out = tmp_path / "one-sided"
     code = main(
         ["trial", "--set", "trial.pictures=false", "--set", "trial.retries=0", "--out", str(out)]
@@ -184,14 +184,14 @@ def test_a_first_grasp_on_one_side_only_ends_the_trial_with_its_taxels_kept(
 
 
 def test_a_first_grasp_that_misses_is_made_again_unlike_it(tmp_path, monkeypatch):
-    import pipeline.trial
-    from pipeline.evaluation import opposing_contacts
-    from pipeline.hand_choice import MISSED_LINE_DEG
+    import pipeline.run.trial
+    from pipeline.metrics.evaluation import opposing_contacts
+    from pipeline.planning.hand_choice import MISSED_LINE_DEG
 
     # The first grasp is read as one side only; the trial looks again and grasps unlike it.
     checks = iter([False])
     monkeypatch.setattr(
-        pipeline.trial,
+        pipeline.run.trial,
         "opposing_contacts",
         lambda contacts: next(checks, None) is None and opposing_contacts(contacts),
     )
@@ -603,12 +603,12 @@ def test_a_grasp_already_made_is_made_again_only_when_nothing_else_teaches():
 
 
 def test_a_grasp_not_fused_is_drawn_where_it_was_planned(monkeypatch):
-    import pipeline.trial_pictures
-    from pipeline.trial import draw_grasps
+    import pipeline.reports.trial_pictures
+    from pipeline.run.trial import draw_grasps
 
     drawn = {}
     monkeypatch.setattr(
-        pipeline.trial_pictures,
+        pipeline.reports.trial_pictures,
         "grasps_picture",
         lambda *args, **kwargs: drawn.update(marks=args[3]),
     )
@@ -679,11 +679,11 @@ def test_the_next_grasp_is_chosen_among_every_hand_and_scored_with_its_own_pads(
 
 def test_later_grasps_change_hands_only_in_a_world_that_can_after_an_auto_choice():
     from pipeline.config import load_config
-    from pipeline.hand_choice import HandChoice, PlannerAnswer, Planners
+    from pipeline.planning.hand_choice import HandChoice, PlannerAnswer, Planners
     from pipeline.registry import load_registry
+    from pipeline.run.trial import next_hands
     from pipeline.testing import PARALLEL_HAND, AnalyticWorld
-    from pipeline.trial import next_hands
-    from plugins.pybullet_world import Pybullet
+    from plugins.worlds.pybullet_world import Pybullet
 
     registry = load_registry()
     config = load_config(registry)

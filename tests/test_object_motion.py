@@ -8,7 +8,7 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from pipeline.evaluation import object_motion, object_turn
+from pipeline.metrics.evaluation import object_motion, object_turn
 from pipeline.types import ObjectPose
 
 

@@ -17,7 +17,7 @@ def run_python(code: str) -> subprocess.CompletedProcess:
 
 def test_open3d_loads_through_the_loader():
     done = run_python(
-        "from pipeline.open3d_loader import open3d\n"
+        "from pipeline.io.open3d_loader import open3d\n"
         "o3d = open3d()\n"
         "import numpy as np\n"
         "cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.eye(3)))\n"
@@ -33,7 +33,7 @@ def test_plain_import_fails_without_the_preload_and_the_loader_uses_the_wheel():
     assert plain.returncode != 0
     assert "libusb-1.0.so.0" in plain.stderr
     loaded = run_python(
-        "from pipeline.open3d_loader import preload_libusb\nprint(preload_libusb())"
+        "from pipeline.io.open3d_loader import preload_libusb\nprint(preload_libusb())"
     )
     assert loaded.returncode == 0, loaded.stderr
     assert "libusb_package" in loaded.stdout
@@ -42,7 +42,7 @@ def test_plain_import_fails_without_the_preload_and_the_loader_uses_the_wheel():
 def test_the_loader_leaves_plotly_and_dash_until_a_plotly_view_is_drawn():
     done = run_python(
         "import sys\n"
-        "from pipeline.open3d_loader import open3d\n"
+        "from pipeline.io.open3d_loader import open3d\n"
         "o3d = open3d()\n"
         "print(sorted(m for m in ('plotly', 'dash', 'IPython') if m in sys.modules))\n"
         "import numpy as np\n"

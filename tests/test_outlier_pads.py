@@ -12,7 +12,7 @@ from pipeline.estimation.consistency import ConsistencySettings
 from pipeline.estimation.outlier_pads import outlier_pad
 from pipeline.experiments.synthetic_study import make_estimator
 from pipeline.metrics import diameter_error
-from pipeline.runner import run_estimator
+from pipeline.run.runner import run_estimator
 from pipeline.synthetic import Cylinder, make_case
 
 #: How far the hidden pad's taxels stand off the cylinder, as on a handle (m).

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from pipeline.errors import EXIT_BAD_INPUT, PluginError, StageFailure
-from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
-from pipeline.open3d_loader import open3d
+from pipeline.geometry.poses import look_at
+from pipeline.io.open3d_loader import open3d
 from pipeline.perception.clustering import (
     dbscan_labels,
     largest_cluster_indices,
@@ -18,11 +18,11 @@ from pipeline.perception.clustering import (
 from pipeline.perception.depth import backproject_depth, project_points
 from pipeline.perception.segmentation import merge_overlapping_footprints, segment_points
 from pipeline.perception.table import fit_table_ransac, table_from_height
-from pipeline.poses import look_at
+from pipeline.sim.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.synthetic import box_object, render_depth, synthetic_observation
 from pipeline.types import CameraIntrinsics, DepthObservation, PointCloud
-from plugins.ground_truth_mask import GroundTruthMask
-from plugins.table_cluster import TableCluster
+from plugins.segmenters.ground_truth_mask import GroundTruthMask
+from plugins.segmenters.table_cluster import TableCluster
 
 SMALL = CameraIntrinsics(width=8, height=6, fx=10.0, fy=12.0, cx=3.5, cy=2.5)
 

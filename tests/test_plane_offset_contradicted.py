@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import EXIT_OK
-from pipeline.formats import read_cloud
+from pipeline.io.formats import read_cloud
 from pipeline.metrics.fits import plane_after_bias
 from pipeline.types import Bias, SymmetryPlane
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import ConfigError
-from pipeline.perception.grasp_geometry import (
+from pipeline.planning.grasp_geometry import (
     PadBand,
     back_face_is_flat,
     corridor,
@@ -15,9 +15,9 @@ from pipeline.perception.grasp_geometry import (
 )
 from pipeline.synthetic import box_object, cylinder_object, synthetic_observation
 from pipeline.types import Bias, GripperSpec, PadLayout, SymmetryInit, SymmetryPlane
-from plugins.table_cluster import TableCluster
-from plugins.top_parallel import TopParallel
-from plugins.top_three_finger import TopThreeFinger
+from plugins.planners.top_parallel import TopParallel
+from plugins.planners.top_three_finger import TopThreeFinger
+from plugins.segmenters.table_cluster import TableCluster
 
 PG70 = GripperSpec(
     "pg70",

@@ -1,11 +1,11 @@
-"""Image-space drawing (pipeline.raster) against independent oracles."""
+"""Image-space drawing (pipeline.reports.raster) against independent oracles."""
 
 from __future__ import annotations
 
 import numpy as np
 from matplotlib.path import Path as MplPath
 
-from pipeline.raster import Frame, Sheet, nice_ticks
+from pipeline.reports.raster import Frame, Sheet, nice_ticks
 
 
 def test_triangles_fill_exactly_the_pixels_whose_centres_are_inside():

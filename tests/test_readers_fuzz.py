@@ -27,11 +27,11 @@ import trimesh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pipeline.catalogue import load_object
+from pipeline.catalogue.objects import load_object
 from pipeline.cli import main
 from pipeline.config import load_config
 from pipeline.errors import EXIT_BAD_INPUT, InputError
-from pipeline.formats import contacts_to_json, write_cloud
+from pipeline.io.formats import contacts_to_json, write_cloud
 from pipeline.registry import load_registry
 from pipeline.synthetic import make_case
 

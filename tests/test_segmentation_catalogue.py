@@ -24,14 +24,14 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, cKDTree
 
-from pipeline.catalogue import list_objects, load_object
+from pipeline.catalogue.objects import list_objects, load_object
 from pipeline.params import build
 from pipeline.perception.clustering import dbscan_labels, voxel_subsample_indices
 from pipeline.perception.depth import backproject_depth
 from pipeline.perception.segmentation import segment_points
 from pipeline.perception.table import fit_table_ransac, table_from_height
-from plugins.pybullet_kinect import PybulletKinect
-from plugins.pybullet_world import Pybullet
+from plugins.sensors.pybullet_kinect import PybulletKinect
+from plugins.worlds.pybullet_world import Pybullet
 
 EPS_M, MIN_POINTS = 0.01, 10  # the table-cluster segmenter's defaults
 MIN_HEIGHT_M = 0.02

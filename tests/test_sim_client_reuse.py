@@ -9,8 +9,8 @@ import pytest
 
 from pipeline.config import load_config
 from pipeline.registry import load_registry
+from pipeline.run.trial import run_trial
 from pipeline.sim import world
-from pipeline.trial import run_trial
 
 
 def _without_timings(document: dict) -> str:

@@ -8,11 +8,11 @@ import pytest
 from box_scenes import points_camera, ray_cast, write_capture
 
 from pipeline.cli import main
+from pipeline.geometry.poses import look_at
 from pipeline.perception.clustering import voxel_subsample_indices
 from pipeline.perception.segmentation import merge_overlapping_footprints
 from pipeline.perception.support import fit_support_plane
 from pipeline.perception.table import table_from_height
-from pipeline.poses import look_at
 
 #: Robot-frame boxes ``(low corner, high corner)`` and the camera of each scene.
 TABLE = ((-0.5, -0.8, -0.03), (0.8, 0.8, 0.0))

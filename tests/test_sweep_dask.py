@@ -7,7 +7,7 @@ import sweep_toy
 
 from pipeline.errors import ConfigError
 from pipeline.experiments import SweepTask
-from pipeline.sweep import read_rows, run_sweep
+from pipeline.experiments.sweep import read_rows, run_sweep
 
 distributed = pytest.importorskip("distributed")
 

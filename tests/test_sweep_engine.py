@@ -15,7 +15,7 @@ import sweep_toy
 
 from pipeline.errors import ConfigError, InputError
 from pipeline.experiments import SweepTask
-from pipeline.sweep import read_rows, row_hash, run_sweep, write_csv
+from pipeline.experiments.sweep import read_rows, row_hash, run_sweep, write_csv
 
 
 def make_tasks(count: int, **extra_by_x: dict) -> list[SweepTask]:

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipeline.catalogue import list_objects, load_object
+from pipeline.catalogue.objects import list_objects, load_object
 from pipeline.errors import InputError
-from pipeline.evaluation import plane_errors
+from pipeline.metrics.evaluation import plane_errors
 from pipeline.symmetry.scoring import symmetry_errors
 from pipeline.symmetry.search import SearchSettings, mesh_symmetries
 from pipeline.symmetry.truth_file import read_symmetries, symmetries_to_json
@@ -138,7 +138,7 @@ def test_scoring_against_hand_computed_angles_and_offsets():
 
 
 def test_vertical_scoring_agrees_with_the_papers_plane_errors():
-    from pipeline.evaluation import GroundTruth
+    from pipeline.metrics.evaluation import GroundTruth
 
     true_plane = SymmetryPlane.from_normal(np.array([1.0, 0.2]), 0.01)
     estimate = SymmetryPlane(0.5, 0.03)

@@ -18,8 +18,8 @@ from pipeline.symmetry.kinds import (
 )
 from pipeline.synthetic import box_object, cylinder_object, synthetic_observation
 from pipeline.types import Symmetry, SymmetryPlane
-from plugins.table_cluster import TableCluster
-from plugins.vc import VcInitialiser
+from plugins.initialisers.vc import VcInitialiser
+from plugins.segmenters.table_cluster import TableCluster
 
 
 def half_cylinder(centre_xy, radius, rng, noise=0.0):

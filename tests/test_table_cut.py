@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipeline.catalogue import load_object
+from pipeline.catalogue.objects import load_object
 from pipeline.config import load_config
 from pipeline.perception.table import measure_table, table_from_height
 from pipeline.registry import load_registry
-from plugins.pybullet_world import Pybullet
+from plugins.worlds.pybullet_world import Pybullet
 
 
 def test_measure_table_recovers_tilt_and_range_dependent_noise():

@@ -15,8 +15,8 @@ import trimesh
 
 from pipeline.metrics import point_to_mesh_distances
 from pipeline.types import GraspPlan
-from plugins.pybullet_taxels import PybulletTaxels
-from plugins.pybullet_world import Pybullet
+from plugins.tactile.pybullet_taxels import PybulletTaxels
+from plugins.worlds.pybullet_world import Pybullet
 
 MM = 1e-3
 TOP_DOWN = np.diag([1.0, -1.0, -1.0])

@@ -1,4 +1,5 @@
-"""Pure taxel geometry (pipeline.pad_layout, pipeline.sim.taxels) against analytic values."""
+"""Pure taxel geometry (pipeline.geometry.pad_layout, pipeline.sim.taxels) against analytic
+values."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.pad_layout import pad_grid
+from pipeline.geometry.pad_layout import pad_grid
 from pipeline.sim.taxels import (
     ray_segments,
     rotations_from_quaternions,

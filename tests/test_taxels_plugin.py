@@ -15,8 +15,8 @@ from pipeline.registry import StageRegistry
 from pipeline.sim.grasping import execute_grasp
 from pipeline.sim.hands import Hand
 from pipeline.types import GraspPlan
-from plugins import pybullet_taxels
-from plugins.pybullet_taxels import PybulletTaxels
+from plugins.tactile import pybullet_taxels
+from plugins.tactile.pybullet_taxels import PybulletTaxels
 
 MM = 1e-3
 PITCH = 3.4 * MM

@@ -12,7 +12,8 @@ import pytest
 from pipeline.config import load_config
 from pipeline.errors import ConfigError, PluginError
 from pipeline.metrics import point_to_mesh_distances
-from pipeline.runner import run_estimator
+from pipeline.run.runner import run_estimator
+from pipeline.run.trial import run_trial
 from pipeline.testing import (
     PARALLEL_HAND,
     AnalyticWorld,
@@ -20,10 +21,9 @@ from pipeline.testing import (
     registry_with,
     tiny_scene,
 )
-from pipeline.trial import run_trial
 from pipeline.types import CameraIntrinsics, GraspPlan
-from plugins.iekf import IekfEstimator
-from plugins.pybullet_taxels import PybulletTaxels
+from plugins.estimators.iekf import IekfEstimator
+from plugins.tactile.pybullet_taxels import PybulletTaxels
 
 INTRINSICS = CameraIntrinsics(160, 120, 200.0, 200.0, 79.5, 59.5)
 
@@ -154,7 +154,7 @@ def test_a_whole_trial_runs_in_the_analytic_world_with_the_built_in_stages(tmp_p
     contacts = json.loads((tmp_path / "trial" / "contacts.json").read_text())
     positions = np.array([t["position"] for g in contacts["grasps"] for t in g["taxels"]])
     assert len(positions) >= 20
-    from pipeline.catalogue import load_object
+    from pipeline.catalogue.objects import load_object
 
     mesh = load_object("cd_drive").mesh
     distances = point_to_mesh_distances(positions, mesh.vertices, mesh.faces)

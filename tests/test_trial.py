@@ -12,9 +12,9 @@ import trimesh
 
 from pipeline.cli import main
 from pipeline.cli.trial import grasps_summary, run_name
-from pipeline.formats import read_cloud
-from pipeline.tables import TERMINAL_WIDTH
-from pipeline.trial import PICTURE_FILES, TRIAL_FILES
+from pipeline.io.formats import read_cloud
+from pipeline.reports.tables import TERMINAL_WIDTH
+from pipeline.run.trial import PICTURE_FILES, TRIAL_FILES
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.trial_pictures import plot_cloud_with_plane, plot_vc_scores
+from pipeline.reports.trial_pictures import plot_cloud_with_plane, plot_vc_scores
 from pipeline.types import SymmetryHypothesis, SymmetryPlane
 
 

@@ -11,11 +11,11 @@ import pytest
 from box_scenes import ray_cast, write_capture
 
 from pipeline.cli import main
-from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
+from pipeline.geometry.poses import look_at
 from pipeline.perception.depth import backproject_depth
-from pipeline.poses import look_at
+from pipeline.sim.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.types import CameraIntrinsics, DepthObservation, PointCloud
-from plugins.vc import VcInitialiser, camera_side_share, mirrored_out_of_view
+from plugins.initialisers.vc import VcInitialiser, camera_side_share, mirrored_out_of_view
 
 TABLE = ((-0.6, -0.6, -0.03), (0.6, 0.6, 0.0))
 #: Two arms of unequal length at right angles: no vertical plane mirrors the footprint.

@@ -12,7 +12,7 @@ import pytest
 import trimesh
 
 from pipeline.cli import main
-from pipeline.formats import read_cloud, read_contacts
+from pipeline.io.formats import read_cloud, read_contacts
 from pipeline.metrics import point_to_mesh_distances
 
 rerun = pytest.importorskip("rerun")

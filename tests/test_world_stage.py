@@ -13,7 +13,7 @@ from pipeline.errors import ConfigError
 from pipeline.registry import load_registry
 from pipeline.stages import STAGES, World
 from pipeline.types import GraspPlan
-from plugins.pybullet_world import Pybullet
+from plugins.worlds.pybullet_world import Pybullet
 
 BOX_M = (0.042, 0.08, 0.12)
 PAD_CENTRE_DEPTH_M = 0.125  # PG-70 pad centres below the palm (robots/pg70.urdf)

@@ -18,7 +18,7 @@ import trimesh
 from scipy import ndimage
 from scipy.spatial import ConvexHull
 
-from .meshing import HalfWidths
+from pipeline.asset.meshing import HalfWidths
 
 #: A part's hull may hold this much more than the solid it covers per area of its
 #: surface (m): its average distance off the solid.

@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from ..config import ModelSettings
-from ..types import EstimateResult
-from .mass import is_closed, signed_volume
-from .meshing import OBJ_DECIMALS
-from .model import ModelAsset, build_model
-from .urdf import urdf_text
+from pipeline.asset.mass import is_closed, signed_volume
+from pipeline.asset.meshing import OBJ_DECIMALS
+from pipeline.asset.model import ModelAsset, build_model
+from pipeline.asset.urdf import urdf_text
+from pipeline.config import ModelSettings
+from pipeline.types import EstimateResult
 
 MODEL_FILE = "model.obj"
 COLLISION_FILE = "model_collision.obj"

@@ -22,7 +22,7 @@ import numpy as np
 import trimesh
 from scipy import ndimage
 
-from .mass import signed_volume
+from pipeline.asset.mass import signed_volume
 
 #: Edge of a grid cell (m): about the depth noise of a Kinect at a tabletop's distance, so
 #: the one-cell blur smooths no more than the sensor's noise.

@@ -8,12 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from ..metrics.fits import plane_after_bias
-from ..types import EstimateResult, StageEstimate
-from .collision import convex_parts
-from .mass import MassProperties, mass_properties
-from .meshing import View, half_widths, surface
-from .symmetry import SymmetryExport, export_symmetry, object_frame
+from pipeline.asset.collision import convex_parts
+from pipeline.asset.mass import MassProperties, mass_properties
+from pipeline.asset.meshing import View, half_widths, surface
+from pipeline.asset.symmetry import SymmetryExport, export_symmetry, object_frame
+from pipeline.metrics.fits import plane_after_bias
+from pipeline.types import EstimateResult, StageEstimate
 
 
 @dataclass(frozen=True)

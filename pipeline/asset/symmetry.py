@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..metrics.fits import plane_after_bias
-from ..types import Bias, SymmetryPlane
+from pipeline.metrics.fits import plane_after_bias
+from pipeline.types import Bias, SymmetryPlane
 
 
 def _direction(theta: float) -> np.ndarray:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from xml.etree import ElementTree
 
-from .mass import MassProperties
+from pipeline.asset.mass import MassProperties
 
 
 def urdf_text(name: str, mass: MassProperties, visual: str, collision: str) -> str:

@@ -3,7 +3,7 @@
 Every deliberate failure (:class:`~pipeline.errors.SymfuseError`) is printed as one line,
 ``symfuse: error: ...``, with its exit code (:mod:`pipeline.errors`: 2 bad input or config,
 3 a failed estimate, 4 a plugin raised, 130 interrupted); ``--debug`` shows the traceback
-instead. Every verb that writes follows the output-folder policy of :mod:`pipeline.outdir`.
+instead. Every verb that writes follows the output-folder policy of :mod:`pipeline.io.outdir`.
 
 This module holds the options the verbs share, ``plugins`` and ``config``, the parser and
 :func:`main`; every other verb lives in its own module of this package with an
@@ -19,11 +19,11 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from .. import __version__
-from ..entry import interrupt_received, report_interrupt
-from ..errors import EXIT_BAD_INPUT, EXIT_OK, ConfigError, SymfuseError
-from ..stages import STAGES
-from ..tables import format_table
+from pipeline import __version__
+from pipeline.entry import interrupt_received, report_interrupt
+from pipeline.errors import EXIT_BAD_INPUT, EXIT_OK, ConfigError, SymfuseError
+from pipeline.reports.tables import format_table
+from pipeline.stages import STAGES
 
 
 def _add_config_options(parser: argparse.ArgumentParser) -> None:
@@ -103,9 +103,9 @@ def _load(args: argparse.Namespace, reads: Sequence[str] | None = None, registry
         reads: the config sections the verb reads (None: all); see :func:`check_overrides`.
         registry: the installed plugins, when the caller has loaded them already.
     """
-    from ..config import load_config
-    from ..registry import load_registry
-    from .options import option_overrides
+    from pipeline.cli.options import option_overrides
+    from pipeline.config import load_config
+    from pipeline.registry import load_registry
 
     registry = registry or load_registry()
     options = option_overrides(args)
@@ -163,9 +163,9 @@ def check_overrides(
 
 
 def _cmd_plugins(args: argparse.Namespace) -> int:
-    from ..config import load_config
-    from ..params import describe
-    from ..registry import load_registry
+    from pipeline.config import load_config
+    from pipeline.params import describe
+    from pipeline.registry import load_registry
 
     registry = load_registry()
     rows = []
@@ -263,7 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_options(config)
     config.set_defaults(run=_cmd_config)
 
-    from . import complete, fuse, objects, sweep, symmetry, trial, view
+    from pipeline.cli import complete, fuse, objects, sweep, symmetry, trial, view
 
     for verb in (fuse, trial, sweep, complete, objects, symmetry, view):
         verb.add_parser(verbs).set_defaults(run=verb.run)

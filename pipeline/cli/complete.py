@@ -10,17 +10,17 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .. import __version__
-from ..completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
-from .view import add_rerun_option, check_rerun, record_if_asked
+from pipeline import __version__
+from pipeline.cli.view import add_rerun_option, check_rerun, record_if_asked
+from pipeline.run.completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
 
 if TYPE_CHECKING:
-    from ..types import Contacts
+    from pipeline.types import Contacts
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``complete`` verb to the CLI's subparsers and return its parser."""
-    from . import _add_config_options, _add_output_options
+    from pipeline.cli import _add_config_options, _add_output_options
 
     parser = subparsers.add_parser(
         "complete",
@@ -72,7 +72,7 @@ def after_view_reader(config, registry, recorded):
     object's cloud, the hand drawn by the configured world; None without any."""
     from functools import partial
 
-    from ..after_view_files import read_after_views
+    from pipeline.io.after_view_files import read_after_views
 
     if recorded is None or not any(path is not None for path in recorded.after_depth):
         return None
@@ -82,13 +82,13 @@ def after_view_reader(config, registry, recorded):
 
 def run(args: argparse.Namespace) -> int:
     """Complete the capture's objects, write the results, print a table."""
-    from ..completion import complete_scene
-    from ..errors import EXIT_ESTIMATE_FAILED, EXIT_OK, FAILED_STATUSES
-    from ..evaluation import one_sided_grasps
-    from ..formats import read_contacts
-    from ..outdir import staged_output
-    from . import _load
-    from .summary import one_sided_line
+    from pipeline.cli import _load
+    from pipeline.cli.summary import one_sided_line
+    from pipeline.errors import EXIT_ESTIMATE_FAILED, EXIT_OK, FAILED_STATUSES
+    from pipeline.io.formats import read_contacts
+    from pipeline.io.outdir import staged_output
+    from pipeline.metrics.evaluation import one_sided_grasps
+    from pipeline.run.completion import complete_scene
 
     check_rerun(args)
     registry, config = _load(args, reads=READS)
@@ -134,7 +134,7 @@ def scene_table(scene: SceneCompletion) -> str:
     set aside at the edge of the view."""
     import numpy as np
 
-    from ..tables import format_table
+    from pipeline.reports.tables import format_table
 
     rows = []
     for completion in scene.objects:
@@ -171,9 +171,9 @@ def write_outputs(
     contacts given, fused with the selected object."""
     import numpy as np
 
-    from ..figures import SceneObjectView, plot_scene
-    from ..formats import write_cloud, write_json
-    from ..result_document import (
+    from pipeline.io.formats import write_cloud, write_json
+    from pipeline.reports.figures import SceneObjectView, plot_scene
+    from pipeline.run.result_document import (
         estimate_entries,
         init_to_json,
         start_document,

@@ -10,7 +10,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import (
+from pipeline.cli import (
+    _add_config_options,
+    _add_output_options,
+    _add_units_option,
+    _load,
+    add_wide_option,
+)
+from pipeline.cli.summary import one_sided_line, selection_line, stage_summary
+from pipeline.cli.view import add_rerun_option, check_rerun, record_if_asked
+from pipeline.errors import (
     EXIT_ESTIMATE_FAILED,
     EXIT_OK,
     ConfigError,
@@ -18,23 +27,14 @@ from ..errors import (
     StageFailure,
     estimate_failed,
 )
-from ..outdir import staged_output
-from ..tables import wrapped
-from . import (
-    _add_config_options,
-    _add_output_options,
-    _add_units_option,
-    _load,
-    add_wide_option,
-)
-from .summary import one_sided_line, selection_line, stage_summary
-from .view import add_rerun_option, check_rerun, record_if_asked
+from pipeline.io.outdir import staged_output
+from pipeline.reports.tables import wrapped
 
 if TYPE_CHECKING:
-    from ..config import Config
-    from ..formats import RecordedGrasps
-    from ..registry import StageRegistry
-    from ..types import DepthObservation, PointCloud, SymmetryPlane
+    from pipeline.config import Config
+    from pipeline.io.formats import RecordedGrasps
+    from pipeline.registry import StageRegistry
+    from pipeline.types import DepthObservation, PointCloud, SymmetryPlane
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -101,8 +101,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def parse_plane(text: str):
     """``NX,NY,D`` as a :class:`~pipeline.types.SymmetryPlane` (``NX x + NY y = D``)."""
-    from ..types import SymmetryPlane
-    from ..units import FARTHEST_M
+    from pipeline.io.units import FARTHEST_M
+    from pipeline.types import SymmetryPlane
 
     fields = [field.strip() for field in text.split(",")]
     if len(fields) != 3:
@@ -129,7 +129,7 @@ FUSE_READS = ("world", "initialiser", "estimator", "model")
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..formats import read_cloud, read_contacts
+    from pipeline.io.formats import read_cloud, read_contacts
 
     check_rerun(args)
     registry, config = _load(args, reads=FUSE_READS)
@@ -163,7 +163,7 @@ def read_view(depth: Path, camera: Path | None) -> DepthObservation:
         InputError: unreadable, or its camera has no pose in the robot frame (the cloud and
             the contacts are in that frame).
     """
-    from ..captures import depth_camera_path, read_depth_image
+    from pipeline.io.captures import depth_camera_path, read_depth_image
 
     capture = read_depth_image(depth, camera, None)
     if capture.T_robot_camera is None:
@@ -183,7 +183,7 @@ def recorded_after_views(
 ) -> tuple:
     """The grasps' after-views (``--after-depth`` and the contacts file's), the hand drawn
     by the configured world (the estimator's ``after_view`` decides whether they count)."""
-    from ..after_view_files import read_after_views
+    from pipeline.io.after_view_files import read_after_views
 
     world = registry.get("world", config.choices["world"]).cls
     return read_after_views(recorded, cloud, world, (args.after_depth, args.after_camera))
@@ -204,8 +204,8 @@ def _fuse_into(
 
     A :class:`StageFailure` is recorded in ``result.json`` (status ``failed``) and re-raised.
     """
-    from ..evaluation import one_sided_grasps
-    from ..result_document import (
+    from pipeline.metrics.evaluation import one_sided_grasps
+    from pipeline.run.result_document import (
         estimate_entries,
         init_to_json,
         record_failure,
@@ -213,7 +213,7 @@ def _fuse_into(
         write_document,
         write_estimate_files,
     )
-    from ..runner import fuse
+    from pipeline.run.runner import fuse
 
     view, after_views = views
     config.write(out / "config.toml")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..errors import ConfigError, InputError
-from ..tables import format_table
+from pipeline.errors import ConfigError, InputError
+from pipeline.reports.tables import format_table
 
 EXPORT_FORMATS = ("obj", "stl")
 
@@ -46,7 +46,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 def run(args: argparse.Namespace) -> int:
     """Print the catalogue table, or export the meshes when ``--export`` is given."""
     if args.export is not None:
-        from ..outdir import staged_output
+        from pipeline.io.outdir import staged_output
 
         with staged_output(
             args.export, overwrite=args.overwrite, replaceable=holds_export, option="--export"
@@ -66,7 +66,7 @@ def catalogue_table() -> str:
     """The catalogue as a plain-text table, one object per line."""
     header = ("name", "kind", "x, y, z (mm)", "symmetry", "watertight", "description")
     rows = []
-    from ..catalogue import list_objects, load_object  # trimesh: only when used
+    from pipeline.catalogue.objects import list_objects, load_object  # trimesh: only when used
 
     for info in list_objects():
         mesh = load_object(info.name).mesh
@@ -79,7 +79,7 @@ def catalogue_table() -> str:
 def holds_export(folder: Path) -> bool:
     """Whether ``folder`` holds only meshes an export writes (``<catalogue name>.<format>``),
     the only folder ``--overwrite`` may replace."""
-    from ..catalogue import list_objects
+    from pipeline.catalogue.objects import list_objects
 
     names = {f"{info.name}.{suffix}" for info in list_objects() for suffix in EXPORT_FORMATS}
     return all(path.is_file() and path.name in names for path in Path(folder).iterdir())
@@ -93,7 +93,7 @@ def export_meshes(directory: Path, formats: tuple[str, ...] = EXPORT_FORMATS) ->
     except OSError as exc:
         raise InputError(f"{directory}: cannot create export folder ({exc.strerror})") from exc
     written = []
-    from ..catalogue import list_objects, load_object  # trimesh: only when used
+    from pipeline.catalogue.objects import list_objects, load_object  # trimesh: only when used
 
     for info in list_objects():
         mesh = load_object(info.name).mesh

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..tables import format_table
+from pipeline.reports.tables import format_table
 
 #: Columns of the self-diagnosis in the stage tables.
 CONSISTENCY_HEADER = ["taxel rms mm", "NIS / bound", "free space / limit", "consistent"]

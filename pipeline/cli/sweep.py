@@ -7,8 +7,8 @@ import json
 import sys
 from pathlib import Path
 
-from ..errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError
-from . import _add_config_options, _load, counting_number
+from pipeline.cli import _add_config_options, _load, counting_number
+from pipeline.errors import EXIT_ESTIMATE_FAILED, EXIT_OK, ConfigError
 
 
 def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
@@ -20,7 +20,7 @@ def _scans_folder(args: argparse.Namespace, experiment) -> Path | None:
             ``*/textured.obj``.
         InputError: a scan cannot be read as an object (named).
     """
-    from ..catalogue import load_object
+    from pipeline.catalogue.objects import load_object
 
     if args.scans is None:
         return None
@@ -72,9 +72,9 @@ def _planned_tasks(args: argparse.Namespace, registry, config, experiment):
         ConfigError: the user set a section the trials do not read, a stage's parameters
             do not go together, or a chosen ``planner.use`` would not plan.
     """
-    from ..config import leaf_keys
-    from ..experiments import ExperimentOptions
-    from ..stages import STAGES
+    from pipeline.config import leaf_keys
+    from pipeline.experiments import ExperimentOptions
+    from pipeline.stages import STAGES
 
     estimator = config.choices["estimator"]
     resolved = config.to_dict()
@@ -104,8 +104,8 @@ def _planned_tasks(args: argparse.Namespace, registry, config, experiment):
     )
     tasks = experiment.tasks(options)
     if "use" in user.get("planner", {}):
-        from ..experiments.paper_tasks import trial_config
-        from ..hand_choice import check_planner_is_read
+        from pipeline.experiments.paper_tasks import trial_config
+        from pipeline.planning.hand_choice import check_planner_is_read
 
         # The trials of one hand read planner.use alike: the first of each stands for all.
         by_hand = {task.params["gripper"]: task for task in tasks if "gripper" in task.params}
@@ -115,9 +115,9 @@ def _planned_tasks(args: argparse.Namespace, registry, config, experiment):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..experiments import EXPERIMENTS
-    from ..outdir import SWEEP_ROWS_FILE
-    from ..sweep import prepare_sweep_folder, run_sweep, settings_section
+    from pipeline.experiments import EXPERIMENTS
+    from pipeline.experiments.sweep import prepare_sweep_folder, run_sweep, settings_section
+    from pipeline.io.outdir import SWEEP_ROWS_FILE
 
     if args.scheduler and args.executor != "dask":
         raise ConfigError("--scheduler applies to --executor dask")
@@ -164,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """The ``sweep`` verb's options."""
-    from ..experiments import EXPERIMENTS, experiment_descriptions
+    from pipeline.experiments import EXPERIMENTS, experiment_descriptions
 
     parser = subparsers.add_parser(
         "sweep",

@@ -6,12 +6,12 @@ import argparse
 import json
 from pathlib import Path
 
-from ..errors import InputError
+from pipeline.errors import InputError
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``symmetry`` verb to the CLI's subparsers and return its parser."""
-    from . import _add_units_option
+    from pipeline.cli import _add_units_option
 
     parser = subparsers.add_parser(
         "symmetry",
@@ -33,10 +33,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def run(args: argparse.Namespace) -> int:
     """Print the symmetries found, and write them with ``--out``."""
-    from ..catalogue import load_object
-    from ..symmetry.search import SearchSettings, mesh_symmetries
-    from ..symmetry.truth_file import symmetries_to_json
-    from ..tables import format_table
+    from pipeline.catalogue.objects import load_object
+    from pipeline.reports.tables import format_table
+    from pipeline.symmetry.search import SearchSettings, mesh_symmetries
+    from pipeline.symmetry.truth_file import symmetries_to_json
 
     if args.out is not None and args.out.exists():
         raise InputError(f"{args.out}: already exists; --out writes a new file")

@@ -8,11 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..entry import stop_if_interrupted
-from ..errors import EXIT_ESTIMATE_FAILED, EXIT_OK, estimate_failed
-from ..outdir import fresh_folder, staged_output
-from ..tables import format_table, wrapped
-from . import (
+from pipeline.cli import (
     _add_config_options,
     _add_output_options,
     _add_units_option,
@@ -20,13 +16,17 @@ from . import (
     add_wide_option,
     counting_number,
 )
-from .summary import CONSISTENCY_HEADER, consistency_cells, selection_line
-from .view import add_rerun_option, check_rerun, record_if_asked
+from pipeline.cli.summary import CONSISTENCY_HEADER, consistency_cells, selection_line
+from pipeline.cli.view import add_rerun_option, check_rerun, record_if_asked
+from pipeline.entry import stop_if_interrupted
+from pipeline.errors import EXIT_ESTIMATE_FAILED, EXIT_OK, estimate_failed
+from pipeline.io.outdir import fresh_folder, staged_output
+from pipeline.reports.tables import format_table, wrapped
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """The ``trial`` verb's options."""
-    from ..config import NEXT_GRASP_STRATEGIES
+    from pipeline.config import NEXT_GRASP_STRATEGIES
 
     parser = subparsers.add_parser(
         "trial",
@@ -231,8 +231,8 @@ def _progress(message: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..hand_choice import next_try
-    from ..trial import run_trial
+    from pipeline.planning.hand_choice import next_try
+    from pipeline.run.trial import run_trial
 
     check_rerun(args)
     registry, config = _load(args)

@@ -13,7 +13,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from ..errors import ConfigError
+from pipeline.errors import ConfigError
 
 
 def add_rerun_option(parser: argparse.ArgumentParser) -> None:
@@ -28,7 +28,7 @@ def add_rerun_option(parser: argparse.ArgumentParser) -> None:
 def check_rerun(args: argparse.Namespace) -> None:
     """Fail before running anything when ``--rerun`` is asked for without the viz extra."""
     if getattr(args, "rerun", False):
-        from ..viz.recording import rerun_module
+        from pipeline.viz.recording import rerun_module
 
         rerun_module()
 
@@ -36,7 +36,7 @@ def check_rerun(args: argparse.Namespace) -> None:
 def record_if_asked(args: argparse.Namespace, run_dir: Path) -> None:
     """After a run wrote ``run_dir``: write its recording when ``--rerun`` was given."""
     if getattr(args, "rerun", False):
-        from ..viz.recording import write_recording
+        from pipeline.viz.recording import write_recording
 
         print(f"wrote {write_recording(run_dir)} (open it with: rerun {run_dir}/recording.rrd)")
 
@@ -106,7 +106,7 @@ def check_recording_target(path: Path, *, overwrite: bool) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..viz.recording import RECORDING_NAME, write_recording
+    from pipeline.viz.recording import RECORDING_NAME, write_recording
 
     target = args.out if args.out is not None else Path(args.run_dir) / RECORDING_NAME
     if args.out is not None or Path(args.run_dir).is_dir():

@@ -36,9 +36,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import gammaincinv
 
-from ..types import AfterView
-from .measurement import Linearisation
-from .registration import RegistrationSettings, register_planar
+from pipeline.estimation.measurement import Linearisation
+from pipeline.estimation.registration import RegistrationSettings, register_planar
+from pipeline.types import AfterView
 
 #: Rows of ``g`` the after-view measures: the bias' yaw and horizontal translation.
 MEASURED = np.array([0, 1, 2])

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .indexsets import unique_inverse
+from pipeline.estimation.indexsets import unique_inverse
 
 #: chi-square quantile, 3 degrees of freedom, 95 % (paper eq. 9).
 GATE_CHI2_3DOF_95 = 7.815

@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .geometry import apply_side, invert_side, side_linear_part
+from pipeline.estimation.geometry import apply_side, invert_side, side_linear_part
 
 if TYPE_CHECKING:
-    from .correspondences import PointIndex
+    from pipeline.estimation.correspondences import PointIndex
 
 #: Object points whose vector median replaces the taxel in the alternative weights (eq. 13).
 ALTERNATIVE_NEIGHBOURS = 5

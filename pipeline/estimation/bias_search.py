@@ -42,10 +42,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.special import gammaincinv
 
-from ..poses import rotation_z
+from pipeline.geometry.poses import rotation_z
 
 if TYPE_CHECKING:
-    from .iekf import FusionProblem
+    from pipeline.estimation.iekf import FusionProblem
 
 
 #: Plane angle offsets in prior stds and plane distance offsets in prior stds.

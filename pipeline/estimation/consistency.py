@@ -38,11 +38,11 @@ from scipy.spatial import cKDTree
 # evaluate): importing scipy.stats would take longer than a trial's estimate.
 from scipy.special import gammaincinv, ndtri
 
-from ..errors import FELL_BACK_STATUSES, estimate_failed
-from ..perception.visibility import free_space_depths
-from ..types import Consistency, DepthObservation, StageEstimate
-from .geometry import invert_side, mirror, side_linear_part
-from .iekf import GraspContacts
+from pipeline.errors import FELL_BACK_STATUSES, estimate_failed
+from pipeline.estimation.geometry import invert_side, mirror, side_linear_part
+from pipeline.estimation.iekf import GraspContacts
+from pipeline.perception.visibility import free_space_depths
+from pipeline.types import Consistency, DepthObservation, StageEstimate
 
 #: Model points around a taxel that define the local surface it is compared with.
 SURFACE_NEIGHBOURS = 8

@@ -40,13 +40,18 @@ from itertools import chain
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from .aggregation import GATE_CHI2_3DOF_95, VoxelMoments, gaussian_sums, voxel_exponents
-from .aggregation import voxel_moments as _voxel_moments
-from .alternative_centres import alternative_centres
-from .covariances import correspondence_covariances
-from .geometry import box_corners, invert_side, side_jacobian, side_linear_part
-from .indexsets import union, unique_inverse
-from .surface import any_azimuth, compatible, facing_labels, point_labels
+from pipeline.estimation.aggregation import (
+    GATE_CHI2_3DOF_95,
+    VoxelMoments,
+    gaussian_sums,
+    voxel_exponents,
+)
+from pipeline.estimation.aggregation import voxel_moments as _voxel_moments
+from pipeline.estimation.alternative_centres import alternative_centres
+from pipeline.estimation.covariances import correspondence_covariances
+from pipeline.estimation.geometry import box_corners, invert_side, side_jacobian, side_linear_part
+from pipeline.estimation.indexsets import union, unique_inverse
+from pipeline.estimation.surface import any_azimuth, compatible, facing_labels, point_labels
 
 #: A gate whose radius exceeds this fraction of the cloud's bounding-box diagonal is summed
 #: over the whole cloud instead of listed pair by pair (when the pairs are not needed).

@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .geometry import BIAS_PLANE_DIM
-from .measurement import Linearisation
-from .structured import noise_matrix
+from pipeline.estimation.geometry import BIAS_PLANE_DIM
+from pipeline.estimation.measurement import Linearisation
+from pipeline.estimation.structured import noise_matrix
 
 
 class DenseGain:

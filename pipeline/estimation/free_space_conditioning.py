@@ -37,11 +37,11 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..types import Consistency, DepthObservation, Hypothesis, StageEstimate
-from .consistency import ConsistencySettings, assess, model_free_space_count
-from .geometry import mirror, plane_normal, plane_tangent
-from .iekf import FusionProblem
-from .problem import stage_estimate
+from pipeline.estimation.consistency import ConsistencySettings, assess, model_free_space_count
+from pipeline.estimation.geometry import mirror, plane_normal, plane_tangent
+from pipeline.estimation.iekf import FusionProblem
+from pipeline.estimation.problem import stage_estimate
+from pipeline.types import Consistency, DepthObservation, Hypothesis, StageEstimate
 
 #: The name recorded in ``StageEstimate.hypothesis``.
 CONDITIONED = "conditioned on free space"

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..poses import rotation_z
+from pipeline.geometry.poses import rotation_z
 
 #: Length of the bias-and-plane block of the state.
 BIAS_PLANE_DIM = 6

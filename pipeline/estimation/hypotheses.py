@@ -39,13 +39,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.special import ndtri
 
-from ..errors import estimate_failed
-from ..perception.visibility import free_space_depths
-from ..types import Consistency, DepthObservation, Hypothesis, StageEstimate
-from .consistency import ConsistencySettings, assess
-from .geometry import apply_bias, invert_bias, mirror
-from .iekf import FusionProblem, StageOutcome
-from .problem import stage_estimate
+from pipeline.errors import estimate_failed
+from pipeline.estimation.consistency import ConsistencySettings, assess
+from pipeline.estimation.geometry import apply_bias, invert_bias, mirror
+from pipeline.estimation.iekf import FusionProblem, StageOutcome
+from pipeline.estimation.problem import stage_estimate
+from pipeline.perception.visibility import free_space_depths
+from pipeline.types import Consistency, DepthObservation, Hypothesis, StageEstimate
 
 #: Bisection steps on the step fraction of a bounded hypothesis (resolution 1/64 of the step).
 BISECTION_STEPS = 6

@@ -24,8 +24,14 @@ import numpy as np
 import scipy.optimize
 from scipy.spatial import cKDTree
 
-from .geometry import BIAS_PLANE_DIM, apply_side, invert_side, side_jacobian, side_linear_part
-from .iekf import FusionProblem, GraspContacts, StageOutcome, worst_status
+from pipeline.estimation.geometry import (
+    BIAS_PLANE_DIM,
+    apply_side,
+    invert_side,
+    side_jacobian,
+    side_linear_part,
+)
+from pipeline.estimation.iekf import FusionProblem, GraspContacts, StageOutcome, worst_status
 
 
 @dataclass(frozen=True)

@@ -77,20 +77,25 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from ..errors import FELL_BACK_STATUSES
-from .after_view_term import AfterViewMeasurement, innovation, linearisation, passes_gate
-from .correspondences import (
+from pipeline.errors import FELL_BACK_STATUSES
+from pipeline.estimation.after_view_term import (
+    AfterViewMeasurement,
+    innovation,
+    linearisation,
+    passes_gate,
+)
+from pipeline.estimation.correspondences import (
     Correspondences,
     PointIndex,
     every_pad_supported,
     exclusive_sides,
     find_correspondences,
 )
-from .covariances import shared_pad_noise
-from .geometry import image_step_bound
-from .indexsets import union
-from .measurement import FrozenMeasurement, Linearisation, freeze, linearise
-from .structured import StructuredCovariance, block_diagonal
+from pipeline.estimation.covariances import shared_pad_noise
+from pipeline.estimation.geometry import image_step_bound
+from pipeline.estimation.indexsets import union
+from pipeline.estimation.measurement import FrozenMeasurement, Linearisation, freeze, linearise
+from pipeline.estimation.structured import StructuredCovariance, block_diagonal
 
 Schedule = Literal["standard", "alternative", "hybrid"]
 GraspStatus = Literal["converged", "max_iterations", "no_correspondence", "diverged"]
@@ -556,7 +561,7 @@ def fuse(
     """
     started = time.perf_counter()
     if settings.start_search and problem.g_start is None:
-        from .bias_search import SearchSettings, search_start
+        from pipeline.estimation.bias_search import SearchSettings, search_start
 
         searched = _after_first_view(problem, covariance_model)
         problem = replace(problem, g_start=search_start(searched, SearchSettings()))

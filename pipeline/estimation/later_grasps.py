@@ -55,19 +55,19 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..errors import estimate_failed
-from ..types import Consistency, DepthObservation, Hypothesis, StageEstimate
-from .consistency import ConsistencySettings, assess
-from .hypotheses import (
+from pipeline.errors import estimate_failed
+from pipeline.estimation.consistency import ConsistencySettings, assess
+from pipeline.estimation.hypotheses import (
     HYPOTHESES,
     Refuse,
     held_problem,
     shortened_covariance,
     unheld_covariance,
 )
-from .iekf import FusionProblem, StageOutcome
-from .outlier_pads import sole_explaining_pad, without_pad
-from .problem import stage_estimate
+from pipeline.estimation.iekf import FusionProblem, StageOutcome
+from pipeline.estimation.outlier_pads import sole_explaining_pad, without_pad
+from pipeline.estimation.problem import stage_estimate
+from pipeline.types import Consistency, DepthObservation, Hypothesis, StageEstimate
 
 #: The name the alternative's stages carry (``result.json``'s ``hypothesis``).
 EARLIER_SHAPE = "earlier shape"
@@ -113,7 +113,7 @@ def earlier_shape_stages(
     supported model though inconsistent (:func:`_best_supported`). Runs only with two or
     more grasps; the earlier estimate is :func:`.problem.estimate_result` of ``refuse`` on
     the grasps before the last."""
-    from .problem import estimate_result
+    from pipeline.estimation.problem import estimate_result
 
     last = stages[-1]
     if len(fusion.grasps) < 2 or last.status != "inconsistent":

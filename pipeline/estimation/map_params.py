@@ -14,20 +14,20 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from ..params import param
-from ..types import EstimationProblem
-from .problem import (
+from pipeline.estimation.problem import (
     bias_plane_covariance,
     checked_points,
     diagonal_covariance,
     grasp_contacts,
     initial_state,
 )
+from pipeline.params import param
+from pipeline.types import EstimationProblem
 
 if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
-    from .after_view_term import AfterViewSettings
-    from .consistency import ConsistencySettings
-    from .iekf import FusionProblem
+    from pipeline.estimation.after_view_term import AfterViewSettings
+    from pipeline.estimation.consistency import ConsistencySettings
+    from pipeline.estimation.iekf import FusionProblem
 
 
 @dataclass(frozen=True)
@@ -127,7 +127,7 @@ def fusion_problem(
     normals; with ``after_view``, each grasp's after-view (when the problem has one and
     it registers) as a measurement of the bias. Raises
     :class:`~pipeline.errors.StageFailure` (naming ``estimator``) on an empty cloud."""
-    from .iekf import FusionProblem
+    from pipeline.estimation.iekf import FusionProblem
 
     p = params
     points = checked_points(problem, estimator)
@@ -138,7 +138,7 @@ def fusion_problem(
     stds = (p.prior_b_theta_rad, xy, xy, p.prior_b_z_m, p.prior_m_r_m, p.prior_m_theta_rad)
     grasps = [grasp_contacts(c, window_std_m, noise, facing_filter) for c in problem.grasps]
     if after_view is not None:
-        from .after_view_term import after_view_measurement
+        from pipeline.estimation.after_view_term import after_view_measurement
 
         for k, contacts in enumerate(grasps):
             view = problem.after_view(k)
@@ -166,7 +166,7 @@ def regrasp_noise(params: MapParams) -> np.ndarray:
 
 def consistency_settings(params: MapParams) -> ConsistencySettings:
     """The self-diagnosis thresholds: the model surface is as uncertain as one point."""
-    from .consistency import ConsistencySettings
+    from pipeline.estimation.consistency import ConsistencySettings
 
     return ConsistencySettings(
         alpha=params.consistency_alpha,

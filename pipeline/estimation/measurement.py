@@ -27,9 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse
 
-from .correspondences import Correspondences
-from .geometry import BIAS_PLANE_DIM, apply_side, side_jacobian, side_linear_part
-from .indexsets import union
+from pipeline.estimation.correspondences import Correspondences
+from pipeline.estimation.geometry import BIAS_PLANE_DIM, apply_side, side_jacobian, side_linear_part
+from pipeline.estimation.indexsets import union
 
 
 @dataclass(frozen=True)

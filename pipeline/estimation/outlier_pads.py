@@ -31,12 +31,12 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..errors import estimate_failed
-from ..types import Consistency, DepthObservation, Hypothesis, StageEstimate
-from .consistency import ConsistencySettings, assess
-from .hypotheses import Refuse
-from .iekf import FusionProblem, GraspContacts
-from .problem import stage_estimate
+from pipeline.errors import estimate_failed
+from pipeline.estimation.consistency import ConsistencySettings, assess
+from pipeline.estimation.hypotheses import Refuse
+from pipeline.estimation.iekf import FusionProblem, GraspContacts
+from pipeline.estimation.problem import stage_estimate
+from pipeline.types import Consistency, DepthObservation, Hypothesis, StageEstimate
 
 
 def without_pad(fusion: FusionProblem, pad: str) -> FusionProblem:

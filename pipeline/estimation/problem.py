@@ -9,8 +9,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import StageFailure
-from ..types import (
+from pipeline.errors import StageFailure
+from pipeline.estimation.covariances import NO_INFORMATION_M, normal_ellipsoids, unit_normals
+from pipeline.estimation.geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
+from pipeline.types import (
     Bias,
     Contacts,
     DepthObservation,
@@ -21,13 +23,11 @@ from ..types import (
     StageEstimate,
     SymmetryPlane,
 )
-from .covariances import NO_INFORMATION_M, normal_ellipsoids, unit_normals
-from .geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
 
 if TYPE_CHECKING:  # the kernels (and scipy) load when an estimate runs, not with the plugins
-    from .consistency import ConsistencySettings
-    from .hypotheses import Refuse
-    from .iekf import FusionProblem, GraspContacts, IterationRecord, StageOutcome
+    from pipeline.estimation.consistency import ConsistencySettings
+    from pipeline.estimation.hypotheses import Refuse
+    from pipeline.estimation.iekf import FusionProblem, GraspContacts, IterationRecord, StageOutcome
 
 
 def checked_points(problem: EstimationProblem, estimator: str) -> np.ndarray:
@@ -58,7 +58,7 @@ def grasp_contacts(
     same std along it, :data:`~.covariances.NO_INFORMATION_M` across), and counts that std
     once more as an error all taxels of a pad share (``pad_errors_m``: the pad's
     compliance)."""
-    from .iekf import GraspContacts
+    from pipeline.estimation.iekf import GraspContacts
 
     return GraspContacts(
         positions_m=contacts.positions,
@@ -183,9 +183,9 @@ def estimate_result(
     # (the patches take the stage's own coordinates).
     from scipy.spatial import cKDTree
 
-    from .consistency import assess, select_stage
-    from .free_space_conditioning import condition
-    from .hypotheses import holdable
+    from pipeline.estimation.consistency import assess, select_stage
+    from pipeline.estimation.free_space_conditioning import condition
+    from pipeline.estimation.hypotheses import holdable
 
     tree = cKDTree(fusion.points_m, balanced_tree=False)
     diagnosed = []
@@ -212,9 +212,9 @@ def estimate_result(
         seconds = stage.seconds + time.perf_counter() - started
         diagnosed.append(replace(stage, consistency=verdict, status=status, seconds=seconds))
     if refuse is not None:
-        from .hypotheses import revise
-        from .later_grasps import earlier_shape_stages
-        from .outlier_pads import outlier_pad_stages
+        from pipeline.estimation.hypotheses import revise
+        from pipeline.estimation.later_grasps import earlier_shape_stages
+        from pipeline.estimation.outlier_pads import outlier_pad_stages
 
         diagnosed = earlier_shape_stages(fusion, diagnosed, refuse, view, consistency, tree)
         diagnosed = revise(fusion, diagnosed, refuse, view, consistency, tree)

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..poses import rotation_z
-from .geometry import rotation_z_derivative
+from pipeline.estimation.geometry import rotation_z_derivative
+from pipeline.geometry.poses import rotation_z
 
 #: Surfaces whose normal is within this of vertical say nothing about a planar motion.
 _FLAT_NORMAL_Z = 0.9

@@ -30,9 +30,9 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse
 
-from .geometry import BIAS_PLANE_DIM
-from .indexsets import union
-from .measurement import Linearisation
+from pipeline.estimation.geometry import BIAS_PLANE_DIM
+from pipeline.estimation.indexsets import union
+from pipeline.estimation.measurement import Linearisation
 
 
 def block_diagonal(blocks: np.ndarray) -> np.ndarray:

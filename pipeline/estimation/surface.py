@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .aggregation import voxel_moments
+from pipeline.estimation.aggregation import voxel_moments
 
 #: Width of one elevation band (deg).
 BAND_DEG = 15.0

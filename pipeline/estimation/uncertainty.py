@@ -50,10 +50,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .correspondences import PointIndex, exclusive_sides, find_correspondences
-from .geometry import BIAS_PLANE_DIM, side_jacobian
-from .iekf import GraspContacts
-from .measurement import freeze, linearise
+from pipeline.estimation.correspondences import PointIndex, exclusive_sides, find_correspondences
+from pipeline.estimation.geometry import BIAS_PLANE_DIM, side_jacobian
+from pipeline.estimation.iekf import GraspContacts
+from pipeline.estimation.measurement import freeze, linearise
 
 
 def hidden_side_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:

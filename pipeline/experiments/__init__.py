@@ -4,7 +4,7 @@
 the grid (each task's ``key`` is unique and stable, so a re-run can skip finished ones);
 ``run_one`` runs a single trial from its JSON parameters and returns one JSON-serialisable
 result row; ``report`` turns all rows into the CSV, the figure PNG(s) and ``report.md``.
-:mod:`pipeline.sweep` runs the tasks locally or on Dask.
+:mod:`pipeline.experiments.sweep` runs the tasks locally or on Dask.
 
 A trial's config is the sweep's (the defaults, ``--config`` files and ``--set`` values; what
 the user changed travels in :attr:`ExperimentOptions.config`) with the experiment's own
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .definitions import EXPERIMENTS, Experiment, experiment_descriptions
+from pipeline.experiments.definitions import EXPERIMENTS, Experiment, experiment_descriptions
 
 __all__ = [
     "EXPERIMENTS",

@@ -40,6 +40,6 @@ def failures_section(failed: Sequence[str]) -> list[str]:
 @functools.cache
 def plugin_registry():
     """The plugin registry (loaded once per process)."""
-    from ..registry import load_registry
+    from pipeline.registry import load_registry
 
     return load_registry()

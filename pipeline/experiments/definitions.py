@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
-    from . import ExperimentOptions, SweepTask
+    from pipeline.experiments import ExperimentOptions, SweepTask
 
 
 class Experiment(Protocol):
@@ -95,7 +95,7 @@ class SymmetryGrid:
 
     @property
     def config_sections(self) -> tuple[str, ...]:
-        from .synthetic_study import CONFIG_SECTIONS
+        from pipeline.experiments.synthetic_study import CONFIG_SECTIONS
 
         return CONFIG_SECTIONS
 
@@ -105,12 +105,18 @@ class SymmetryGrid:
 
     @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]:
-        from .synthetic_study import run_trial
+        from pipeline.experiments.synthetic_study import run_trial
 
         return run_trial
 
     def tasks(self, options: ExperimentOptions) -> list[SweepTask]:
-        from .synthetic_study import R_MM_FULL, THETA_DEG_FULL, Draws, grid_tasks, random_tasks
+        from pipeline.experiments.synthetic_study import (
+            R_MM_FULL,
+            THETA_DEG_FULL,
+            Draws,
+            grid_tasks,
+            random_tasks,
+        )
 
         if not options.grid:
             draws = Draws(self.tactile_span_deg, theta_deg=(0.0, 90.0), r_mm=(-50.0, 50.0))
@@ -125,7 +131,7 @@ class SymmetryGrid:
         )
 
     def report(self, rows: list[dict], out_dir: Path) -> list[Path]:
-        from .synthetic_report import report_grid, report_random
+        from pipeline.experiments.synthetic_report import report_grid, report_random
 
         if rows and all("/trial" in row.get("key", "") for row in rows):
             return report_random(
@@ -186,18 +192,22 @@ class MeasureTable:
 
     @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]:
-        from .paper_trial import run_paper_trial
+        from pipeline.experiments.paper_trial import run_paper_trial
 
         return run_paper_trial
 
     def tasks(self, options: ExperimentOptions) -> list[SweepTask]:
-        from .paper_tasks import QUICK_VIEW_OFFSET_DEG, VIEW_OFFSETS_DEG, object_tasks
+        from pipeline.experiments.paper_tasks import (
+            QUICK_VIEW_OFFSET_DEG,
+            VIEW_OFFSETS_DEG,
+            object_tasks,
+        )
 
         offsets = (QUICK_VIEW_OFFSET_DEG,) if options.quick else VIEW_OFFSETS_DEG
         return object_tasks(options, self.object, inits=self.inits, view_offsets_deg=offsets)
 
     def report(self, rows: list[dict], out_dir: Path) -> list[Path]:
-        from .measure_report import report_measure
+        from pipeline.experiments.measure_report import report_measure
 
         return report_measure(rows, out_dir, self)
 

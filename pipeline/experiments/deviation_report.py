@@ -10,9 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from ..sweep import write_csv
-from .common import failures_section, fmt
-from .paper_report import (
+from pipeline.experiments.common import failures_section, fmt
+from pipeline.experiments.paper_report import (
     DEVIATION_TARGET_MM,
     SHAPE_HEADER,
     bias_section,
@@ -21,8 +20,16 @@ from .paper_report import (
     shape_cells,
     shape_score_section,
 )
-from .paper_trial import DIVERGED_GROWTH_MM
-from .rows import STAGES, count_rows, failure_lines, finished_rows, mean_value, value
+from pipeline.experiments.paper_trial import DIVERGED_GROWTH_MM
+from pipeline.experiments.rows import (
+    STAGES,
+    count_rows,
+    failure_lines,
+    finished_rows,
+    mean_value,
+    value,
+)
+from pipeline.experiments.sweep import write_csv
 
 
 def deviation_verdict(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:

@@ -33,16 +33,16 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..catalogue import list_objects
-from ..config import NEXT_GRASP_STRATEGIES
-from ..estimation.later_grasps import EARLIER_SHAPE
-from ..sweep import write_csv
-from . import ExperimentOptions, SweepTask
-from .common import failures_section, fmt, task_seed
-from .init import yaws_deg
-from .paper_tasks import paper_task, sweep_params
-from .paper_trial import run_paper_trial
-from .rows import count_rows, failure_lines, finished_rows, value
+from pipeline.catalogue.objects import list_objects
+from pipeline.config import NEXT_GRASP_STRATEGIES
+from pipeline.estimation.later_grasps import EARLIER_SHAPE
+from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.common import failures_section, fmt, task_seed
+from pipeline.experiments.init import yaws_deg
+from pipeline.experiments.paper_tasks import paper_task, sweep_params
+from pipeline.experiments.paper_trial import run_paper_trial
+from pipeline.experiments.rows import count_rows, failure_lines, finished_rows, value
+from pipeline.experiments.sweep import write_csv
 
 NAME = "explore"
 DESCRIPTION = (
@@ -420,7 +420,7 @@ def _share(count: int, total: int) -> str:
 def report(rows: list[dict], out_dir: Path) -> list[Path]:
     """``results.csv``, ``explore.png`` (median deviation and plane errors after each
     grasp per strategy, all trials and the hard ones) and ``report.md``."""
-    from ..figures import line_figure
+    from pipeline.reports.figures import line_figure
 
     out_dir = Path(out_dir)
     csv_path = write_csv(rows, out_dir / "results.csv")
@@ -448,7 +448,7 @@ def _per_grasp_section(
 ) -> tuple[list[str], list[Any]]:
     """The report's head: per grasp and strategy, the medians over all trials and over the
     hard ones; and the figure's panels of the same deviations."""
-    from ..figures import LinePanel
+    from pipeline.reports.figures import LinePanel
 
     grasps = range(1, GRASPS + 1)
     lines = [

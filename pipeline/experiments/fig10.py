@@ -23,11 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from ..figures import BoxPanel, GridPanel, box_plot_figure
-from ..sweep import write_csv
-from . import ExperimentOptions, SweepTask
-from .common import failures_section, fmt, task_seed
-from .synthetic_report import (
+from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.common import failures_section, fmt, task_seed
+from pipeline.experiments.sweep import write_csv
+from pipeline.experiments.synthetic_report import (
     SUCCESS_MM,
     diagnosis_section,
     failing_share_figure,
@@ -37,8 +36,9 @@ from .synthetic_report import (
     percent,
     stage_error,
 )
-from .synthetic_study import CONFIG_SECTIONS as CONFIG_SECTIONS
-from .synthetic_study import Draws, random_tasks, run_trial, trial_params
+from pipeline.experiments.synthetic_study import CONFIG_SECTIONS as CONFIG_SECTIONS
+from pipeline.experiments.synthetic_study import Draws, random_tasks, run_trial, trial_params
+from pipeline.reports.figures import BoxPanel, GridPanel, box_plot_figure
 
 NAME = "fig10"
 DESCRIPTION = "synthetic cylinder: diameter error vs initial bias magnitude (paper Fig. 10)"

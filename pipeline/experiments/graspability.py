@@ -44,15 +44,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..sweep import write_csv
-from . import ExperimentOptions, SweepTask, objects
-from .common import fmt, plugin_registry
-from .paper_tasks import trial_config, user_settings
-from .paper_trial import paper_trial
+from pipeline.experiments import ExperimentOptions, SweepTask, objects
+from pipeline.experiments.common import fmt, plugin_registry
+from pipeline.experiments.paper_tasks import trial_config, user_settings
+from pipeline.experiments.paper_trial import paper_trial
+from pipeline.experiments.sweep import write_csv
 
 if TYPE_CHECKING:
-    from ..trial import TrialRecord
-    from ..types import GraspPlan, ObjectPose, SymmetryPlane
+    from pipeline.run.trial import TrialRecord
+    from pipeline.types import GraspPlan, ObjectPose, SymmetryPlane
 
 NAME = "graspability"
 DESCRIPTION = (
@@ -84,9 +84,9 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
         ConfigError: the configured world cannot lift (:meth:`World.lift
             <pipeline.stages.World.lift>` not implemented), checked before any trial runs.
     """
-    from ..config import load_config
-    from ..errors import ConfigError
-    from ..stages import World
+    from pipeline.config import load_config
+    from pipeline.errors import ConfigError
+    from pipeline.stages import World
 
     world = load_config(plugin_registry(), settings=user_settings(options)).choices["world"]
     if plugin_registry().get("world", world).cls.lift is World.lift:
@@ -122,7 +122,7 @@ class PlanningModel:
 
 
 def _pose(entry: Mapping[str, Any]) -> ObjectPose:
-    from ..types import ObjectPose
+    from pipeline.types import ObjectPose
 
     return ObjectPose(np.asarray(entry["position"]), np.asarray(entry["quaternion_xyzw"]))
 
@@ -131,7 +131,7 @@ def moved_plane(plane: SymmetryPlane, motion: np.ndarray) -> SymmetryPlane:
     """``plane`` carried by the rigid ``motion`` (4x4, frame R); its normal kept
     horizontal (the motion of an object resting on the table is a turn about the
     vertical and a shift, up to the millimetres a grasp tilts it)."""
-    from ..types import SymmetryPlane
+    from pipeline.types import SymmetryPlane
 
     normal = motion[:3, :3] @ plane.normal
     point = motion[:3, :3] @ (plane.normal * plane.offset_m) + motion[:3, 3]
@@ -142,8 +142,8 @@ def planning_models(
     record: TrialRecord, obj: Any, resting: ObjectPose, seed: int
 ) -> dict[str, PlanningModel]:
     """:data:`MODELS` for the planner, the object at ``resting`` (see the module doc)."""
-    from ..metrics.shape_scores import sample_surface
-    from ..trial import ground_truth
+    from pipeline.metrics.shape_scores import sample_surface
+    from pipeline.run.trial import ground_truth
 
     result = record.result
     scored_at = _pose(record.document["object_pose_after"])
@@ -198,9 +198,9 @@ def attempt(world: Any, setup: Any, gripper: str, plan: GraspPlan) -> Attempt:
 def grasp_models(params: Mapping[str, Any], record: TrialRecord) -> dict[str, Any]:
     """Plan ``params["grasps"]`` grasps on each model and execute each; the row fields
     (module doc)."""
-    from ..catalogue import load_object
-    from ..hand_choice import create_planner
-    from ..types import Bias, PointCloud, SceneSetup, SymmetryInit
+    from pipeline.catalogue.objects import load_object
+    from pipeline.planning.hand_choice import create_planner
+    from pipeline.types import Bias, PointCloud, SceneSetup, SymmetryInit
 
     config = trial_config(params)
     registry = plugin_registry()
@@ -377,7 +377,7 @@ def miss_lines(rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 def success_figure(by_object: Mapping[str, Sequence[Mapping[str, Any]]], out_path: Path) -> Path:
     """``graspability.png``: grasp success per model (bars), per object and over all."""
-    from ..figures import BarGroups, bar_figure
+    from pipeline.reports.figures import BarGroups, bar_figure
 
     labels = [*by_object, "all"]
     groups = [*by_object.values(), [row for group in by_object.values() for row in group]]

@@ -18,12 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from ..sweep import write_csv
-from . import ExperimentOptions, SweepTask
-from .common import task_seed
-from .paper_tasks import paper_task, user_settings
-from .paper_trial import run_paper_trial
-from .rows import INIT_LABELS, group_rows
+from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.common import task_seed
+from pipeline.experiments.paper_tasks import paper_task, user_settings
+from pipeline.experiments.paper_trial import run_paper_trial
+from pipeline.experiments.rows import INIT_LABELS, group_rows
+from pipeline.experiments.sweep import write_csv
 
 NAME = "init"
 DESCRIPTION = "initialisers (PS, VC, PCA) on the catalogue in PyBullet: plane within 10 deg/10 mm"

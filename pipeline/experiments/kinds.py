@@ -25,11 +25,11 @@ from typing import Any
 
 import numpy as np
 
-from ..sweep import write_csv
-from . import ExperimentOptions, SweepTask, explore
-from .common import fmt, task_seed
-from .init import yaws_deg
-from .paper_tasks import paper_task, user_settings
+from pipeline.experiments import ExperimentOptions, SweepTask, explore
+from pipeline.experiments.common import fmt, task_seed
+from pipeline.experiments.init import yaws_deg
+from pipeline.experiments.paper_tasks import paper_task, user_settings
+from pipeline.experiments.sweep import write_csv
 
 NAME = "kinds"
 DESCRIPTION = (
@@ -75,16 +75,16 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
 
 def run_one(params: Mapping[str, Any]) -> dict[str, Any]:
     """View, segment, choose the kind and score both completions of one task."""
-    from ..catalogue import load_object
-    from ..evaluation import GroundTruth, shape_scores
-    from ..metrics import mesh_deviation
-    from ..symmetry.axis_fit import fit_axis
-    from ..symmetry.kinds import complete, free_space_share
-    from ..symmetry.scoring import round_centre, symmetry_errors
-    from ..symmetry.truth_file import true_symmetries
-    from ..types import SceneSetup, Symmetry
-    from .common import plugin_registry
-    from .paper_tasks import trial_config
+    from pipeline.catalogue.objects import load_object
+    from pipeline.experiments.common import plugin_registry
+    from pipeline.experiments.paper_tasks import trial_config
+    from pipeline.metrics import mesh_deviation
+    from pipeline.metrics.evaluation import GroundTruth, shape_scores
+    from pipeline.symmetry.axis_fit import fit_axis
+    from pipeline.symmetry.kinds import complete, free_space_share
+    from pipeline.symmetry.scoring import round_centre, symmetry_errors
+    from pipeline.symmetry.truth_file import true_symmetries
+    from pipeline.types import SceneSetup, Symmetry
 
     registry = plugin_registry()
     config = trial_config(params)

@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from . import ExperimentOptions, SweepTask
-from .deviation_report import report_deviation
-from .paper_tasks import QUICK_VIEW_OFFSET_DEG, object_tasks
-from .paper_trial import run_paper_trial
-from .rows import group_rows
+from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.deviation_report import report_deviation
+from pipeline.experiments.paper_tasks import QUICK_VIEW_OFFSET_DEG, object_tasks
+from pipeline.experiments.paper_trial import run_paper_trial
+from pipeline.experiments.rows import group_rows
 
 NAME = "kth"
 DESCRIPTION = "three-finger set, SDH-2 + stereo, VC: deviation per object and stage (paper Fig. 23)"

@@ -10,11 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from ..figures import BoxPanel, box_plot_figure
-from ..sweep import write_csv
-from .common import failures_section, fmt
-from .definitions import MeasureTable
-from .paper_report import (
+from pipeline.experiments.common import failures_section, fmt
+from pipeline.experiments.definitions import MeasureTable
+from pipeline.experiments.paper_report import (
     SHAPE_HEADER,
     bias_section,
     deviation_box_figure,
@@ -22,8 +20,18 @@ from .paper_report import (
     shape_cells,
     shape_score_section,
 )
-from .paper_trial import DIVERGED_GROWTH_MM
-from .rows import INIT_LABELS, STAGES, count_rows, failure_lines, finished_rows, group_rows, value
+from pipeline.experiments.paper_trial import DIVERGED_GROWTH_MM
+from pipeline.experiments.rows import (
+    INIT_LABELS,
+    STAGES,
+    count_rows,
+    failure_lines,
+    finished_rows,
+    group_rows,
+    value,
+)
+from pipeline.experiments.sweep import write_csv
+from pipeline.reports.figures import BoxPanel, box_plot_figure
 
 #: "Clearly better than Stage 0": the final error is at most this fraction of Stage 0's.
 CLEARLY_BETTER_RATIO = 0.5

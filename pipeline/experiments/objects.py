@@ -31,14 +31,14 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import estimate_failed
-from ..sweep import write_csv
-from . import ExperimentOptions, SweepTask, explore
-from .common import fmt, plugin_registry, task_seed
-from .init import yaws_deg
-from .paper_tasks import paper_task, sweep_params, user_settings
-from .paper_trial import FAILURE_STAGES, run_paper_trial
-from .rows import value
+from pipeline.errors import estimate_failed
+from pipeline.experiments import ExperimentOptions, SweepTask, explore
+from pipeline.experiments.common import fmt, plugin_registry, task_seed
+from pipeline.experiments.init import yaws_deg
+from pipeline.experiments.paper_tasks import paper_task, sweep_params, user_settings
+from pipeline.experiments.paper_trial import FAILURE_STAGES, run_paper_trial
+from pipeline.experiments.rows import value
+from pipeline.experiments.sweep import write_csv
 
 NAME = "objects"
 DESCRIPTION = (
@@ -68,7 +68,7 @@ TAXONOMY = (*FAILURE_STAGES, "raised")
 
 
 def tasks(options: ExperimentOptions) -> list[SweepTask]:
-    from ..config import load_config
+    from pipeline.config import load_config
 
     count = QUICK_YAWS if options.quick else (options.repeats or YAWS)
     init = load_config(plugin_registry(), settings=user_settings(options)).choices["initialiser"]
@@ -332,7 +332,7 @@ def objects_figure(
 ) -> Path:
     """``objects.png``: per object, the shares of trials with opposing contacts and fused
     no worse than vision, and the median deviation at Stage 0, Stage 2 and selected."""
-    from ..figures import DotPanel, dot_figure
+    from pipeline.reports.figures import DotPanel, dot_figure
 
     labels = list(by_object)
     groups = [by_object[label] for label in labels]

@@ -9,17 +9,23 @@ from typing import Any
 
 import numpy as np
 
-from ..evaluation import BIAS_NEES_BOUND
-from ..figures import BoxPanel, box_plot_figure
-from .common import fmt
-from .rows import STAGES, count_rows, finished_rows, mean_five_numbers, mean_value
+from pipeline.experiments.common import fmt
+from pipeline.experiments.rows import (
+    STAGES,
+    count_rows,
+    finished_rows,
+    mean_five_numbers,
+    mean_value,
+)
+from pipeline.metrics.evaluation import BIAS_NEES_BOUND
+from pipeline.reports.figures import BoxPanel, box_plot_figure
 
 #: The paper's average deviation after fusion "when the method's conditions hold" (mm).
 DEVIATION_TARGET_MM = 5.0
 
 
 #: The shape scores the reports show per stage: (row field after ``stage{k}_``, column
-#: label, decimals). See :func:`pipeline.evaluation.shape_scores`.
+#: label, decimals). See :func:`pipeline.metrics.evaluation.shape_scores`.
 SHAPE_SCORES = (
     ("chamfer_mm", "Chamfer (mm)", 1),
     ("fscore_2mm", "F@2mm", 2),
@@ -42,7 +48,7 @@ def deviation_box_figure(
     """Deviation box-and-whisker plots, one panel per stage, one box per category.
 
     Each box is the category's averaged five-number summary (:func:`mean_five_numbers`).
-    It is drawn by handing :func:`pipeline.figures.box_plot_figure` those five values as the
+    It is drawn by handing :func:`pipeline.reports.figures.box_plot_figure` those five values as the
     sample: their 0/25/50/75/100th percentiles (linear interpolation) are exactly the five
     values, so the drawn box is the summary itself.
     """
@@ -101,7 +107,7 @@ def bias_section(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]
     """The "Bias against the truth" table: per group, Stage 2's bias error across and along
     the plane and in yaw beside the std its covariance claims (medians over the finished
     trials), and the share of trials whose bias lies outside the covariance's 99 % region
-    (:func:`pipeline.evaluation.bias_errors`), after a blank line; empty when no row has
+    (:func:`pipeline.metrics.evaluation.bias_errors`), after a blank line; empty when no row has
     the scores (a sensor that does not know its calibration error)."""
     scored = {
         label: [row for row in finished_rows(group) if "stage2_bias_nees" in row]

@@ -1,6 +1,6 @@
 """Task grids and trial configs of the paper's real-object experiments, run in simulation.
 
-One task is one full simulated trial (:func:`pipeline.trial.run_trial`): an object, an
+One task is one full simulated trial (:func:`pipeline.run.trial.run_trial`): an object, an
 initialiser (``ps`` or ``vc``), an object yaw and a seed.
 
 Object yaw. The paper placed each object "in different pose compared to Kinect". Here a
@@ -34,10 +34,10 @@ from typing import Any
 
 import tomli_w
 
-from ..catalogue import list_objects
-from ..errors import ConfigError
-from . import ExperimentOptions, SweepTask
-from .common import plugin_registry, task_seed
+from pipeline.catalogue.objects import list_objects
+from pipeline.errors import ConfigError
+from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.common import plugin_registry, task_seed
 
 #: Object yaws relative to the reference view (deg): five poses, like the paper's five runs.
 VIEW_OFFSETS_DEG = (-30.0, -15.0, 0.0, 15.0, 30.0)
@@ -54,7 +54,7 @@ def camera_azimuth_deg(options: ExperimentOptions, overrides: Sequence[str] = ()
         ConfigError: that sensor has no ``azimuth_deg`` (its viewpoint is not known before
             the trial runs, so no yaw can face the object toward it).
     """
-    from ..config import load_config
+    from pipeline.config import load_config
 
     config = load_config(
         plugin_registry(), settings=user_settings(options), overrides=list(overrides)
@@ -208,7 +208,7 @@ def trial_overrides(params: Mapping[str, Any]) -> list[str]:
 def trial_config(params: Mapping[str, Any]):
     """The resolved config of the trial of ``params``: the defaults, then the user's
     changes (``config``), then the experiment's :func:`trial_overrides`."""
-    from ..config import load_config
+    from pipeline.config import load_config
 
     return load_config(
         plugin_registry(), settings=params.get("config", {}), overrides=trial_overrides(params)

@@ -7,7 +7,7 @@ final stage's, or ``"failed"``), ``diverged``, ``points``, ``taxels_in_contact``
 ``seconds``, ``timings``, and per stage ``stage{k}_status``, ``stage{k}_iterations``,
 ``stage{k}_hypothesis`` (the alternative hypothesis its model comes from, empty for the
 fused model; docs/method.md §9), ``stage{k}_deviation_{min,q1,median,q3,max,mean}_mm``
-and every scalar metric of :func:`pipeline.evaluation.evaluate_stage` as
+and every scalar metric of :func:`pipeline.metrics.evaluation.evaluate_stage` as
 ``stage{k}_<metric>`` (thickness, side angle, diameter, plane errors, and the shape scores:
 ``chamfer_mm``, ``precision_2mm``, ``recall_2mm``, ``fscore_2mm``, the same at 5 mm,
 ``iou``); ``opposing_contacts`` (whether the first grasp's pads pressed from opposing
@@ -27,14 +27,14 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import StageFailure
-from ..formats import consistency_fields, hypothesis_field
-from .common import plugin_registry
-from .paper_tasks import trial_config
-from .rows import STAGES
+from pipeline.errors import StageFailure
+from pipeline.experiments.common import plugin_registry
+from pipeline.experiments.paper_tasks import trial_config
+from pipeline.experiments.rows import STAGES
+from pipeline.io.formats import consistency_fields, hypothesis_field
 
 if TYPE_CHECKING:
-    from ..trial import TrialRecord
+    from pipeline.run.trial import TrialRecord
 
 #: Where a trial can stop short of an estimate (:func:`failure_fields`), in pipeline order;
 #: a finished trial whose estimate is worse than vision's counts as ``estimator``.
@@ -63,8 +63,8 @@ def paper_trial(
     """:func:`run_paper_trial`'s row and the finished trial's record (None when a stage
     refused), with the trial's folder (``record.out_dir``) kept until the block ends, also
     when ``trial_dir`` is None (a temporary folder)."""
-    from ..outdir import staged_output
-    from ..trial import run_trial
+    from pipeline.io.outdir import staged_output
+    from pipeline.run.trial import run_trial
 
     registry = plugin_registry()
     config = trial_config(params)

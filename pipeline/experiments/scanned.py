@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from .common import plugin_registry
+from pipeline.experiments.common import plugin_registry
 
 
 def scan_trial_params(
@@ -26,7 +26,7 @@ def scan_trial_params(
     ranked grasp rather than the paper's single rule, and the default config's initialiser,
     with the object at ``yaw_deg`` (degrees about the vertical, frame R).
     """
-    from ..config import load_config
+    from pipeline.config import load_config
 
     defaults = load_config(plugin_registry())
     return {

@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ConfigError, InputError, StageFailure
-from . import ExperimentOptions, SweepTask
-from .common import fmt, plugin_registry
+from pipeline.errors import ConfigError, InputError, StageFailure
+from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.common import fmt, plugin_registry
 
 DESCRIPTION = "real labelled captures (--captures DIR): objects isolated/merged/split/missed"
 CONFIG_SECTIONS = ("sensor", "segmenter")
@@ -56,7 +56,7 @@ def capture_files(folder: Path) -> list[Path]:
     Raises:
         ConfigError: no such folder, no PCD in it, or a PCD without a ``label`` field.
     """
-    from ..captures import _pcd_header
+    from pipeline.io.captures import _pcd_header
 
     if not Path(folder).is_dir():
         raise ConfigError(f"--captures {folder}: no such folder")
@@ -111,8 +111,8 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
 
 def read_labels(path: Path) -> np.ndarray:
     """The ``label`` field of an organised PCD as an ``(H, W)`` int array."""
-    from ..captures import _pcd_header
-    from ..open3d_loader import open3d
+    from pipeline.io.captures import _pcd_header
+    from pipeline.io.open3d_loader import open3d
 
     header = _pcd_header(path)
     width, height = int(header["WIDTH"][0]), int(header["HEIGHT"][0])
@@ -167,8 +167,8 @@ def run_one(params: dict) -> dict[str, Any]:
     """One capture: support plane, segmentation, and each labelled object's outcome."""
     import json
 
-    from ..completion import segment_scene
-    from ..config import load_config
+    from pipeline.config import load_config
+    from pipeline.run.completion import segment_scene
 
     path = Path(params["path"])
     registry = plugin_registry()
@@ -205,7 +205,7 @@ def run_one(params: dict) -> dict[str, Any]:
 def table_share(labels: np.ndarray, observation) -> float:
     """Share of the table pixels (labels 1-9) within :data:`TABLE_TOLERANCE_M` of the
     support plane of ``observation`` (``z = table_height_m`` in its robot frame)."""
-    from ..perception.depth import backproject_depth
+    from pipeline.perception.depth import backproject_depth
 
     points, pixels = backproject_depth(
         observation.depth_m, observation.intrinsics, observation.T_robot_camera
@@ -248,8 +248,8 @@ def summary(rows: Sequence[dict]) -> list[list[Any]]:
 
 def report(rows: list[dict], out_dir: Path) -> list[Path]:
     """``results.csv`` (one row per labelled object) and ``report.md`` (per category)."""
-    from ..sweep import write_csv
-    from ..tables import format_table
+    from pipeline.experiments.sweep import write_csv
+    from pipeline.reports.tables import format_table
 
     flat = [
         {"scene": row["key"], "category": row["category"], **entry}

@@ -12,11 +12,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from . import ExperimentOptions, SweepTask
-from .deviation_report import report_deviation
-from .paper_tasks import QUICK_VIEW_OFFSET_DEG, VIEW_OFFSETS_DEG, object_tasks
-from .paper_trial import run_paper_trial
-from .rows import INIT_LABELS, group_rows
+from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.deviation_report import report_deviation
+from pipeline.experiments.paper_tasks import QUICK_VIEW_OFFSET_DEG, VIEW_OFFSETS_DEG, object_tasks
+from pipeline.experiments.paper_trial import run_paper_trial
+from pipeline.experiments.rows import INIT_LABELS, group_rows
 
 NAME = "spray"
 DESCRIPTION = "spray bottle, PG-70: deviation box plots per stage, VC and PS (paper Figs. 14-19)"

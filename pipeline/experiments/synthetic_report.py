@@ -10,9 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from ..figures import GridPanel, error_grid_figure
-from ..sweep import write_csv
-from .common import failures_section, fmt
+from pipeline.experiments.common import failures_section, fmt
+from pipeline.experiments.sweep import write_csv
+from pipeline.reports.figures import GridPanel, error_grid_figure
 
 #: A trial succeeds when the final diameter error is below this (the paper's 4 mm).
 SUCCESS_MM = 4.0

@@ -33,18 +33,18 @@ from typing import Any
 
 import numpy as np
 
-from ..formats import (
+from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.common import plugin_registry, task_seed
+from pipeline.io.formats import (
     consistency_fields,
     consistency_to_json,
     hypothesis_field,
     hypothesis_to_json,
 )
-from ..metrics import diameter_error
-from ..runner import run_estimator
-from ..stages import Estimator
-from ..synthetic import make_case
-from . import ExperimentOptions, SweepTask
-from .common import plugin_registry, task_seed
+from pipeline.metrics import diameter_error
+from pipeline.run.runner import run_estimator
+from pipeline.stages import Estimator
+from pipeline.synthetic import make_case
 
 #: The config sections a synthetic trial reads: no scene, sensor or hand is simulated.
 CONFIG_SECTIONS = ("estimator",)

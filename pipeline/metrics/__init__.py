@@ -9,14 +9,19 @@
   :data:`FSCORE_THRESHOLDS_M`) and :func:`hull_iou` (volumetric IoU on a grid).
 
 Pure functions on point arrays in the robot frame ``R`` (metres, radians); open3d is loaded
-lazily (through :mod:`pipeline.open3d_loader`) for exact point-to-triangle distances and
+lazily (through :mod:`pipeline.io.open3d_loader`) for exact point-to-triangle distances and
 inside tests.
 """
 
 from __future__ import annotations
 
-from .deviation import DeviationSummary, mesh_deviation, mesh_occupancy, point_to_mesh_distances
-from .fits import (
+from pipeline.metrics.deviation import (
+    DeviationSummary,
+    mesh_deviation,
+    mesh_occupancy,
+    point_to_mesh_distances,
+)
+from pipeline.metrics.fits import (
     MAD_TO_SIGMA,
     TUKEY_C,
     CircleFit,
@@ -29,7 +34,7 @@ from .fits import (
     plane_after_bias,
     side_wall,
 )
-from .shape_scores import (
+from pipeline.metrics.shape_scores import (
     FSCORE_THRESHOLDS_M,
     SolidGrid,
     hull_iou,

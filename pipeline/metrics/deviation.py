@@ -1,6 +1,6 @@
 """Geometric deviation of a completed model from the true mesh (docs/method.md §6): exact
 point-to-triangle distances and inside tests with open3d's ``RaycastingScene`` (loaded
-lazily through :mod:`pipeline.open3d_loader`), summarised per trial.
+lazily through :mod:`pipeline.io.open3d_loader`), summarised per trial.
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def _raycasting_scene(vertices: np.ndarray, faces: np.ndarray):
     must be shifted by the same origin); the remaining rounding is below 1e-6 m for objects
     under 1 m.
     """
-    from ..open3d_loader import open3d
+    from pipeline.io.open3d_loader import open3d
 
     o3d = open3d()
     vertices = np.asarray(vertices, dtype=np.float64)
@@ -68,7 +68,7 @@ def _raycasting_scene(vertices: np.ndarray, faces: np.ndarray):
 
 def _tensor(array: np.ndarray):
     """An open3d tensor of a float32 array."""
-    from ..open3d_loader import open3d
+    from pipeline.io.open3d_loader import open3d
 
     return open3d().core.Tensor(np.ascontiguousarray(array, dtype=np.float32))
 

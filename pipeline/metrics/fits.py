@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..types import Bias, SymmetryPlane
+from pipeline.types import Bias, SymmetryPlane
 
 #: Tukey bisquare tuning constant: 95 % efficiency under Gaussian residuals.
 TUKEY_C = 4.685

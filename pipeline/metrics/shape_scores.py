@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from .deviation import _raycasting_scene, _tensor
+from pipeline.metrics.deviation import _raycasting_scene, _tensor
 
 #: Distance thresholds of the F-score (m): 2 and 5 mm, the values shape-completion papers
 #: report for objects of hand size.

@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..stages import SensorSource, World
-from ..types import AfterView, DepthObservation, GraspOutcome, GraspPlan, PointCloud
-from .depth import backproject_depth
+from pipeline.perception.depth import backproject_depth
+from pipeline.stages import SensorSource, World
+from pipeline.types import AfterView, DepthObservation, GraspOutcome, GraspPlan, PointCloud
 
 
 @dataclass(frozen=True)

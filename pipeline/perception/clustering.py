@@ -10,7 +10,7 @@ import numpy as np
 
 
 def _cloud(points: np.ndarray):
-    from pipeline.open3d_loader import open3d
+    from pipeline.io.open3d_loader import open3d
 
     o3d = open3d()
     return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))

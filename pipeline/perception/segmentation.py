@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .clustering import dbscan_labels, voxel_subsample_indices
-from .table import TablePlane
+from pipeline.perception.clustering import dbscan_labels, voxel_subsample_indices
+from pipeline.perception.table import TablePlane
 
 
 @dataclass(frozen=True)
@@ -241,8 +241,8 @@ def segment_image(
     """
     from scipy.spatial import cKDTree
 
-    from .depth import backproject_depth
-    from .surfaces import concave_creases, connected_regions, image_normals
+    from pipeline.perception.depth import backproject_depth
+    from pipeline.perception.surfaces import concave_creases, connected_regions, image_normals
 
     depth = np.asarray(depth_m, dtype=np.float64)
     points_list, pixels = backprojected or backproject_depth(depth, intrinsics, T_robot_camera)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .table import refit_until_settled
+from pipeline.perception.table import refit_until_settled
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,7 @@ def candidate_planes(
     """The dominant planes of a cloud, one after the other (open3d RANSAC on what the
     planes before left), each refitted to its inliers; normals toward the camera at the
     origin. Stops after ``max_planes`` or when a plane holds fewer than ``min_points``."""
-    from pipeline.open3d_loader import open3d
+    from pipeline.io.open3d_loader import open3d
 
     o3d = open3d()
     o3d.utility.random.seed(seed)
@@ -105,7 +105,7 @@ def fit_support_plane(
         raise ValueError(f"a plane needs at least 3 points, got {len(points)}")
     grid = points
     if voxel_m > 0.0:
-        from pipeline.open3d_loader import open3d
+        from pipeline.io.open3d_loader import open3d
 
         o3d = open3d()
         cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))

@@ -78,7 +78,7 @@ def fit_table_ransac(
     Raises:
         ValueError: fewer than 3 points, or no near-horizontal plane was found.
     """
-    from pipeline.open3d_loader import open3d
+    from pipeline.io.open3d_loader import open3d
 
     points = np.asarray(points_robot, dtype=np.float64)
     if len(points) < 3:

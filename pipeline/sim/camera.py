@@ -17,10 +17,10 @@ import numpy as np
 import pybullet
 
 from pipeline.errors import ConfigError
-from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
+from pipeline.geometry.poses import look_at, rotation_z
 from pipeline.params import check_ordered, param
-from pipeline.poses import look_at, rotation_z
 from pipeline.sim.depth_noise import SimulatedDepth
+from pipeline.sim.kinect import KINECT_V1_INTRINSICS as KINECT
 from pipeline.types import CameraIntrinsics, DepthObservation
 
 if TYPE_CHECKING:

@@ -21,8 +21,7 @@ import trimesh
 
 from pipeline.errors import ConfigError, InputError
 from pipeline.metrics import mesh_occupancy, point_to_mesh_distances
-
-from . import native_output_silenced
+from pipeline.sim import native_output_silenced
 
 #: How far (m) a convex part of a non-convex object's collision geometry may stick out of
 #: the true surface. Taxels in contact lie on the collision geometry, so this bounds their

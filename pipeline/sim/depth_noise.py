@@ -36,7 +36,7 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline.kinect import axial_sigma_m
+from pipeline.sim.kinect import axial_sigma_m
 from pipeline.types import CameraIntrinsics
 
 #: Largest incidence angle used in the Nguyen terms (their ``pi/2 - theta`` denominators

@@ -60,9 +60,9 @@ from typing import Protocol
 
 import numpy as np
 
-from ..errors import ConfigError
-from ..types import GraspOutcome, GraspPlan, LiftOutcome, ObjectPose
-from .hand_models import FingerDrive, SimHand
+from pipeline.errors import ConfigError
+from pipeline.sim.hand_models import FingerDrive, SimHand
+from pipeline.types import GraspOutcome, GraspPlan, LiftOutcome, ObjectPose
 
 
 @dataclass(frozen=True)

@@ -10,10 +10,10 @@ from contextlib import contextmanager
 import numpy as np
 import pybullet as pb
 
-from ..types import GraspOutcome, GraspPlan, LiftOutcome, ObjectPose
-from . import grasp_sequence
-from .grasp_sequence import HAND_GRASP_SETTINGS, GraspSettings, opposed_fingers
-from .hands import Hand
+from pipeline.sim import grasp_sequence
+from pipeline.sim.grasp_sequence import HAND_GRASP_SETTINGS, GraspSettings, opposed_fingers
+from pipeline.sim.hands import Hand
+from pipeline.types import GraspOutcome, GraspPlan, LiftOutcome, ObjectPose
 
 __all__ = [
     "HAND_GRASP_SETTINGS",

@@ -19,7 +19,7 @@ Opening: for the PG-70 ``opening_m`` is the distance between the pad surfaces. F
 SDH-2 it is twice the distance from the palm axis of the distal pads' flat surfaces when
 each proximal link is tilted by ``alpha`` and the distal link held parallel to the palm
 axis (distal joint ``-alpha``): ``opening = 2 (r_base - 14.8 mm - 86.5 mm sin(alpha))``
-with ``r_base = 38.1 mm`` (:mod:`pipeline.perception.sdh_geometry`); at spread 60 deg that
+with ``r_base = 38.1 mm`` (:mod:`pipeline.planning.sdh_geometry`); at spread 60 deg that
 is the diameter of the circle the three distal pads touch. Openings below 46.6 mm flex the
 proximal links inward (``alpha > 0``), for narrow objects.
 
@@ -39,10 +39,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..pad_layout import pad_grid
-from ..perception import sdh_geometry
-from ..types import ClosingPad, GraspPlan, GripperSpec, PadLayout, TaxelState
-from .taxels import taxels_to_robot
+from pipeline.geometry.pad_layout import pad_grid
+from pipeline.planning import sdh_geometry
+from pipeline.sim.taxels import taxels_to_robot
+from pipeline.types import ClosingPad, GraspPlan, GripperSpec, PadLayout, TaxelState
 
 if TYPE_CHECKING:
     import yourdfpy
@@ -63,7 +63,8 @@ SDH_THUMB_SQUEEZE_RAD = 0.1
 
 @dataclass(frozen=True)
 class PadGeometry:
-    """A pad's layout plus the shape of its surface (see :func:`pipeline.pad_layout.pad_grid`)."""
+    """A pad's layout plus the shape of its surface (see
+    :func:`pipeline.geometry.pad_layout.pad_grid`)."""
 
     layout: PadLayout
     curved_rows: int = 0
@@ -190,7 +191,7 @@ def _sdh_closing() -> tuple[ClosingPad, ...]:
     """The distal pads close from their fingers' bases (the base joints' origins in
     ``robots/sdh2.urdf``) along the fingers' facings: fingers 1 and 2 turn from facing the
     thumb by the spread, one each way; the thumb faces +x
-    (:func:`pipeline.perception.sdh_geometry.finger_facings`)."""
+    (:func:`pipeline.planning.sdh_geometry.finger_facings`)."""
     joints = hand_urdf("sdh2.urdf").joint_map
     facings = sdh_geometry.finger_facings(0.0)
     return tuple(

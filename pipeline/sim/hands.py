@@ -11,10 +11,8 @@ import numpy as np
 import pybullet as pb
 from scipy.spatial.transform import Rotation
 
-from robots import ROOT as ROBOTS_ROOT
-
-from ..errors import ConfigError
-from .hand_models import (
+from pipeline.errors import ConfigError
+from pipeline.sim.hand_models import (
     GRIPPERS,
     HAND_MODELS,
     PARK_POSITION_M,
@@ -22,12 +20,13 @@ from .hand_models import (
     SimHand,
     TaxelFrames,
 )
-from .taxels import (
+from pipeline.sim.taxels import (
     ray_segments,
     rotations_from_quaternions,
     segments_near_box,
     surface_gaps,
 )
+from robots import ROOT as ROBOTS_ROOT
 
 __all__ = ["GRIPPERS", "HAND_MODELS", "PARK_POSITION_M", "Hand"]
 

@@ -20,9 +20,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import InputError
-from pipeline.types import ObjectPose
-
-from .bodies import (
+from pipeline.sim.bodies import (
     MAX_SETTLE_STEPS,
     OBJECT_RGBA,
     REST_SPEED_M_S,
@@ -32,7 +30,8 @@ from .bodies import (
     TABLE_RGBA,
     mass_properties,
 )
-from .collision import convex_decomposition
+from pipeline.sim.collision import convex_decomposition
+from pipeline.types import ObjectPose
 
 #: Bullet collision margin of the table and objects (m). Bullet's default (about 1 mm on
 #: convex hulls) would leave objects floating that high above the table.
@@ -294,7 +293,7 @@ def within_faces(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
     the surface by far less than the depth sensor's noise."""
     if len(mesh.faces) <= max_faces:
         return mesh
-    from pipeline.open3d_loader import open3d
+    from pipeline.io.open3d_loader import open3d
 
     o3d = open3d()
     dense = o3d.geometry.TriangleMesh(

@@ -1,6 +1,6 @@
 """Taxels in the robot frame and ray probes along their normals: pure numpy/scipy, no
 simulator. The layout of the taxels on a pad, and the pad frame, are
-:mod:`pipeline.pad_layout`'s.
+:mod:`pipeline.geometry.pad_layout`'s.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The PyBullet world: one object on the table and one hand, as the built-in ``pybullet``
-world plugin (:mod:`plugins.pybullet_world`) exposes it through the
+world plugin (:mod:`plugins.worlds.pybullet_world`) exposes it through the
 :class:`pipeline.stages.World` contract.
 
 The robot frame ``R`` is PyBullet's world frame.

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..metrics import MAD_TO_SIGMA
-from ..types import Symmetry
+from pipeline.metrics import MAD_TO_SIGMA
+from pipeline.types import Symmetry
 
 #: Points the fit uses at most (an even subsample of the cloud's order).
 FIT_POINTS = 800

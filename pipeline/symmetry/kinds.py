@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..perception.visibility import free_space_depths
-from ..types import DepthObservation, Symmetry, SymmetryPlane
-from .axis_fit import SLICE_M, AxisFit, fit_axis, profile_residuals
+from pipeline.perception.visibility import free_space_depths
+from pipeline.symmetry.axis_fit import SLICE_M, AxisFit, fit_axis, profile_residuals
+from pipeline.types import DepthObservation, Symmetry, SymmetryPlane
 
 #: Turns of the visible profile a sweep completion holds (the view itself among them).
 SWEEP_TURNS = 12

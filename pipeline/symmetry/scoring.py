@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..types import Symmetry
+from pipeline.types import Symmetry
 
 
 def nearest_point(symmetry: Symmetry, point_m: np.ndarray) -> np.ndarray:

@@ -22,8 +22,8 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.spatial import cKDTree
 
-from ..metrics import sample_surface
-from ..types import Symmetry
+from pipeline.metrics import sample_surface
+from pipeline.types import Symmetry
 
 #: The angles a candidate axis turns the surface by (rad). None is a multiple of 360/k deg
 #: for k <= 8, so an object with a k-fold symmetry only (a box, 2- or 4-fold about its

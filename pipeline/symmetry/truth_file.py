@@ -1,6 +1,6 @@
 """``symmetry.json``: an object's true symmetries stored beside its mesh file.
 
-A mesh file ``DIR/NAME.obj`` (any format :func:`pipeline.catalogue.load_object` reads) has
+A mesh file ``DIR/NAME.obj`` (any format :func:`pipeline.catalogue.objects.load_object` reads) has
 its true mirror planes and rotation axes in ``DIR/symmetry.json`` when that file exists and
 names it::
 
@@ -30,13 +30,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import InputError
-from ..formats import check_keys, read_json
-from ..types import Symmetry
-from ..units import scale_of
+from pipeline.errors import InputError
+from pipeline.io.formats import check_keys, read_json
+from pipeline.io.units import scale_of
+from pipeline.types import Symmetry
 
 if TYPE_CHECKING:
-    from ..catalogue import CatalogueObject
+    from pipeline.catalogue.objects import CatalogueObject
 
 _log = logging.getLogger(__name__)
 
@@ -141,9 +141,8 @@ def searched_symmetries(vertices: np.ndarray, faces: np.ndarray) -> tuple[Symmet
     import trimesh
 
     from objects import ROOT as OBJECTS_ROOT
-
-    from ..sim.collision import cache_dir, mesh_hash
-    from .search import SEARCH_VERSION, mesh_symmetries
+    from pipeline.sim.collision import cache_dir, mesh_hash
+    from pipeline.symmetry.search import SEARCH_VERSION, mesh_symmetries
 
     digest = mesh_hash(trimesh.Trimesh(vertices, faces, process=False))
     name = f"{digest}-v{SEARCH_VERSION}.json"

@@ -12,7 +12,7 @@ Everything is pure numpy: no simulator, no files.
 
 from __future__ import annotations
 
-from .cases import (
+from pipeline.synthetic.cases import (
     PAD_NAMES,
     GripperKind,
     PadGeometry,
@@ -23,7 +23,7 @@ from .cases import (
     perturbed_plane,
     touch_pads,
 )
-from .cylinder import (
+from pipeline.synthetic.cylinder import (
     Cylinder,
     CylinderView,
     Viewpoint,
@@ -31,7 +31,7 @@ from .cylinder import (
     cylinder_mesh,
     render_cylinder,
 )
-from .tabletop import (
+from pipeline.synthetic.tabletop import (
     SyntheticObject,
     box_object,
     cylinder_object,

@@ -36,8 +36,16 @@ from typing import Literal
 
 import numpy as np
 
-from ..poses import rotation_z
-from ..types import (
+from pipeline.geometry.poses import rotation_z
+from pipeline.synthetic.cylinder import (
+    DEFAULT_CYLINDER,
+    DEFAULT_VIEWPOINT,
+    Cylinder,
+    Viewpoint,
+    camera_direction,
+    render_cylinder,
+)
+from pipeline.types import (
     Bias,
     Contacts,
     DepthObservation,
@@ -45,14 +53,6 @@ from ..types import (
     PointCloud,
     SymmetryInit,
     SymmetryPlane,
-)
-from .cylinder import (
-    DEFAULT_CYLINDER,
-    DEFAULT_VIEWPOINT,
-    Cylinder,
-    Viewpoint,
-    camera_direction,
-    render_cylinder,
 )
 
 GripperKind = Literal["parallel", "three_finger"]

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..kinect import KINECT_V1_INTRINSICS
-from ..poses import look_at
-from ..types import CameraIntrinsics, PointCloud
+from pipeline.geometry.poses import look_at
+from pipeline.sim.kinect import KINECT_V1_INTRINSICS
+from pipeline.types import CameraIntrinsics, PointCloud
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class Viewpoint:
         azimuth_rad: direction of the camera from the axis, about +z (0 = +x side).
         elevation_rad: camera height angle above the horizontal through the centre.
         distance_m: camera-to-centre distance.
-        intrinsics: pinhole intrinsics (default :data:`pipeline.kinect.KINECT_V1_INTRINSICS`).
+        intrinsics: pinhole intrinsics (default :data:`pipeline.sim.kinect.KINECT_V1_INTRINSICS`).
     """
 
     azimuth_rad: float = np.pi

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.kinect import KINECT_V1_INTRINSICS as KINECT
-from pipeline.kinect import axial_sigma_m
-from pipeline.poses import look_at, rotation_z
+from pipeline.geometry.poses import look_at, rotation_z
+from pipeline.sim.kinect import KINECT_V1_INTRINSICS as KINECT
+from pipeline.sim.kinect import axial_sigma_m
 from pipeline.types import CameraIntrinsics, DepthObservation
 
 

@@ -60,15 +60,15 @@ from typing import Any
 
 import numpy as np
 
-from ..camera_file import CameraFile, read_camera
-from ..captures import Capture, read_depth_image
-from ..errors import InputError, MissingExtraError
-from ..formats import read_cloud, read_contacts, read_json
-from ..metrics import nearest_distances, plane_after_bias, point_to_mesh_distances
-from ..trial_pictures import DEVIATION_CMAP, DEVIATION_MAX_M
-from ..types import Bias, Contacts, SymmetryPlane
-from .layout import blueprint, plots_path
-from .shapes import plane_quad
+from pipeline.errors import InputError, MissingExtraError
+from pipeline.io.camera_file import CameraFile, read_camera
+from pipeline.io.captures import Capture, read_depth_image
+from pipeline.io.formats import read_cloud, read_contacts, read_json
+from pipeline.metrics import nearest_distances, plane_after_bias, point_to_mesh_distances
+from pipeline.reports.trial_pictures import DEVIATION_CMAP, DEVIATION_MAX_M
+from pipeline.types import Bias, Contacts, SymmetryPlane
+from pipeline.viz.layout import blueprint, plots_path
+from pipeline.viz.shapes import plane_quad
 
 #: File name of the recording inside a run folder.
 RECORDING_NAME = "recording.rrd"
@@ -277,7 +277,7 @@ def _after_view_points(recorded, cloud: np.ndarray | None) -> tuple[np.ndarray, 
     """Each grasp's after-view back-projected (its ``camera.json`` beside it), within
     :data:`AFTER_VIEW_MARGIN_M` of the cloud's bounding box; the grasps with one that is
     there and placed in the robot frame."""
-    from ..perception.depth import backproject_depth
+    from pipeline.perception.depth import backproject_depth
 
     if cloud is None or not len(cloud):
         return ()
@@ -462,9 +462,9 @@ class _RunRecorder:
 def _world_class(document: dict[str, Any]):
     """The installed world class a run was made in (a run from before the world was a
     stage: the shipped default), or None when it is not installed."""
-    from ..config import load_config
-    from ..errors import PluginError
-    from ..registry import load_registry
+    from pipeline.config import load_config
+    from pipeline.errors import PluginError
+    from pipeline.registry import load_registry
 
     registry = load_registry()
     name = document.get("stages_used", {}).get("world") or load_config(registry).choices["world"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..types import SymmetryPlane
+from pipeline.types import SymmetryPlane
 
 #: The plane quad reaches this far beyond the model on each side (m).
 PLANE_MARGIN_M = 0.015

@@ -1,5 +1,5 @@
 """MuJoCo simulation: the same table, object and hands as the PyBullet world, compiled by
-MuJoCo, for the built-in ``mujoco`` world plugin (:mod:`plugins.mujoco_world`).
+MuJoCo, for the built-in ``mujoco`` world plugin (:mod:`plugins.worlds.mujoco_world`).
 
 * :mod:`.scene` builds the model (an ``MjSpec``): the table, the object (its mesh for the
   camera, convex parts for contacts) and a hand compiled from the project's URDF in

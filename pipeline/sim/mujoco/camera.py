@@ -13,8 +13,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from ...types import CameraIntrinsics
-from .scene import HAND_GROUP, OBJECT_VISUAL_GROUP, TABLE_GROUP
+from pipeline.sim.mujoco.scene import HAND_GROUP, OBJECT_VISUAL_GROUP, TABLE_GROUP
+from pipeline.types import CameraIntrinsics
 
 #: The geom groups the camera sees.
 CAMERA_GROUPS = np.array(

@@ -9,9 +9,14 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..hand_models import HAND_MODELS, SimHand, TaxelFrames
-from ..taxels import ray_segments, segments_near_box, surface_gaps
-from .scene import HAND_PREFIX, HAND_TARGET_BODY, OBJECT_COLLISION_GROUP, TABLE_GROUP
+from pipeline.sim.hand_models import HAND_MODELS, SimHand, TaxelFrames
+from pipeline.sim.mujoco.scene import (
+    HAND_PREFIX,
+    HAND_TARGET_BODY,
+    OBJECT_COLLISION_GROUP,
+    TABLE_GROUP,
+)
+from pipeline.sim.taxels import ray_segments, segments_near_box, surface_gaps
 
 #: The geom groups a taxel probe sees: the object's collision parts and the table (which
 #: hides the object behind it); never the hand.

@@ -33,12 +33,11 @@ import mujoco
 import numpy as np
 import trimesh
 
+from pipeline.errors import InputError
+from pipeline.sim.bodies import OBJECT_RGBA, TABLE_HALF_EXTENTS_M, TABLE_RGBA, mass_properties
+from pipeline.sim.collision import convex_decomposition, read_convex_parts
+from pipeline.sim.hand_models import HAND_MODELS, PARK_POSITION_M
 from robots import ROOT as ROBOTS_ROOT
-
-from ...errors import InputError
-from ..bodies import OBJECT_RGBA, TABLE_HALF_EXTENTS_M, TABLE_RGBA, mass_properties
-from ..collision import convex_decomposition, read_convex_parts
-from ..hand_models import HAND_MODELS, PARK_POSITION_M
 
 #: MuJoCo's time step (s). The grasp sequence steps at 1/240 s; each of its steps is this
 #: many MuJoCo steps (:meth:`pipeline.sim.mujoco.world.MujocoPhysics.step`): four make

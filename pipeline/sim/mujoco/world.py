@@ -1,5 +1,5 @@
 """The MuJoCo world: one object on the table and at most one hand, as the built-in
-``mujoco`` world plugin (:mod:`plugins.mujoco_world`) exposes it through the
+``mujoco`` world plugin (:mod:`plugins.worlds.mujoco_world`) exposes it through the
 :class:`pipeline.stages.World` contract.
 
 The model is compiled from the scene (:func:`pipeline.sim.mujoco.scene.build_model`)
@@ -17,8 +17,14 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ...errors import ConfigError
-from ...types import (
+from pipeline.errors import ConfigError
+from pipeline.sim import grasp_sequence
+from pipeline.sim.bodies import MAX_SETTLE_STEPS, REST_SPEED_M_S, REST_SPIN_RAD_S, SETTLE_STEPS
+from pipeline.sim.grasp_sequence import GraspSettings
+from pipeline.sim.mujoco.camera import ray_cast
+from pipeline.sim.mujoco.hand import MujocoHand
+from pipeline.sim.mujoco.scene import OBJECT_BODY, TIMESTEP_S, ObjectBody, build_model
+from pipeline.types import (
     CameraImage,
     CameraIntrinsics,
     GraspOutcome,
@@ -27,12 +33,6 @@ from ...types import (
     ObjectPose,
     SceneObject,
 )
-from .. import grasp_sequence
-from ..bodies import MAX_SETTLE_STEPS, REST_SPEED_M_S, REST_SPIN_RAD_S, SETTLE_STEPS
-from ..grasp_sequence import GraspSettings
-from .camera import ray_cast
-from .hand import MujocoHand
-from .scene import OBJECT_BODY, TIMESTEP_S, ObjectBody, build_model
 
 #: The time step of the settling and of the grasp sequence when it does not set one (s).
 SEQUENCE_STEP_S = 1.0 / 240.0

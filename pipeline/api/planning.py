@@ -1,0 +1,125 @@
+"""Grasp-planning kernels the built-in planners are made of: candidates, their
+geometry and predicted pad contacts.
+
+What is named here keeps its meaning across releases, as :mod:`pipeline.api` does.
+Each name loads its module when it is first imported, so a plugin pays only for the
+kernels it uses (``symfuse plugins`` imports every plugin and must stay quick).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pipeline.planning.candidate import (
+        Candidate,
+        CandidateCloud,
+        CandidateParams,
+        candidate_frame,
+    )
+    from pipeline.planning.grasp_candidates import (
+        CandidatePlanner,
+        closing_angles,
+        plan_from_candidates,
+    )
+    from pipeline.planning.grasp_geometry import (
+        SDH_FINGER_ANGLES_RAD,
+        SDH_PARALLEL_FINGER_ANGLES_RAD,
+        SDH_PARALLEL_FINGER_LATERAL_M,
+        SDH_PARALLEL_FINGER_OFFSETS_M,
+        back_face_is_flat,
+        cylindrical_top_grasp,
+        front_to_back,
+        hand_pose,
+        pad_band,
+        parallel_top_grasp,
+        rotate_z,
+    )
+    from pipeline.planning.next_grasp import MeasurementModel
+    from pipeline.planning.pad_contact import sdh_flat_part_edge_m
+    from pipeline.planning.parallel_candidates import ParallelHand, parallel_candidate
+    from pipeline.planning.sdh_candidates import (
+        PINCH_SPREAD_RAD,
+        SDH_SPREADS,
+        TOO_NARROW,
+        sdh_candidate,
+    )
+
+#: Where each name comes from: (module, name there).
+_SOURCES = {
+    "Candidate": ("pipeline.planning.candidate", "Candidate"),
+    "CandidateCloud": ("pipeline.planning.candidate", "CandidateCloud"),
+    "CandidateParams": ("pipeline.planning.candidate", "CandidateParams"),
+    "CandidatePlanner": ("pipeline.planning.grasp_candidates", "CandidatePlanner"),
+    "MeasurementModel": ("pipeline.planning.next_grasp", "MeasurementModel"),
+    "PINCH_SPREAD_RAD": ("pipeline.planning.sdh_candidates", "PINCH_SPREAD_RAD"),
+    "ParallelHand": ("pipeline.planning.parallel_candidates", "ParallelHand"),
+    "SDH_FINGER_ANGLES_RAD": ("pipeline.planning.grasp_geometry", "SDH_FINGER_ANGLES_RAD"),
+    "SDH_PARALLEL_FINGER_ANGLES_RAD": (
+        "pipeline.planning.grasp_geometry",
+        "SDH_PARALLEL_FINGER_ANGLES_RAD",
+    ),
+    "SDH_PARALLEL_FINGER_LATERAL_M": (
+        "pipeline.planning.grasp_geometry",
+        "SDH_PARALLEL_FINGER_LATERAL_M",
+    ),
+    "SDH_PARALLEL_FINGER_OFFSETS_M": (
+        "pipeline.planning.grasp_geometry",
+        "SDH_PARALLEL_FINGER_OFFSETS_M",
+    ),
+    "SDH_SPREADS": ("pipeline.planning.sdh_candidates", "SDH_SPREADS"),
+    "TOO_NARROW": ("pipeline.planning.sdh_candidates", "TOO_NARROW"),
+    "back_face_is_flat": ("pipeline.planning.grasp_geometry", "back_face_is_flat"),
+    "candidate_frame": ("pipeline.planning.candidate", "candidate_frame"),
+    "closing_angles": ("pipeline.planning.grasp_candidates", "closing_angles"),
+    "cylindrical_top_grasp": ("pipeline.planning.grasp_geometry", "cylindrical_top_grasp"),
+    "front_to_back": ("pipeline.planning.grasp_geometry", "front_to_back"),
+    "hand_pose": ("pipeline.planning.grasp_geometry", "hand_pose"),
+    "pad_band": ("pipeline.planning.grasp_geometry", "pad_band"),
+    "parallel_candidate": ("pipeline.planning.parallel_candidates", "parallel_candidate"),
+    "parallel_top_grasp": ("pipeline.planning.grasp_geometry", "parallel_top_grasp"),
+    "plan_from_candidates": ("pipeline.planning.grasp_candidates", "plan_from_candidates"),
+    "rotate_z": ("pipeline.planning.grasp_geometry", "rotate_z"),
+    "sdh_candidate": ("pipeline.planning.sdh_candidates", "sdh_candidate"),
+    "sdh_flat_part_edge_m": ("pipeline.planning.pad_contact", "sdh_flat_part_edge_m"),
+}
+
+__all__ = [
+    "PINCH_SPREAD_RAD",
+    "SDH_FINGER_ANGLES_RAD",
+    "SDH_PARALLEL_FINGER_ANGLES_RAD",
+    "SDH_PARALLEL_FINGER_LATERAL_M",
+    "SDH_PARALLEL_FINGER_OFFSETS_M",
+    "SDH_SPREADS",
+    "TOO_NARROW",
+    "Candidate",
+    "CandidateCloud",
+    "CandidateParams",
+    "CandidatePlanner",
+    "MeasurementModel",
+    "ParallelHand",
+    "back_face_is_flat",
+    "candidate_frame",
+    "closing_angles",
+    "cylindrical_top_grasp",
+    "front_to_back",
+    "hand_pose",
+    "pad_band",
+    "parallel_candidate",
+    "parallel_top_grasp",
+    "plan_from_candidates",
+    "rotate_z",
+    "sdh_candidate",
+    "sdh_flat_part_edge_m",
+]
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module, original = _SOURCES[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(import_module(module), original)
+    globals()[name] = value
+    return value

@@ -1,0 +1,60 @@
+"""Simulation kernels the built-in sensors and tactile model are made of: camera
+rendering, depth-noise models, the shipped hands.
+
+What is named here keeps its meaning across releases, as :mod:`pipeline.api` does.
+Each name loads its module when it is first imported, so a plugin pays only for the
+kernels it uses (``symfuse plugins`` imports every plugin and must stay quick).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pipeline.shipped_hands import ShippedHandsWorld
+    from pipeline.sim.camera import CameraParams, check_camera_params, check_depth_range, observe
+    from pipeline.sim.depth_noise import (
+        KinectV1Noise,
+        SimulatedDepth,
+        StereoNoise,
+        simulate_kinect_v1,
+        simulate_stereo,
+    )
+
+#: Where each name comes from: (module, name there).
+_SOURCES = {
+    "CameraParams": ("pipeline.sim.camera", "CameraParams"),
+    "KinectV1Noise": ("pipeline.sim.depth_noise", "KinectV1Noise"),
+    "ShippedHandsWorld": ("pipeline.shipped_hands", "ShippedHandsWorld"),
+    "SimulatedDepth": ("pipeline.sim.depth_noise", "SimulatedDepth"),
+    "StereoNoise": ("pipeline.sim.depth_noise", "StereoNoise"),
+    "check_camera_params": ("pipeline.sim.camera", "check_camera_params"),
+    "check_depth_range": ("pipeline.sim.camera", "check_depth_range"),
+    "observe": ("pipeline.sim.camera", "observe"),
+    "simulate_kinect_v1": ("pipeline.sim.depth_noise", "simulate_kinect_v1"),
+    "simulate_stereo": ("pipeline.sim.depth_noise", "simulate_stereo"),
+}
+
+__all__ = [
+    "CameraParams",
+    "KinectV1Noise",
+    "ShippedHandsWorld",
+    "SimulatedDepth",
+    "StereoNoise",
+    "check_camera_params",
+    "check_depth_range",
+    "observe",
+    "simulate_kinect_v1",
+    "simulate_stereo",
+]
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module, original = _SOURCES[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(import_module(module), original)
+    globals()[name] = value
+    return value

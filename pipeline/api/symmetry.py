@@ -1,0 +1,34 @@
+"""Symmetry kernels the built-in initialisers are made of: the choice between a mirror plane
+and a rotation axis by the evidence of a view.
+
+What is named here keeps its meaning across releases, as :mod:`pipeline.api` does.
+Each name loads its module when it is first imported, so a plugin pays only for the
+kernels it uses (``symfuse plugins`` imports every plugin and must stay quick).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pipeline.symmetry.kinds import choose_kind
+
+#: Where each name comes from: (module, name there).
+_SOURCES = {
+    "choose_kind": ("pipeline.symmetry.kinds", "choose_kind"),
+}
+
+__all__ = [
+    "choose_kind",
+]
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module, original = _SOURCES[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(import_module(module), original)
+    globals()[name] = value
+    return value

@@ -1,0 +1,1 @@
+"""Small geometric building blocks every layer uses: poses and the taxel layout of a pad."""

@@ -1,0 +1,281 @@
+"""Predicted pad contact: a vertical pad's taxel grid (:class:`PadTaxels`; flat, or an
+SDH-2 distal pad with its curved tip) moving horizontally toward a sampled surface, where
+it first touches, how much of it then touches and how inclined the surface is there
+(:func:`pad_coverage`). Grasp candidates score their contacts with it
+(:mod:`pipeline.planning.candidate`), and :mod:`pipeline.planning.next_grasp` predicts the
+contacts a next grasp would add.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.geometry.pad_layout import pad_grid
+from pipeline.planning import sdh_geometry as sdh
+from pipeline.types import PadLayout
+
+
+@dataclass(frozen=True)
+class PadContact:
+    """Where a pad moving toward the surface stops and how much of it touches.
+
+    Attributes:
+        touch_m: position of the pad's flat surface along its motion when it stops (m).
+        coverage: fraction of its taxels within the tolerance of the surface then.
+        points: ``(K, 3)`` surface points under those taxels.
+        surface_fit: what the surface's slopes are fitted to (:func:`_slopes`'s arguments:
+            the seen taxels' column offsets and row heights, the surface in front of each,
+            the touch and the tolerance, m), when first asked for: a candidate rejected
+            before its score needs none. Empty: a surface facing the pad.
+    """
+
+    touch_m: float
+    coverage: float
+    points: np.ndarray
+    surface_fit: tuple = field(default=(), repr=False, compare=False)
+
+    @functools.cached_property
+    def _slopes(self) -> tuple[float, float]:
+        return _slopes(*self.surface_fit) if self.surface_fit else (0.0, 0.0)
+
+    @property
+    def inclination_rad(self) -> float:
+        """Angle between the surface's normal at the touch and the pad's."""
+        return float(np.arctan(np.hypot(*self._slopes)))
+
+    @property
+    def turn_rad(self) -> float:
+        """The part of the inclination about the vertical, signed: the angle about +z by
+        which the side in front of the pad is turned from facing it (from the surface's
+        slope across the pad)."""
+        return float(-np.arctan(self._slopes[0]))
+
+    @property
+    def quality(self) -> float:
+        """Coverage times ``cos^2`` of the inclination: an inclined surface takes the pad's
+        force partly along itself, and the pad slides off it."""
+        return self.coverage * math.cos(self.inclination_rad) ** 2
+
+    def stops_before(self, point_m: np.ndarray, direction: np.ndarray) -> bool:
+        """Whether the pad, moving along ``direction`` (the unit it was predicted with),
+        stops before reaching ``point_m`` (frame R): past the object's centre, the surface
+        it found is the far side, met from inside a hole in the model."""
+        return self.touch_m < float(np.asarray(point_m) @ np.asarray(direction))
+
+
+#: Fewest taxel rows a pad must touch for its contact to be a side of the object.
+_MIN_CONTACT_ROWS = 3
+#: Depth of the surface layer a pad meets in each taxel cell (m): over twice the cloud's
+#: depth noise, thinner than any graspable object's wall-to-wall depth.
+LAYER_M = 0.006
+
+
+@dataclass(frozen=True)
+class PadTaxels:
+    """A vertical pad's taxel grid as it moves horizontally (metres): ``col_u`` the
+    columns' offsets across the motion (evenly ``pitch_m`` apart), ``row_z`` the rows'
+    heights, ``row_recess`` how far each row lies behind the pad's flat surface (a tip
+    curving away from the object)."""
+
+    col_u: np.ndarray
+    row_z: np.ndarray
+    row_recess: np.ndarray
+    pitch_m: float
+
+    @property
+    def z_range_m(self) -> tuple[float, float]:
+        """The heights the taxels see: from half a pitch below the lowest row to half a
+        pitch above the highest. Only points in this range can touch the pad."""
+        half = self.pitch_m / 2.0
+        return float(self.row_z.min()) - half, float(self.row_z.max()) + half
+
+
+def flat_pad_taxels(pad: PadLayout, centre_z_m: float) -> PadTaxels:
+    """A flat vertical pad, rows along z around ``centre_z_m``."""
+    positions, _ = pad_grid(pad.rows, pad.cols, pad.pitch_m)
+    grid = positions.reshape(pad.rows, pad.cols, 3)
+    return PadTaxels(grid[0, :, 1], centre_z_m - grid[:, 0, 0], np.zeros(pad.rows), pad.pitch_m)
+
+
+def sdh_flat_part_edge_m(pad: PadLayout) -> float:
+    """How far below the SDH-2 distal pad's centre its flat rows end (negative: above
+    it): the curved tip rows below them lie back from a side the pad presses on."""
+    flat_rows = pad.rows - sdh.DISTAL_PAD_CURVED_ROWS
+    return (flat_rows - (pad.rows - 1) / 2.0 - 0.5) * pad.pitch_m
+
+
+def sdh_distal_taxels(pad: PadLayout, centre_z_m: float) -> PadTaxels:
+    """An SDH-2 distal pad on a vertical distal link: rows along the link toward the tip
+    (down), the curved tip rows recessed behind the flat surface."""
+    return curved_pad_taxels(
+        pad, centre_z_m, sdh.DISTAL_PAD_CURVED_ROWS, sdh.DISTAL_PAD_CURVE_RADIUS_M
+    )
+
+
+def curved_pad_taxels(
+    pad: PadLayout, centre_z_m: float, curved_rows: int, radius_m: float
+) -> PadTaxels:
+    """A pad on a vertical link whose ``curved_rows`` rows nearest the tip (down) lie on a
+    cylinder of ``radius_m`` curving away, recessed behind the flat surface."""
+    positions, _ = pad_grid(pad.rows, pad.cols, pad.pitch_m, curved_rows, radius_m)
+    grid = positions.reshape(pad.rows, pad.cols, 3)
+    return PadTaxels(grid[0, :, 1], centre_z_m - grid[:, 0, 0], -grid[:, 0, 2], pad.pitch_m)
+
+
+def pad_coverage(
+    points_robot: np.ndarray,
+    origin_m: np.ndarray,
+    direction: np.ndarray,
+    taxels: PadTaxels,
+    tolerance_m: float,
+) -> PadContact | None:
+    """Predict a pad's contact with the surface sampled by ``points_robot``.
+
+    The pad moves along ``direction`` (horizontal unit); its columns are offset across the
+    motion from the line through ``origin_m``. Each taxel sees the points within half a
+    pitch of it across and in height, and of those the layer :data:`LAYER_M` deep behind
+    the nearest (a z-buffer seen from the pad: a completed cloud also holds the far side,
+    which is not the surface in front of it); their median position along
+    ``direction`` is the surface in front of it. The pad stops when its first taxel
+    reaches the surface; the taxels whose surface is then within ``tolerance_m`` count as
+    touching.
+
+    Returns:
+        The contact, or None when no point lies in front of any taxel or the touching
+        taxels span fewer than three rows (about 10 mm: the pad meets an edge or a
+        horizontal top, not a side).
+    """
+    origin_m = np.asarray(origin_m, dtype=np.float64)
+    direction = np.asarray(direction, dtype=np.float64)
+    return pad_coverages(points_robot, origin_m[None], direction[None], taxels, tolerance_m)[0]
+
+
+def pad_coverages(
+    points_robot: np.ndarray,
+    origins_m: np.ndarray,
+    directions: np.ndarray,
+    taxels: PadTaxels,
+    tolerance_m: float,
+) -> list[PadContact | None]:
+    """:func:`pad_coverage` of the same pad moving from each of ``origins_m`` along each of
+    ``directions`` (both ``(Q, 3)``) at once: one pass over the points for all the pads of
+    a hand (the points' order within each pad is the cloud's, as one at a time)."""
+    half = taxels.pitch_m / 2.0
+    z_low, z_high = taxels.z_range_m
+    laterals = np.column_stack([-directions[:, 1], directions[:, 0]])
+    z = points_robot[:, 2]
+    # Offsets across each pad's motion, (Q, N): the z-range test first, on the points alone.
+    at_rows = np.flatnonzero((z >= z_low) & (z <= z_high))
+    starts = np.sum(origins_m[:, :2] * laterals, axis=1)
+    u = laterals @ points_robot[at_rows, :2].T - starts[:, None]
+    query, index = np.nonzero((u >= taxels.col_u.min() - half) & (u <= taxels.col_u.max() + half))
+    u = u[query, index]
+    kept = points_robot[at_rows[index]]
+    z = kept[:, 2]
+    cols = len(taxels.col_u)
+    per_pad = len(taxels.row_z) * cols
+    col = np.clip(np.round((u - taxels.col_u[0]) / taxels.pitch_m).astype(int), 0, cols - 1)
+    order = np.argsort(taxels.row_z)
+    sorted_z = taxels.row_z[order]
+    row = order[np.searchsorted((sorted_z[1:] + sorted_z[:-1]) / 2.0, z)]
+    inside = np.abs(z - taxels.row_z[row]) <= half
+    query, kept = query[inside], kept[inside]
+    if len(query) == 0:
+        return [None] * len(origins_m)
+    # Each pad's taxels numbered apart: taxel // per_pad is the pad.
+    taxel = query * per_pad + (row * cols + col)[inside]
+    # Depths along each pad's motion as one pad alone computes them (the same rounding).
+    bounds = np.searchsorted(query, np.arange(len(origins_m) + 1))
+    depth = np.concatenate(
+        [
+            (kept[start:end] - origin) @ direction
+            for origin, direction, start, end in zip(
+                origins_m, directions, bounds[:-1], bounds[1:], strict=True
+            )
+        ]
+    )
+    by_taxel = np.lexsort((depth, taxel))
+    taxel, depth, kept = taxel[by_taxel], depth[by_taxel], kept[by_taxel]
+    first, counts = _runs(taxel)
+    layer = depth <= np.repeat(depth[first], counts) + LAYER_M
+    taxel, depth, kept = taxel[layer], depth[layer], kept[layer]
+    first, counts = _runs(taxel)  # every taxel keeps its nearest point
+    seen = taxel[first]
+    surface = depth[first + counts // 2] + taxels.row_recess[seen % per_pad // cols]
+    pads, pad_first = np.unique(seen // per_pad, return_index=True)
+    pad_end = np.append(pad_first[1:], len(seen))
+    contacts: list[PadContact | None] = [None] * len(origins_m)
+    for pad, start, end in zip(pads, pad_first, pad_end, strict=True):
+        cells = slice(start, end)
+        contacts[pad] = _contact(
+            seen[cells] % per_pad,
+            surface[cells],
+            counts[cells],
+            kept[first[start] : first[end - 1] + counts[end - 1]],
+            taxels,
+            tolerance_m,
+            float(origins_m[pad] @ directions[pad]),
+        )
+    return contacts
+
+
+def _contact(
+    seen: np.ndarray,
+    surface: np.ndarray,
+    counts: np.ndarray,
+    kept: np.ndarray,
+    taxels: PadTaxels,
+    tolerance_m: float,
+    start_m: float,
+) -> PadContact | None:
+    """One pad's contact from the taxels that see the surface (``seen``, row-major), the
+    surface in front of each (m along the motion from the pad's start ``start_m``), how
+    many points each holds and those points (``kept``, by taxel)."""
+    cols = len(taxels.col_u)
+    # The first touch: the nearest surface seen by at least two points (a single point may
+    # be a mixed pixel at the silhouette).
+    supported = counts >= 2
+    touch = float(surface[supported].min() if np.any(supported) else surface.min())
+    touches = surface <= touch + tolerance_m
+    touching = seen[touches]
+    if len(np.unique(touching // cols)) < _MIN_CONTACT_ROWS:
+        return None  # an edge or a horizontal top, not a side
+    return PadContact(
+        touch_m=touch + start_m,
+        coverage=len(touching) / (len(taxels.row_z) * cols),
+        points=kept[np.repeat(touches, counts)],
+        surface_fit=(
+            taxels.col_u[seen % cols],
+            taxels.row_z[seen // cols],
+            surface,
+            touch,
+            tolerance_m,
+        ),
+    )
+
+
+def _runs(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each run of equal values of the sorted, non-empty ``ids`` starts, and its
+    length (``np.unique``'s first indices and counts, without its sort)."""
+    starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
+    return starts, np.diff(np.append(starts, len(ids)))
+
+
+def _slopes(
+    u: np.ndarray, z: np.ndarray, surface: np.ndarray, touch: float, tolerance_m: float
+) -> tuple[float, float]:
+    """The surface's slopes ``b`` across the pad and ``c`` in height, from a plane
+    ``surface = a + b u + c z`` fitted over the taxels whose surface lies within three
+    tolerances of the touch (too few of them, or a degenerate layout: both 0); the angle
+    between the pad's normal and the surface's is ``arctan(hypot(b, c))``."""
+    near = surface <= touch + 3.0 * tolerance_m
+    design = np.column_stack([np.ones(np.count_nonzero(near)), u[near], z[near]])
+    if len(design) < 4:
+        return 0.0, 0.0
+    # lstsq's rank has matrix_rank's threshold (largest singular value x eps x rows).
+    (_, b, c), _, rank, _ = np.linalg.lstsq(design, surface[near], rcond=None)
+    return (float(b), float(c)) if rank == 3 else (0.0, 0.0)

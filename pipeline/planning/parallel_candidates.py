@@ -1,0 +1,229 @@
+"""Parallel-jaw grasp candidates: a jaw gripper's geometry (:class:`ParallelHand`) and one
+candidate closing along a direction at a height (:func:`parallel_candidate`)."""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.planning.candidate import (
+    BEYOND_CENTRE,
+    BLIND_PAD_FACTOR,
+    MIN_HITS,
+    Candidate,
+    CandidateCloud,
+    CandidateSettings,
+    candidate_score,
+)
+from pipeline.planning.grasp_geometry import hand_pose
+from pipeline.planning.pad_contact import PadContact, PadTaxels, flat_pad_taxels, pad_coverage
+from pipeline.types import GraspCandidate, PadLayout
+
+
+@dataclass(frozen=True)
+class ParallelHand:
+    """A parallel-jaw gripper's geometry (m) for :func:`parallel_candidate`; the finger
+    carrying each pad reaches ``pad_centre_to_fingertip_m`` below the pad's centre, its
+    face ``finger_recess_m`` behind the pad's surface."""
+
+    pad: PadLayout
+    aperture_m: float
+    palm_to_pad_centre_m: float
+    pad_centre_to_fingertip_m: float
+    finger_recess_m: float
+    jaw_half_width_m: float
+    housing_half_length_m: float
+    housing_half_width_m: float
+    housing_depth_m: float
+
+
+def front_jaw_gap(
+    aperture_m: float,
+    width_m: float,
+    descent_m: float,
+    jaw_clearance_m: float,
+    back_margin_m: float,
+) -> float | None:
+    """Where the open jaws stand around an object ``width_m`` wide between their paths:
+    the front jaw's gap before the visible front (m), the back jaw taking the rest of the
+    aperture; None when they cannot both descend ``descent_m`` clear of it.
+
+    The back jaw keeps ``back_margin_m`` beyond its clearance where the room allows (the
+    back is the mirror plane's guess, and a mirrored model is often a few millimetres
+    thinner than the object) and the front gap is ``jaw_clearance_m``, or half of what is
+    left when less is. An object too wide for the margin is still grasped, the room split
+    evenly between the jaws: neither lands on it when the model is off either way by less
+    than half the room. Both jaws close towards the hand's centre, each at most half the
+    aperture, so before a narrow object the front gap grows until the back jaw still
+    reaches the back (placed by the front alone it would close on nothing: contact on one
+    side only).
+    """
+    room_m = aperture_m - width_m
+    if room_m < 2.0 * descent_m:
+        return None
+    if room_m - back_margin_m >= 2.0 * descent_m:
+        gap_m = min(jaw_clearance_m, (room_m - back_margin_m) / 2.0)
+    else:
+        gap_m = room_m / 2.0
+    reach_m = aperture_m / 2.0 - descent_m
+    return max(gap_m, room_m - reach_m)
+
+
+def parallel_candidate(
+    cloud: CandidateCloud,
+    centre_m: np.ndarray,
+    direction: np.ndarray,
+    angle_rad: float,
+    height_m: float,
+    hand: ParallelHand,
+    settings: CandidateSettings,
+    *,
+    jaw_clearance_m: float,
+    back_margin_m: float,
+) -> Candidate:
+    """A parallel-jaw grasp closing along ``direction`` (front to back) through ``centre_m``
+    with the pad centres at ``height_m``.
+
+    Both jaws descend clear of every point above the fingertips between their paths, the
+    front jaw before the visible surface there and the back jaw behind the completed back,
+    as far as :func:`front_jaw_gap` puts them; the surface between them must enclose
+    ``centre_m``, and the front pad must stop before it. Where the model has no back under
+    the back pad, that pad would pass the centre and meet the front wall from inside: its
+    contact is unknown, reported as 0, and the grasp keeps :data:`BLIND_PAD_FACTOR` of the
+    score the front pad's contact gives. The housing must pass above the object's top.
+    """
+    s = settings
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    fingertip_z = height_m - hand.pad_centre_to_fingertip_m
+    if s.below_clearance(fingertip_z):
+        return Candidate.rejected(angle_rad, height_m, 0.0, "fingertips below the table clearance")
+
+    def column(visible: bool) -> np.ndarray:
+        """The points between the jaws' paths above the fingertips (lowest first)."""
+        points = cloud.above(fingertip_z, visible=visible)
+        return points[np.abs((points - centre_m) @ lateral) <= hand.jaw_half_width_m]
+
+    front_points, all_points = column(visible=True), column(visible=False)
+    if len(front_points) == 0:
+        return Candidate.rejected(angle_rad, height_m, 0.0, "no visible surface between the jaws")
+    front = float(np.percentile(front_points @ direction, 2.0))
+    back = float(np.percentile(all_points @ direction, 98.0))
+    if not front < centre_m @ direction < back:
+        # Where the completed model has a gap (a thin-walled object's unseen side), the
+        # column may hold one wall only: the jaws would pinch it, not close around the object.
+        return Candidate.rejected(
+            angle_rad, height_m, 0.0, "the jaws would close on one wall, not around the object"
+        )
+    width = back - front
+    front_gap = front_jaw_gap(
+        hand.aperture_m, width, s.descent_clearance_m, jaw_clearance_m, back_margin_m
+    )
+    if front_gap is None:
+        return Candidate.rejected(
+            angle_rad,
+            height_m,
+            0.0,
+            f"{width * 1e3:.0f} mm wide between the jaws' paths, aperture "
+            f"{hand.aperture_m * 1e3:.0f} mm",
+        )
+    front_pad = front - front_gap
+    middle = front_pad + hand.aperture_m / 2.0
+    position = centre_m + (middle - centre_m @ direction) * direction
+    position[2] = height_m + hand.palm_to_pad_centre_m
+    housing_bottom = position[2] - hand.housing_depth_m
+    below_housing = cloud.above(housing_bottom - s.descent_clearance_m)
+    offset = below_housing - position
+    under_housing = (
+        np.abs(offset @ direction) <= hand.housing_half_length_m + s.descent_clearance_m
+    ) & (np.abs(offset @ lateral) <= hand.housing_half_width_m + s.descent_clearance_m)
+    if np.count_nonzero(under_housing) >= MIN_HITS:
+        return Candidate.rejected(
+            angle_rad, height_m, 0.0, "the housing would hit the object's top"
+        )
+
+    contacts = []
+    taxels = _flat_taxels(hand.pad, height_m)
+    for seen, sign in ((True, 1.0), (False, -1.0)):
+        side = "front" if sign > 0 else "back"
+        # Only the points at the pad's rows can touch it.
+        points = cloud.slab(*taxels.z_range_m, visible=seen)
+        contact = pad_coverage(points, position, sign * direction, taxels, s.touch_tolerance_m)
+        if contact is None:
+            return Candidate.rejected(angle_rad, height_m, 0.0, f"no surface before the {side} pad")
+        below_pad = cloud.slab(
+            float(np.mean(taxels.row_z)) - hand.pad_centre_to_fingertip_m,
+            taxels.z_range_m[0],
+            visible=seen,
+        )
+        if _finger_meets_first(below_pad, position, sign * direction, taxels, contact, hand, s):
+            return Candidate.rejected(
+                angle_rad, height_m, 0.0, f"the {side} finger meets the object before its pad"
+            )
+        contacts.append(contact)
+    if not contacts[0].stops_before(centre_m, direction):
+        return Candidate.rejected(angle_rad, height_m, 0.0, BEYOND_CENTRE)
+    tipping = (height_m - s.table_height_m) / cloud.footprint_half_m(direction)
+    if contacts[1].stops_before(centre_m, -direction):
+        coverages = tuple(c.quality for c in contacts)
+        score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
+    else:
+        # The model has no back under the back pad: where the jaws stand does not depend on
+        # it (the column's extent places them), but what the pad would meet is unknown.
+        coverages = (contacts[0].quality, 0.0)
+        score = BLIND_PAD_FACTOR * candidate_score(
+            coverages[:1], angle_rad, tipping, s.tipping_weight
+        )
+    return Candidate(
+        GraspCandidate(
+            closing_angle_deg=math.degrees(angle_rad),
+            height_m=height_m,
+            spread_deg=0.0,
+            width_m=width,
+            contact_coverage=coverages,
+            tipping_ratio=tipping,
+            score=score,
+            feasible=True,
+        ),
+        T_robot_hand=hand_pose(position, direction),
+        opening_m=hand.aperture_m,
+        predicted_contacts=contacts[0].points,
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def _flat_taxels(pad: PadLayout, height_m: float) -> PadTaxels:
+    """:func:`flat_pad_taxels`, once per pad and height."""
+    return flat_pad_taxels(pad, height_m)
+
+
+def _finger_meets_first(
+    points: np.ndarray,
+    origin_m: np.ndarray,
+    direction: np.ndarray,
+    taxels: PadTaxels,
+    contact: PadContact,
+    hand: ParallelHand,
+    settings: CandidateSettings,
+) -> bool:
+    """Whether the finger carrying a pad, closing along ``direction``, meets the surface
+    between the pad's lowest taxels and the fingertip before the pad reaches ``contact``:
+    a shoulder below a bottle's cap, say, stops the finger (its face ``finger_recess_m``
+    behind the pad) with the pad short of the cap. (Above the pad the finger also passes
+    an object's top face, which may reach beyond a wrong mirrored back; the pad meets
+    that true back as soon as the finger does.)"""
+    half = taxels.pitch_m / 2.0
+    centre_z = float(np.mean(taxels.row_z))
+    z = points[:, 2]
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    in_band = (
+        (np.abs((points - origin_m) @ lateral) <= taxels.col_u.max() + half)
+        & (z >= centre_z - hand.pad_centre_to_fingertip_m)
+        & (z < taxels.row_z.min() - half)
+    )
+    if np.count_nonzero(in_band) < MIN_HITS:
+        return False
+    nearest = float(np.percentile(points[in_band] @ direction, 2.0))
+    return nearest + hand.finger_recess_m < contact.touch_m - settings.touch_tolerance_m

@@ -1,0 +1,386 @@
+"""SDH-2 grasp candidates: one candidate at a pre-shape (base rotation, :data:`SDH_SPREADS`),
+closing direction and pad height (:func:`sdh_candidate`), with the fingers' predicted
+contacts, the pre-shape search and the closing check it needs."""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from pipeline.planning import sdh_geometry as sdh
+from pipeline.planning.candidate import (
+    BEYOND_CENTRE,
+    MIN_HITS,
+    Candidate,
+    CandidateCloud,
+    CandidateSettings,
+    candidate_score,
+)
+from pipeline.planning.grasp_geometry import hand_pose
+from pipeline.planning.pad_contact import PadContact, PadTaxels, pad_coverages, sdh_distal_taxels
+from pipeline.types import GraspCandidate, PadLayout
+
+#: SDH-2 pre-shapes every grasp is tried with: base rotation -> where the object's centre
+#: sits on the palm's x axis (m): at 60 deg the fingers face the palm axis (a tripod); at 0
+#: fingers 1 and 2 face the thumb and the object sits midway between the thumb's base and
+#: theirs.
+SDH_SPREADS = {
+    math.radians(60.0): 0.0,
+    0.0: (sdh.FINGER_BASES_M[0, 0] + sdh.FINGER_BASES_M[2, 0]) / 2.0,
+}
+#: The pinch: at 90 deg fingers 1 and 2 face each other across the palm and close on the
+#: object from two sides, its centre on the line between their bases, while the thumb
+#: closes on a third side. Tried where the object is too narrow across for fingers 1 and 2
+#: facing the thumb.
+PINCH_SPREAD_RAD = math.pi / 2.0
+_CENTRES = {**SDH_SPREADS, PINCH_SPREAD_RAD: float(sdh.FINGER_BASES_M[0, 0])}
+#: Why :func:`sdh_candidate` rejects a grasp at spread 0 that the pinch may take instead.
+TOO_NARROW = "too narrow for fingers facing the thumb"
+#: Steps of the pre-shape search: proximal angles tried below the contact angle (rad).
+_OPEN_STEP_RAD = math.radians(3.0)
+
+
+def sdh_candidate(
+    cloud: CandidateCloud,
+    centre_m: np.ndarray,
+    direction: np.ndarray,
+    angle_rad: float,
+    height_m: float,
+    spread_rad: float,
+    pad: PadLayout,
+    aperture_m: float,
+    settings: CandidateSettings,
+) -> Candidate:
+    """An SDH-2 grasp at base rotation ``spread_rad`` (a key of :data:`SDH_SPREADS`, or
+    :data:`PINCH_SPREAD_RAD`), the palm's x axis along ``direction`` (thumb on the front
+    side), distal pad centres at ``height_m``. Fingers 1 and 2 facing the thumb (spread 0)
+    need the object as wide as their two pads across the closing line.
+
+    Each finger's contact angle is the proximal angle at which its distal pad (distal link
+    parallel to the palm axis) touches the completed cloud (visible and mirrored)
+    (:func:`pad_coverage`), before ``centre_m`` on its way (past it, the model has no
+    surface on the finger's side there, and the pad would meet the far side from inside);
+    the palm height puts the pads' centres at ``height_m`` at those angles. The pre-shape is
+    the most closed common proximal angle, at least 3 deg before the earliest contact, at
+    which every finger, the knuckles and the palm descend clear of the cloud
+    (:func:`sdh_geometry.finger_profile`); ``opening_m`` is that pre-shape's opening. From
+    there to its contact no finger's knuckle or proximal link may meet the cloud
+    (:func:`sdh_geometry.closing_hits`).
+    """
+    s = settings
+    x_hand = np.array([direction[0], direction[1], 0.0])
+    y_hand = np.array([direction[1], -direction[0], 0.0])
+    palm_xy = centre_m - _CENTRES[spread_rad] * x_hand
+    rotation = np.column_stack([x_hand[:2], y_hand[:2]])
+    facings = sdh.finger_facings(spread_rad) @ rotation.T
+    taxels = _distal_taxels(pad, height_m)
+    in_band = cloud.band(height_m, pad.rows * pad.pitch_m / 2.0)
+    if spread_rad == 0.0:
+        # Fingers 1 and 2 facing the thumb meet the back 33 mm either side of the closing
+        # line: the object must be wide enough there for both their pads.
+        across = in_band @ y_hand
+        span = sdh.FINGER_BASES_M[0, 1] + pad.cols * pad.pitch_m / 2.0
+        if len(across) == 0 or np.ptp(np.percentile(across, [2.0, 98.0])) < 2.0 * span:
+            return Candidate.rejected(angle_rad, height_m, spread_rad, TOO_NARROW)
+    # Only the points at the pads' rows can touch them.
+    reachable = cloud.slab(*taxels.z_range_m)
+    # Fingers meet an object off the palm axis inclined, so the palm is moved once, onto
+    # the centre of the contacts predicted from the first guess.
+    for attempt in range(2):
+        bases = palm_xy[:2] + sdh.FINGER_BASES_M @ rotation.T
+        found = _finger_contacts(reachable, bases, facings, taxels, s.touch_tolerance_m)
+        if isinstance(found, str):
+            return Candidate.rejected(angle_rad, height_m, spread_rad, found)
+        contacts, alphas = found
+        if attempt == 0:
+            palm_xy = _contact_centre(contacts, x_hand, y_hand, spread_rad) - (
+                _CENTRES[spread_rad] * x_hand
+            )
+    if not all(
+        contact.stops_before(centre_m, np.append(facing, 0.0))
+        for contact, facing in zip(contacts, facings, strict=True)
+    ):
+        return Candidate.rejected(angle_rad, height_m, spread_rad, BEYOND_CENTRE)
+    palm_z = height_m + float(np.mean(sdh.distal_pad_depth_m(np.array(alphas))))
+    below_palm = cloud.above(palm_z - sdh.BASE_DEPTH_M - s.descent_clearance_m - _MARGIN_M)
+    radial = np.hypot(*(below_palm[:, :2] - palm_xy[:2]).T)
+    palm_hit = (radial <= sdh.PALM_RADIUS_M + s.descent_clearance_m) & (
+        palm_z - below_palm[:, 2] <= sdh.BASE_DEPTH_M + s.descent_clearance_m
+    )
+    if np.count_nonzero(palm_hit) >= MIN_HITS:
+        return Candidate.rejected(
+            angle_rad, height_m, spread_rad, "the palm would hit the object's top"
+        )
+    open_alpha = _clear_preshape(cloud, bases, facings, palm_z, min(alphas), s)
+    if open_alpha is None:
+        return Candidate.rejected(
+            angle_rad, height_m, spread_rad, "the fingers cannot open around the object"
+        )
+    opening = sdh.opening_for_alpha(open_alpha)
+    if opening > aperture_m + 1e-9:
+        return Candidate.rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
+    if _closing_collides(cloud.visible, bases, facings, palm_z, open_alpha, alphas, s):
+        return Candidate.rejected(
+            angle_rad, height_m, spread_rad, "a proximal link would hit the object while closing"
+        )
+    # Closing from the pre-shape, the fingertips are lowest where the proximal links pass
+    # closest to vertical.
+    steepest = 0.0 if open_alpha <= 0.0 <= max(alphas) else min(abs(open_alpha), abs(max(alphas)))
+    lowest_tip = palm_z - (
+        sdh.KNUCKLE_DEPTH_M + sdh.PROXIMAL_LENGTH_M * math.cos(steepest) + sdh.DISTAL_LENGTH_M
+    )
+    if s.below_clearance(lowest_tip):
+        return Candidate.rejected(
+            angle_rad, height_m, spread_rad, "fingertips below the table clearance"
+        )
+    coverages = tuple(c.quality for c in contacts)
+    tipping = (height_m - s.table_height_m) / cloud.footprint_half_m(x_hand)
+    score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
+    above_pads = cloud.above(float(taxels.row_z.max()) + taxels.pitch_m / 2.0)
+    if any(
+        _top_edge_above_pad(above_pads, np.append(base, 0.0), np.append(facing, 0.0), taxels, c)
+        for base, facing, c in zip(bases, facings, contacts, strict=True)
+    ):
+        score *= _EDGE_PENALTY
+    width = float(np.ptp(in_band @ x_hand)) if len(in_band) else math.nan
+    position = np.array([palm_xy[0], palm_xy[1], palm_z])
+    order = (2, 0, 1)  # thumb, finger 1, finger 2
+    return Candidate(
+        GraspCandidate(
+            closing_angle_deg=math.degrees(angle_rad),
+            height_m=height_m,
+            spread_deg=math.degrees(spread_rad),
+            width_m=width,
+            contact_coverage=tuple(coverages[i] for i in order),
+            tipping_ratio=tipping,
+            score=score,
+            feasible=True,
+        ),
+        T_robot_hand=hand_pose(position, x_hand),
+        opening_m=opening,
+        spread_rad=spread_rad,
+        predicted_contacts=np.concatenate([contacts[i].points for i in order]),
+    )
+
+
+def _finger_contacts(
+    points: np.ndarray,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    taxels: PadTaxels,
+    tolerance_m: float,
+) -> tuple[list[PadContact], list[float]] | str:
+    """Each finger's predicted distal pad contact with ``points`` (the completed cloud, or
+    the part of it at the pads' rows) and its proximal angle there, or why a finger finds
+    none."""
+    origins = np.column_stack([bases, np.zeros(len(bases))])
+    directions = np.column_stack([facings, np.zeros(len(facings))])
+    found = pad_coverages(points, origins, directions, taxels, tolerance_m)
+    contacts, alphas = [], []
+    for finger, origin, direction, contact in zip(
+        sdh.FINGERS, origins, directions, found, strict=True
+    ):
+        if contact is None:
+            return f"{finger} meets no surface"
+        alpha = float(sdh.alpha_for_reach(contact.touch_m - origin @ direction))
+        if not abs(alpha) < sdh.JOINT_LIMIT_RAD:
+            return f"{finger} cannot reach the surface"
+        contacts.append(contact)
+        alphas.append(alpha)
+    return contacts, alphas
+
+
+def _contact_centre(
+    contacts: list[PadContact], x_hand: np.ndarray, y_hand: np.ndarray, spread_rad: float
+) -> np.ndarray:
+    """Where the object's centre lies among the fingers' predicted contacts (f1, f2,
+    thumb), robot xy with z 0: midway between the thumb's contact and the fingers' along
+    the palm's x axis, between finger 1's and finger 2's across it (spread 0); midway
+    between finger 1's and finger 2's (the pinch); or the circumcentre of the three
+    contacts (fingers facing the palm axis)."""
+    points = np.array([c.points.mean(axis=0)[:2] for c in contacts])
+    if spread_rad == 0.0:
+        x = (points[:2].mean(axis=0) @ x_hand[:2] + points[2] @ x_hand[:2]) / 2.0
+        y = points[:2].mean(axis=0) @ y_hand[:2]
+        return np.append(x * x_hand[:2] + y * y_hand[:2], 0.0)
+    if spread_rad == PINCH_SPREAD_RAD:
+        return np.append(points[:2].mean(axis=0), 0.0)
+    a, b, c = points
+    d = 2.0 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))
+    if abs(d) < 1e-9:
+        return np.append(points.mean(axis=0), 0.0)
+    norms = (a @ a, b @ b, c @ c)
+    ux = (norms[0] * (b[1] - c[1]) + norms[1] * (c[1] - a[1]) + norms[2] * (a[1] - b[1])) / d
+    uy = (norms[0] * (c[0] - b[0]) + norms[1] * (a[0] - c[0]) + norms[2] * (b[0] - a[0])) / d
+    return np.array([ux, uy, 0.0])
+
+
+def _clear_preshape(
+    cloud: CandidateCloud,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    palm_z: float,
+    contact_alpha: float,
+    s: CandidateSettings,
+) -> float | None:
+    """The most closed proximal angle on a 3-deg grid, at least 3 deg before
+    ``contact_alpha``, at which every finger descends clear of the completed cloud (the
+    palm at height ``palm_z``); None when none does."""
+    step = math.floor((contact_alpha - _OPEN_STEP_RAD) / _OPEN_STEP_RAD)
+    steps = []
+    while step * _OPEN_STEP_RAD > -sdh.JOINT_LIMIT_RAD:
+        steps.append(step)
+        step -= 1
+    # Points deeper below the palm than any profile reaches, or beside every profile's
+    # grid, are never hit.
+    deepest, t_low, t_high = _profile_bounds(s.descent_clearance_m)
+    points = cloud.above(palm_z - deepest - _MARGIN_M)
+    depth_below_palm = palm_z - points[:, 2]
+    corridors = []
+    for base, facing in zip(bases, facings, strict=True):
+        relative = points[:, :2] - base
+        across = np.abs(relative @ np.array([-facing[1], facing[0]]))
+        near = across <= sdh.FINGER_HALF_WIDTH_M + s.descent_clearance_m
+        t, d = relative[near] @ facing, depth_below_palm[near]
+        within = (t >= t_low) & (t <= t_high)
+        corridors.append((t[within], d[within]))
+    for first in range(0, len(steps), _STEPS_AT_ONCE):
+        chunk = tuple(steps[first : first + _STEPS_AT_ONCE])
+        clear = np.ones(len(chunk), dtype=bool)
+        for t, d in corridors:
+            clear &= _profile_hits(chunk, t, d, s.descent_clearance_m) < MIN_HITS
+        if np.any(clear):
+            return chunk[int(np.argmax(clear))] * _OPEN_STEP_RAD
+    return None
+
+
+def _closing_collides(
+    visible: np.ndarray,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    palm_z: float,
+    open_alpha: float,
+    contact_alphas: list[float],
+    s: CandidateSettings,
+) -> bool:
+    """Whether a finger's knuckle or proximal link meets the visible cloud on its way from
+    the pre-shape to its contact angle (checked every 3 deg and at the contact): on a tall
+    object a low grasp swings the proximal links into its upper part. Only seen points
+    count: the mirrored ones are where the plane guesses the back, too uncertain to veto a
+    grasp on."""
+    depth_below_palm = palm_z - visible[:, 2]
+    for base, facing, contact in zip(bases, facings, contact_alphas, strict=True):
+        relative = visible[:, :2] - base
+        across = np.abs(relative @ np.array([-facing[1], facing[0]]))
+        near = across <= sdh.FINGER_HALF_WIDTH_M + s.touch_tolerance_m
+        t, d = relative[near] @ facing, depth_below_palm[near]
+        alphas = [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]
+        hits = sdh.closing_hits(t, d, alphas, s.touch_tolerance_m)
+        if np.any(np.count_nonzero(hits, axis=1) >= MIN_HITS):
+            return True
+    return False
+
+
+#: Resolution of the finger profiles the pre-shape search compares the cloud with (m).
+_PROFILE_STEP_M = 0.001
+#: Pre-shapes the search compares the cloud with at once: most are found within a few.
+_STEPS_AT_ONCE = 8
+#: Slack of the cheap height bounds that select the points an exact test then checks (m).
+_MARGIN_M = 1e-6
+
+
+@functools.lru_cache(maxsize=256)
+def _swept_profile(step: int, clearance_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The finger profile at proximal angle ``step`` x 3 deg, grown by ``clearance_m`` in
+    both directions."""
+    grid, depth = sdh.finger_profile(step * _OPEN_STEP_RAD, _PROFILE_STEP_M)
+    half = math.ceil(clearance_m / _PROFILE_STEP_M)
+    # The greatest depth within ``half`` cells either side, the ends mirrored.
+    padded = np.pad(depth, half, mode="symmetric")
+    grown = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1).max(axis=1)
+    return grid, grown + clearance_m
+
+
+@functools.lru_cache(maxsize=16)
+def _profile_bounds(clearance_m: float) -> tuple[float, float, float]:
+    """Over every pre-shape within the joint limits: the deepest any grown profile reaches
+    below the palm, and the least and greatest distance along the facing a point may have
+    and still fall on a profile's grid (m)."""
+    limit = math.ceil(sdh.JOINT_LIMIT_RAD / _OPEN_STEP_RAD)
+    profiles = [_swept_profile(step, clearance_m) for step in range(-limit, limit + 1)]
+    return (
+        max(float(reach.max()) for _, reach in profiles),
+        min(float(grid[0]) for grid, _ in profiles) - _PROFILE_STEP_M,
+        max(float(grid[-1]) for grid, _ in profiles) + _PROFILE_STEP_M,
+    )
+
+
+@functools.lru_cache(maxsize=1024)
+def _profile_table(steps: tuple[int, ...], clearance_m: float) -> tuple[np.ndarray, ...]:
+    """The grown profiles of ``steps`` (:func:`_swept_profile`) as arrays: each grid's
+    first distance ``(K,)``, its length ``(K,)`` and the reaches ``(K, longest)``, padded
+    with -inf."""
+    profiles = [_swept_profile(step, clearance_m) for step in steps]
+    lengths = np.array([len(grid) for grid, _ in profiles])
+    reaches = np.full((len(steps), lengths.max()), -np.inf)
+    for row, (_, reach) in enumerate(profiles):
+        reaches[row, : len(reach)] = reach
+    return np.array([grid[0] for grid, _ in profiles]), lengths, reaches
+
+
+def _profile_hits(
+    steps: tuple[int, ...], t: np.ndarray, d: np.ndarray, clearance_m: float
+) -> np.ndarray:
+    """``(K,)``: how many points at distance ``t`` along a finger's facing and depth ``d``
+    below the palm (both ``(N,)``) each pre-shape of ``steps`` sweeps on its descent."""
+    starts, lengths, reaches = _profile_table(steps, clearance_m)
+    index = np.round((t[None, :] - starts[:, None]) / _PROFILE_STEP_M).astype(int)
+    inside = (index >= 0) & (index < lengths[:, None])
+    reach = np.take_along_axis(reaches, np.clip(index, 0, reaches.shape[1] - 1), axis=1)
+    return np.count_nonzero(inside & (d[None, :] <= reach), axis=1)
+
+
+#: How deep behind a pad's touch the surface counts as the side it closes on, looking for
+#: that side's top edge (m).
+_EDGE_DEPTH_M = 0.015
+#: Score factor of a grasp with a top edge behind a distal link (:func:`_top_edge_above_pad`):
+#: such a grasp is taken only where no other comes near, as on a box too tall for the pads
+#: to reach clear of its top edge (docs/method.md §5 has what a quarter and a fiftieth did).
+_EDGE_PENALTY = 0.1
+
+
+@functools.lru_cache(maxsize=64)
+def _distal_taxels(pad: PadLayout, height_m: float) -> PadTaxels:
+    """:func:`sdh_distal_taxels`, once per pad and height."""
+    return sdh_distal_taxels(pad, height_m)
+
+
+def _top_edge_above_pad(
+    points: np.ndarray,
+    origin_m: np.ndarray,
+    direction: np.ndarray,
+    taxels: PadTaxels,
+    contact: PadContact,
+) -> bool:
+    """Whether the top edge of the side a distal pad closes on lies between the pad's top
+    row and the distal joint, where the link stands 1 mm behind the pad's surface. A rim,
+    lip or lid there is often a millimetre or two proud of the side below it, more than
+    the link's recess and less than the cloud can show, and stops the finger on its
+    link with the pad short of the side (a mug's rim, a coffee tin's lid)."""
+    half = taxels.pitch_m / 2.0
+    pad_top = float(taxels.row_z.max()) + half
+    joint = float(np.median(taxels.row_z)) + sdh.DISTAL_PAD_CENTRE_M  # the middle row
+    lateral = np.array([-direction[1], direction[0], 0.0])
+    relative = points - origin_m
+    depth = relative @ direction - (contact.touch_m - origin_m @ direction)
+    side = (
+        (np.abs(relative @ lateral) <= sdh.FINGER_HALF_WIDTH_M)
+        & (depth <= _EDGE_DEPTH_M)
+        & (points[:, 2] > pad_top)
+    )
+    if np.count_nonzero(side) < MIN_HITS:
+        return False  # the side ends below the pad's top row: the pad reaches over it
+    top = float(np.percentile(points[side, 2], 98.0))
+    return top < joint

@@ -1,0 +1,1 @@
+"""Estimator plugins: fusing the contacts with the view."""

@@ -1,0 +1,1 @@
+"""Symmetry initialiser plugins: the first estimate of the symmetry plane."""

@@ -1,0 +1,1 @@
+"""Planner plugins: a grasp on the completed model."""

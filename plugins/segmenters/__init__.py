@@ -1,0 +1,1 @@
+"""Segmenter plugins: the object's points cut out of a view."""

@@ -1,0 +1,1 @@
+"""Sensor plugins: depth views of the world."""

@@ -1,0 +1,1 @@
+"""Tactile plugins: the taxel contacts of an executed grasp."""

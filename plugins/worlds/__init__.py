@@ -1,0 +1,1 @@
+"""World plugins: the simulated (or recorded) scene a trial runs in."""
