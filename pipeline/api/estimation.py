@@ -8,8 +8,9 @@ kernels it uses (``symfuse plugins`` imports every plugin and must stay quick).
 
 from __future__ import annotations
 
-from importlib import import_module
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from pipeline.api._lazy import lazy_attributes
 
 if TYPE_CHECKING:
     from pipeline.estimation.after_view_term import AfterViewSettings
@@ -68,11 +69,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    try:
-        module, original = _SOURCES[name]
-    except KeyError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    value = getattr(import_module(module), original)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_attributes(__name__, globals(), _SOURCES)

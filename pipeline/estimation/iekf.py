@@ -331,6 +331,8 @@ def update_grasp(
     point_variance_m2: np.ndarray,
 ) -> _GraspResult:
     # Thirteen parameters: the filter's state, priors and gates for one grasp, as arrays.
+    # One loop of Gauss-Newton iterations whose exits (gate, divergence, convergence) all
+    # read the same iterate: split, each piece would carry that state back and forth.
     """Iterate one grasp's update (see the module docstring); the caller commits the gain.
 
     ``points_prior`` is never modified; with ``move_points`` the result holds a new array.
@@ -457,6 +459,8 @@ def run_stage(
     covariance_model: Callable[[np.ndarray, np.ndarray], CovarianceModel],
     stage_one: StageOutcome | None = None,
 ) -> StageOutcome:
+    # One pass over the grasps in order: the covariances, the divergence bounds and the
+    # record each grasp updates are the loop's own state.
     """Run Stage 1 (``stage_one`` None) or Stage 2 (started from ``stage_one``) over all
     grasps in order."""
     started = time.perf_counter()

@@ -130,6 +130,8 @@ def estimate_result(
     consistency: ConsistencySettings | None = None,
     refuse: Refuse | None = None,
 ) -> EstimateResult:
+    # The self-diagnosis's steps (diagnose, condition, replace, select) run in this order on
+    # the same stages; each step is its own function, this one keeps their order visible.
     """Stage 0 (the initial state) followed by the fused stages ``outcomes`` (1, then 2).
 
     Stage 0's time is the setup: the time since ``started_s`` (a ``time.perf_counter()``

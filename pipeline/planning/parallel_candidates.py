@@ -84,6 +84,8 @@ def parallel_candidate(
     jaw_clearance_m: float,
     back_margin_m: float,
 ) -> Candidate:
+    # A candidate's pose and hand, and its feasibility checks in order, each using the
+    # geometry the one before computed: split, every piece would take these back.
     """A parallel-jaw grasp closing along ``direction`` (front to back) through ``centre_m``
     with the pad centres at ``height_m``.
 

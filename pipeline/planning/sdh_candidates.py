@@ -53,6 +53,8 @@ def sdh_candidate(
     aperture_m: float,
     settings: CandidateSettings,
 ) -> Candidate:
+    # A candidate's pose and hand, and its feasibility checks in order, each using the
+    # geometry the one before computed: split, every piece would take these back.
     """An SDH-2 grasp at base rotation ``spread_rad`` (a key of :data:`SDH_SPREADS`, or
     :data:`PINCH_SPREAD_RAD`), the palm's x axis along ``direction`` (thumb on the front
     side), distal pad centres at ``height_m``. Fingers 1 and 2 facing the thumb (spread 0)

@@ -120,6 +120,8 @@ class VcInitialiser(SymmetryInitialiser):
             )
 
     def propose(self, cloud: PointCloud, observation: DepthObservation | None) -> SymmetryInit:
+        # The hypotheses are generated, scored against the view and ranked in one pass over
+        # the same arrays, then the kind of symmetry is chosen on them.
         p = self.params
         if observation is None:
             raise StageFailure("initialiser 'vc' needs the depth image (observation is None)")
