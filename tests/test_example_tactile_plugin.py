@@ -51,6 +51,7 @@ def test_its_own_tests_pass_against_the_installed_symfuse(installed):
     assert " passed" in done.stdout
 
 
+@pytest.mark.slow
 def test_a_whole_trial_runs_with_it_in_the_analytic_world(installed, tmp_path):
     from pipeline.config import load_config
     from pipeline.run.trial import run_trial

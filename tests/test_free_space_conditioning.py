@@ -220,6 +220,7 @@ def test_a_drift_the_camera_rules_out_is_conditioned_away():
     np.testing.assert_array_equal(final.covariance, covariance)
 
 
+@pytest.mark.slow
 def test_a_marginal_drift_is_conditioned_away_however_wide_the_posterior():
     """The offset's posterior its prior (32 mm std): the plane needed moves back by less
     than a millimetre, far inside the search's first ring at that scale."""
@@ -249,6 +250,7 @@ def test_a_drift_beyond_the_model_noise_is_not_conditioned_away():
     assert all(s.hypothesis is None or s.hypothesis.name != CONDITIONED for s in result.stages)
 
 
+@pytest.mark.slow
 def test_a_stage_whose_taxels_fail_is_not_conditioned():
     """The first drift with the object placed 10 mm along the jaws: the taxels contradict
     the model too, so conditioning on free space alone cannot explain the evidence."""

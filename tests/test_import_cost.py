@@ -51,6 +51,7 @@ def test_the_completion_plugins_modules_load_no_scipy():
     assert loaded_after(code, ("scipy", *HEAVY)) == []
 
 
+@pytest.mark.slow
 def test_a_trial_without_pictures_loads_no_plotting_or_statistics(tmp_path):
     """A sweep's trials draw no pictures: they never pay for matplotlib or scipy.stats."""
     code = (

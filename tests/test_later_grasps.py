@@ -183,6 +183,7 @@ def test_an_earlier_shape_the_last_grasp_contradicts_is_kept_when_it_is_best_sup
     assert all(a is b for a, b in zip(kept, stages, strict=True))
 
 
+@pytest.mark.slow
 def test_a_pad_the_earlier_shape_cannot_explain_does_not_locate_it():
     """A third pad of the second grasp presses 15 mm outside the cylinder beside the right
     jaw (on a handle the mirror image does not complete), and the filter locating the
@@ -213,6 +214,7 @@ def test_a_pad_the_earlier_shape_cannot_explain_does_not_locate_it():
     assert last.bias.translation_m[0] == pytest.approx(second.g_true[1], abs=0.001)
 
 
+@pytest.mark.slow
 def test_an_earlier_estimate_at_odds_with_its_own_grasps_is_not_kept_flagged(monkeypatch):
     """As in the test above, but the estimate of the grasps before the last already
     contradicted their taxels: located, it could fit the last grasp better than Stage 0 by

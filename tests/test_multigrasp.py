@@ -88,6 +88,7 @@ def test_two_grasp_trial_records_each_grasp(two_grasps):
     assert (two_grasps / "grasps.png").is_file()
 
 
+@pytest.mark.slow
 def test_fuse_on_a_multi_grasp_contacts_file_reproduces_the_final_estimate(two_grasps, tmp_path):
     init = json.loads((two_grasps / "result.json").read_text())["init"]
     plane = ",".join(repr(v) for v in (*init["plane"]["normal"], init["plane"]["offset"]))
@@ -158,6 +159,7 @@ def test_until_std_stops_once_the_model_is_known_well_enough(tmp_path, threshold
         assert after["hidden_side_std_mm"] > before["hidden_side_std_mm"]
 
 
+@pytest.mark.slow
 def test_a_first_grasp_on_one_side_only_ends_the_trial_with_its_taxels_kept(
     tmp_path, monkeypatch, capsys
 ):
@@ -183,6 +185,7 @@ def test_a_first_grasp_on_one_side_only_ends_the_trial_with_its_taxels_kept(
     )
 
 
+@pytest.mark.slow
 def test_a_first_grasp_that_misses_is_made_again_unlike_it(tmp_path, monkeypatch):
     import pipeline.run.trial
     from pipeline.metrics.evaluation import opposing_contacts
