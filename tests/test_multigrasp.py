@@ -137,12 +137,13 @@ def test_a_trial_that_stops_early_says_so_with_the_grasp_it_stopped_on(
 
 
 @pytest.mark.parametrize(
-    ("threshold", "grasps"), [("20", 1), pytest.param("2.5", 2, marks=pytest.mark.slow)]
+    ("threshold", "grasps"), [("20", 1), pytest.param("2.0", 2, marks=pytest.mark.slow)]
 )
 def test_until_std_stops_once_the_model_is_known_well_enough(tmp_path, threshold, grasps):
-    """On the default CD drive jaws on its broad faces never learn where along them it
-    sits (the whole hidden side's std grows with every re-grasp), but each new grasp
-    narrows the plane, and with it the hidden side's shape, until the threshold is met."""
+    """On the default CD drive each new grasp narrows the plane, and with it the hidden
+    side's shape, until the threshold is met; the after-view measures where each grasp left
+    the drive along its broad faces, which the jaws cannot feel, so the whole hidden side's
+    std shrinks too."""
     out = tmp_path / "stop"
     code = main(
         ["trial", "--grasps", "3", "--until-std", threshold, "--set", "trial.pictures=false",
@@ -156,7 +157,7 @@ def test_until_std_stops_once_the_model_is_known_well_enough(tmp_path, threshold
     known = [grasp["uncertainty"] for grasp in document["grasps"]]
     for before, after in itertools.pairwise(known):
         assert after["hidden_shape_std_mm"] < before["hidden_shape_std_mm"]
-        assert after["hidden_side_std_mm"] > before["hidden_side_std_mm"]
+        assert after["hidden_side_std_mm"] < before["hidden_side_std_mm"]
 
 
 @pytest.mark.slow
