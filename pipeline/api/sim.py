@@ -14,7 +14,13 @@ from pipeline.api._lazy import lazy_attributes
 
 if TYPE_CHECKING:
     from pipeline.shipped_hands import ShippedHandsWorld
-    from pipeline.sim.camera import CameraParams, check_camera_params, check_depth_range, observe
+    from pipeline.sim.camera import (
+        CameraParams,
+        SimulatedCamera,
+        check_camera_params,
+        check_depth_range,
+        observe,
+    )
     from pipeline.sim.depth_noise import (
         KinectV1Noise,
         SimulatedDepth,
@@ -28,6 +34,7 @@ _SOURCES = {
     "CameraParams": ("pipeline.sim.camera", "CameraParams"),
     "KinectV1Noise": ("pipeline.sim.depth_noise", "KinectV1Noise"),
     "ShippedHandsWorld": ("pipeline.shipped_hands", "ShippedHandsWorld"),
+    "SimulatedCamera": ("pipeline.sim.camera", "SimulatedCamera"),
     "SimulatedDepth": ("pipeline.sim.depth_noise", "SimulatedDepth"),
     "StereoNoise": ("pipeline.sim.depth_noise", "StereoNoise"),
     "check_camera_params": ("pipeline.sim.camera", "check_camera_params"),
@@ -41,6 +48,7 @@ __all__ = [
     "CameraParams",
     "KinectV1Noise",
     "ShippedHandsWorld",
+    "SimulatedCamera",
     "SimulatedDepth",
     "StereoNoise",
     "check_camera_params",

@@ -9,6 +9,7 @@ this module.
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
@@ -21,6 +22,7 @@ from pipeline.geometry.poses import look_at, rotation_z
 from pipeline.params import check_ordered, param
 from pipeline.sim.depth_noise import SimulatedDepth
 from pipeline.sim.kinect import KINECT_V1_INTRINSICS as KINECT
+from pipeline.stages import SensorSource
 from pipeline.types import CameraIntrinsics, DepthObservation
 
 if TYPE_CHECKING:
@@ -262,3 +264,28 @@ def observe(
         object_mask=object_mask,
         calibration_error=T_believed @ np.linalg.inv(T_robot_camera),
     )
+
+
+class SimulatedCamera(SensorSource):
+    """A sensor that renders the world from its :class:`CameraParams` viewpoint and passes
+    the depth through a noise model (:func:`observe`): a subclass gives the model
+    (:meth:`corrupt`), its ``Params`` the camera's and the depth range's fields, which are
+    checked together (:func:`check_camera_params`, :func:`check_depth_range`)."""
+
+    @classmethod
+    def check_params(cls, params: Any) -> None:
+        super().check_params(params)
+        check_camera_params(params, f"sensor.{cls.name}")
+        check_depth_range(params, f"sensor.{cls.name}")
+
+    @abstractmethod
+    def corrupt(
+        self, depth_m: np.ndarray, intrinsics: CameraIntrinsics, rng: np.random.Generator
+    ) -> SimulatedDepth:
+        """The sensor's depth from the true ``depth_m`` (m), drawing noise from ``rng``."""
+
+    def observe(self, world: World) -> DepthObservation:
+        return observe(world, self.params, self.corrupt)
+
+    def observe_again(self, world: World, first: DepthObservation) -> DepthObservation:
+        return observe(world, self.params, self.corrupt, again=first)

@@ -9,9 +9,6 @@ import numpy as np
 
 from pipeline.api import (
     CameraIntrinsics,
-    DepthObservation,
-    SensorSource,
-    World,
     hookimpl,
     param,
     project,
@@ -19,15 +16,13 @@ from pipeline.api import (
 from pipeline.api.sim import (
     CameraParams,
     KinectV1Noise,
+    SimulatedCamera,
     SimulatedDepth,
-    check_camera_params,
-    check_depth_range,
-    observe,
     simulate_kinect_v1,
 )
 
 
-class PybulletKinect(SensorSource):
+class PybulletKinect(SimulatedCamera):
     """Kinect v1 depth + colour (Nguyen 2012 noise, 1/8-px disparity, shadows), any world.
 
     Asks the world for a noise-free rendering (PyBullet: TinyRenderer) at the Kinect's
@@ -67,23 +62,10 @@ class PybulletKinect(SensorSource):
             1, "pixels dropped on each side of a depth edge (px)", at_least=0
         )
 
-    @classmethod
-    def check_params(cls, params: Params) -> None:
-        super().check_params(params)
-        check_camera_params(params, f"sensor.{cls.name}")
-        check_depth_range(params, f"sensor.{cls.name}")
-
-    def _corrupt(
+    def corrupt(
         self, depth_m: np.ndarray, intrinsics: CameraIntrinsics, rng: np.random.Generator
     ) -> SimulatedDepth:
-        noise = project(KinectV1Noise, self.params)
-        return simulate_kinect_v1(depth_m, intrinsics, rng, noise)
-
-    def observe(self, world: World) -> DepthObservation:
-        return observe(world, self.params, self._corrupt)
-
-    def observe_again(self, world: World, first: DepthObservation) -> DepthObservation:
-        return observe(world, self.params, self._corrupt, again=first)
+        return simulate_kinect_v1(depth_m, intrinsics, rng, project(KinectV1Noise, self.params))
 
 
 @hookimpl

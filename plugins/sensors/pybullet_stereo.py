@@ -8,25 +8,20 @@ import numpy as np
 
 from pipeline.api import (
     CameraIntrinsics,
-    DepthObservation,
-    SensorSource,
-    World,
     hookimpl,
     param,
     project,
 )
 from pipeline.api.sim import (
     CameraParams,
+    SimulatedCamera,
     SimulatedDepth,
     StereoNoise,
-    check_camera_params,
-    check_depth_range,
-    observe,
     simulate_stereo,
 )
 
 
-class PybulletStereo(SensorSource):
+class PybulletStereo(SimulatedCamera):
     """Stereo depth + colour (z^2 sigma_d / (f B) noise, occlusions, edges), any world.
 
     Models the narrow-angle camera pair of an Armar III-like head: 640x480 images, a 90 mm
@@ -60,23 +55,10 @@ class PybulletStereo(SensorSource):
             2, "pixels dropped on each side of a depth edge (px)", at_least=0
         )
 
-    @classmethod
-    def check_params(cls, params: Params) -> None:
-        super().check_params(params)
-        check_camera_params(params, f"sensor.{cls.name}")
-        check_depth_range(params, f"sensor.{cls.name}")
-
-    def _corrupt(
+    def corrupt(
         self, depth_m: np.ndarray, intrinsics: CameraIntrinsics, rng: np.random.Generator
     ) -> SimulatedDepth:
-        noise = project(StereoNoise, self.params)
-        return simulate_stereo(depth_m, intrinsics, rng, noise)
-
-    def observe(self, world: World) -> DepthObservation:
-        return observe(world, self.params, self._corrupt)
-
-    def observe_again(self, world: World, first: DepthObservation) -> DepthObservation:
-        return observe(world, self.params, self._corrupt, again=first)
+        return simulate_stereo(depth_m, intrinsics, rng, project(StereoNoise, self.params))
 
 
 @hookimpl
