@@ -195,14 +195,21 @@ def support_flags(cloud: PointCloud, init: SymmetryInit) -> tuple[str, ...]:
     """A flag when the mirror plane has no evidence in the view: fewer than
     :data:`~pipeline.symmetry.support.MIN_MIRROR_SUPPORT` of the visible points meet their
     own mirror image (:func:`~pipeline.symmetry.support.mirror_support`), so the mirrored
-    half is nowhere checked against the data (a laptop's lid mirrored into a tent). An
-    axis carries its own evidence (its slices are circles) and is not flagged."""
-    from pipeline.symmetry.support import COUNTERPART_M, MIN_MIRROR_SUPPORT, mirror_support
+    half is nowhere checked against the data (a laptop's lid mirrored into a tent), and
+    the view is no body of revolution whose axis the plane contains
+    (:func:`~pipeline.symmetry.support.axis_supports`). An axis carries its own evidence
+    (its slices are circles) and is not flagged."""
+    from pipeline.symmetry.support import (
+        COUNTERPART_M,
+        MIN_MIRROR_SUPPORT,
+        axis_supports,
+        mirror_support,
+    )
 
     if not init.proposed.is_plane:
         return ()
     support = mirror_support(cloud.points, init.proposed)
-    if support >= MIN_MIRROR_SUPPORT:
+    if support >= MIN_MIRROR_SUPPORT or axis_supports(cloud.points, init.proposed):
         return ()
     return (
         f"unsupported mirror plane: {support:.0%} of the visible points meet their mirror "

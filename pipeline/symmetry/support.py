@@ -10,6 +10,11 @@ the visible surface (a box's top, a can's front) is its own mirror image, so som
 points have a mirrored point next to them; on an object the plane does not fit, the
 visible and mirrored halves meet nowhere.
 
+A body of revolution seen from the front is the exception: the plane through its axis
+across the view mirrors the front onto the hidden back, and nothing meets. Its evidence is
+the axis' (:mod:`pipeline.symmetry.axis_fit`): the view's slices are circles about an axis
+the plane passes through (:func:`axis_supports`).
+
 Pure numeric.
 """
 
@@ -28,6 +33,9 @@ COUNTERPART_M = 0.01
 MIN_MIRROR_SUPPORT = 0.12
 #: Visible points (an even subsample) the support is measured on.
 SUPPORT_POINTS = 3000
+#: Largest profile RMS of a vertical axis fit that makes the view a body of revolution
+#: (m): VC's ``max_profile_rms_m`` default (docs/symmetry.md).
+MAX_PROFILE_RMS_M = 0.003
 
 
 def mirror_support(
@@ -54,3 +62,16 @@ def mirror_support(
     sample = points[:: max(1, len(points) // SUPPORT_POINTS)]
     distances, _ = cKDTree(plane.apply(points)).query(sample, distance_upper_bound=counterpart_m)
     return float(np.mean(distances <= counterpart_m))
+
+
+def axis_supports(points_m: np.ndarray, plane: Symmetry) -> bool:
+    """Whether the view fits a vertical axis (profile RMS at most :data:`MAX_PROFILE_RMS_M`)
+    that ``plane`` passes within :data:`COUNTERPART_M` of: a body of revolution, for which
+    every plane through its axis is a mirror plane."""
+    from pipeline.symmetry.axis_fit import fit_axis
+
+    fit = fit_axis(np.asarray(points_m, dtype=np.float64))
+    if fit is None or fit.profile_rms_m > MAX_PROFILE_RMS_M:
+        return False
+    offset = float((fit.axis.point_m - plane.point_m) @ plane.direction)
+    return abs(offset) <= COUNTERPART_M
