@@ -539,3 +539,25 @@ def test_a_planner_set_to_its_default_for_another_hand_is_refused(run, tmp_path)
     assert code == EXIT_BAD_INPUT
     assert "planner 'top-parallel' does not plan for the hand 'sdh'" in one_error_line(err)
     assert not (tmp_path / "o").exists()
+
+
+def test_a_set_for_an_implementation_not_in_use_is_refused(run, tmp_path):
+    code, _, err = run("trial", "--set", "estimator.icp.max_iterations=5", "--out", tmp_path / "o")
+    assert code == EXIT_BAD_INPUT
+    assert "--set estimator.icp.max_iterations=5: estimator.use is 'iekf'" in one_error_line(err)
+    assert not (tmp_path / "o").exists()
+    code, _, err = run("trial", "--set", "initialiser.ps.bias=full", "--out", tmp_path / "o")
+    assert "initialiser.use is 'vc'" in one_error_line(err)
+
+
+def test_a_set_for_an_implementation_a_run_may_read_is_accepted(run):
+    # Every hand's planner plans with trial.gripper = "auto"; `config` prints any key.
+    code, out, _ = run("config", "--set", "estimator.icp.max_iterations=5")
+    assert code == 0 and "max_iterations = 5" in out
+    from pipeline.cli import check_selected
+    from pipeline.config import load_config
+    from pipeline.registry import load_registry
+
+    registry = load_registry()
+    config = load_config(registry)
+    check_selected(["planner.top-three-finger.spread_deg=10"], config, registry)

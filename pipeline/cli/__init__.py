@@ -111,6 +111,8 @@ def _load(args: argparse.Namespace, reads: Sequence[str] | None = None, registry
     options = option_overrides(args)
     config = load_config(registry, args.config, args.overrides, options=options)
     check_overrides(args.verb, args.overrides, [text for text, _ in options], reads)
+    if args.verb != "config":  # `symfuse config` writes a config to use later: any key goes
+        check_selected(args.overrides, config, registry)
     if args.config and reads is not None:
         note_unread_sections(args.verb, args.config, config, reads)
     return registry, config
@@ -157,6 +159,35 @@ def check_overrides(
             raise ConfigError(
                 f"--set {text}: symfuse {verb} sets {key} from its arguments; drop this --set"
             )
+
+
+def check_selected(overrides: Sequence[str], config, registry) -> None:
+    """Refuse a ``--set STAGE.NAME.KEY=VALUE`` for an implementation the run does not use:
+    ``STAGE.use`` names another, so the value would be ignored without a word. Two stages
+    read more than the one they use: every hand's planner plans with ``trial.gripper =
+    "auto"``, and an estimator without a taxel model of its own takes another's for the
+    next-grasp score.
+
+    Raises:
+        ConfigError: naming the ``--set`` and the implementation in use.
+    """
+    from pipeline.stages import Estimator
+
+    for text in overrides:
+        parts = text.partition("=")[0].strip().split(".")
+        if len(parts) != 3 or parts[0] not in STAGES or parts[1] == config.choices[parts[0]]:
+            continue
+        stage, name = parts[0], parts[1]
+        used = config.choices[stage]
+        if stage == "planner" or (
+            stage == "estimator"
+            and registry.get(stage, used).cls.measurement_model is Estimator.measurement_model
+        ):
+            continue
+        raise ConfigError(
+            f"--set {text}: {stage}.use is '{used}', so {stage}.{name}'s parameters have no "
+            f"effect; add --set {stage}.use={name}, or drop this --set"
+        )
 
 
 # --- symfuse plugins -------------------------------------------------------------------
