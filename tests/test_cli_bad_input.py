@@ -33,7 +33,11 @@ def one_error_line(err: str) -> str:
         (["sweep", "nope"], "sweep: argument EXPERIMENT: invalid choice: 'nope'"),
         (["trial", "--seed", "x"], "trial: argument --seed: expected an integer, got 'x'"),
         (["fuse", "--cloud", "c.ply"], "fuse: the following arguments are required"),
-        (["plugins", "--foo"], "unrecognized arguments: --foo"),
+        (
+            ["plugins", "--foo"],
+            "plugins: unrecognized arguments: --foo (see symfuse plugins --help)",
+        ),
+        (["complete", "x.pcd", "--wide", "--out", "o"], "see symfuse complete --help"),
         ([], "the following arguments are required: VERB"),
     ],
 )

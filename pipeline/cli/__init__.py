@@ -321,7 +321,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; its exit code. Ctrl-C gives 130 whatever error it caused, or none
     (:mod:`pipeline.entry`, the console script, notes it from the first instant)."""
     parser = build_parser()
-    args = parser.parse_args(_join_signed_values(sys.argv[1:] if argv is None else argv))
+    args, unknown = parser.parse_known_args(
+        _join_signed_values(sys.argv[1:] if argv is None else argv)
+    )
+    if unknown:
+        # Named by the verb's parser, so the message points at the verb's own --help.
+        verb_parser(parser, args.verb).error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
         code = args.run(args)
     except SymfuseError as exc:
@@ -343,6 +348,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         return report_interrupt()
     return report_interrupt() if interrupt_received() else code
+
+
+def verb_parser(parser: argparse.ArgumentParser, verb: str) -> argparse.ArgumentParser:
+    """The sub-parser of ``verb`` in :func:`build_parser`'s ``parser``."""
+    verbs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return verbs.choices[verb]
 
 
 def interrupted(exc: BaseException) -> bool:
