@@ -565,3 +565,27 @@ def test_a_set_for_an_implementation_a_run_may_read_is_accepted(run):
     registry = load_registry()
     config = load_config(registry)
     check_selected(["planner.top-three-finger.spread_deg=10"], config, registry)
+
+
+def test_symmetry_refuses_an_unwritable_out_before_it_searches(run, monkeypatch):
+    import pipeline.symmetry.search as search
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("searched before checking --out")
+
+    monkeypatch.setattr(search, "mesh_symmetries", no_search)
+    code, _, err = run("symmetry", "cd_drive", "--out", "/proc/symmetry.json")
+    assert code == EXIT_BAD_INPUT
+    assert "/proc/symmetry.json: cannot write" in one_error_line(err)
+
+
+def test_an_interrupted_symmetry_search_leaves_no_file(run, monkeypatch, tmp_path):
+    import pipeline.symmetry.search as search
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(search, "mesh_symmetries", interrupted)
+    code, _, _ = run("symmetry", "cd_drive", "--out", tmp_path / "s.json")
+    assert code == 130
+    assert not (tmp_path / "s.json").exists()
