@@ -38,6 +38,14 @@ def one_error_line(err: str) -> str:
             "plugins: unrecognized arguments: --foo (see symfuse plugins --help)",
         ),
         (["complete", "x.pcd", "--wide", "--out", "o"], "see symfuse complete --help"),
+        (
+            ["trial", "--grasps", "2", "--until-std", "0"],
+            "--until-std: expected a number of mm above 0",
+        ),
+        (
+            ["trial", "--grasps", "2", "--until-std", "nan"],
+            "expected a number of mm above 0, got nan",
+        ),
         ([], "the following arguments are required: VERB"),
     ],
 )
