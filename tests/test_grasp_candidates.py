@@ -331,17 +331,7 @@ JAW_SETTINGS = CandidateSettings(
 def _jaw_hand():
     from pipeline.sim.hands import GRIPPERS
 
-    return ParallelHand(
-        pad=GRIPPERS["pg70"].pads[0],
-        aperture_m=0.065,
-        palm_to_pad_centre_m=0.125,
-        pad_centre_to_fingertip_m=0.029,
-        finger_recess_m=0.003,
-        jaw_half_width_m=0.02,
-        housing_half_length_m=0.056,
-        housing_half_width_m=0.04,
-        housing_depth_m=0.078,
-    )
+    return ParallelHand.of(GRIPPERS["pg70"], "test")
 
 
 def _jaws_closing_along_y(visible: np.ndarray, completed: np.ndarray):

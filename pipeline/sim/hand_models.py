@@ -30,22 +30,18 @@ derive from it and add the engine's calls. No simulator is imported here.
 
 from __future__ import annotations
 
-import functools
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pipeline.geometry.pad_layout import pad_grid
+from pipeline.io.hand_urdf import PadGeometry, gripper_spec_from_urdf
 from pipeline.planning import sdh_geometry
 from pipeline.sim.taxels import taxels_to_robot
-from pipeline.types import ClosingPad, GraspPlan, GripperSpec, PadLayout, TaxelState
-
-if TYPE_CHECKING:
-    import yourdfpy
+from pipeline.types import GraspPlan, GripperSpec, PadLayout, TaxelState
 
 #: Where an unused hand waits: high above the table, out of the camera's view (m).
 PARK_POSITION_M = (0.0, 0.0, 2.0)
@@ -59,16 +55,6 @@ SDH_FINGERS = sdh_geometry.FINGERS
 #: large so that it presses with its full force cap.
 SDH_FINGER_SQUEEZE_RAD = 0.03
 SDH_THUMB_SQUEEZE_RAD = 0.1
-
-
-@dataclass(frozen=True)
-class PadGeometry:
-    """A pad's layout plus the shape of its surface (see
-    :func:`pipeline.geometry.pad_layout.pad_grid`)."""
-
-    layout: PadLayout
-    curved_rows: int = 0
-    curve_radius_m: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -161,8 +147,7 @@ def _pg70_model() -> HandModel:
         FingerDrive(side, (side,), (f"{side}_jaw",), (-1.0,), 0.041, (-0.002,))
         for side in ("left", "right")
     )
-    closing = ClosingPad.jaws("left", "right")
-    spec = GripperSpec("pg70", 2, 0.065, tuple(p.layout for p in pads), 0.154, closing)
+    spec = gripper_spec_from_urdf("pg70", "pg70.urdf", pads)
     return HandModel(
         spec,
         "pg70.urdf",
@@ -171,42 +156,6 @@ def _pg70_model() -> HandModel:
         _pg70_open_configuration,
         _pg70_aperture,
         lambda spread_rad: np.array([[1.0, 0.0], [-1.0, 0.0]]),  # left jaw at -x, right at +x
-    )
-
-
-@functools.cache
-def hand_urdf(urdf: str) -> yourdfpy.URDF:
-    """A shipped hand's URDF (``robots/<urdf>``), read once: its joints and links, its
-    shapes unloaded until a scene graph is built."""
-    import yourdfpy
-
-    from robots import ROOT
-
-    return yourdfpy.URDF.load(
-        str(ROOT / urdf), build_scene_graph=False, load_meshes=False, load_collision_meshes=False
-    )
-
-
-def _sdh_closing() -> tuple[ClosingPad, ...]:
-    """The distal pads close from their fingers' bases (the base joints' origins in
-    ``robots/sdh2.urdf``) along the fingers' facings: fingers 1 and 2 turn from facing the
-    thumb by the spread, one each way; the thumb faces +x
-    (:func:`pipeline.planning.sdh_geometry.finger_facings`)."""
-    joints = hand_urdf("sdh2.urdf").joint_map
-    facings = sdh_geometry.finger_facings(0.0)
-    return tuple(
-        ClosingPad(
-            f"{finger}_distal",
-            (
-                float(joints[f"{finger}_base"].origin[0, 3]),
-                float(joints[f"{finger}_base"].origin[1, 3]),
-            ),
-            (float(facing[0]), float(facing[1])),
-            sign,
-            sdh_geometry.DISTAL_PAD_CURVED_ROWS,
-            sdh_geometry.DISTAL_PAD_CURVE_RADIUS_M,
-        )
-        for finger, facing, sign in zip(SDH_FINGERS, facings, (1, -1, 0), strict=True)
     )
 
 
@@ -231,9 +180,7 @@ def _sdh_model() -> HandModel:
             )
         )
     max_aperture_m = sdh_geometry.opening_for_alpha(-sdh_geometry.JOINT_LIMIT_RAD)
-    spec = GripperSpec(
-        "sdh", 3, max_aperture_m, tuple(p.layout for p in pads), 0.246, _sdh_closing()
-    )
+    spec = gripper_spec_from_urdf("sdh", "sdh2.urdf", pads, max_aperture_m)
     return HandModel(
         spec,
         "sdh2.urdf",
