@@ -490,6 +490,9 @@ class HandGeometry:
             jaws' widest extent across the closing direction (y); 0 otherwise.
         jaw_travel_m: for a parallel gripper, the pad surfaces' distance at joints 0 plus
             every jaw's stroke: the widest opening between the pads; 0 otherwise.
+        jaw_closed_m: for a parallel gripper, the pad surfaces' distance at joints 0.
+        jaws: a parallel gripper's prismatic joints, in :attr:`fingers` order.
+        jaw_speed_m_s: the slowest of their velocity limits (m/s; 0 without jaws).
         bending: the fingers of a turn-and-bend hand (:class:`BendingFinger`).
         closing: each finger's pad nearest its fingertip, closing from the finger's base
             joint along the pad's normal (flat: the taxel layout, not the URDF, says which
@@ -503,6 +506,9 @@ class HandGeometry:
     fingertip_depth_m: float
     jaw_half_width_m: float = 0.0
     jaw_travel_m: float = 0.0
+    jaw_closed_m: float = 0.0
+    jaws: tuple[str, ...] = ()
+    jaw_speed_m_s: float = 0.0
     bending: tuple[BendingFinger, ...] = ()
     closing: tuple[ClosingPad, ...] = ()
 

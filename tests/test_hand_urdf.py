@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -217,3 +218,54 @@ def test_a_trial_runs_with_the_third_hand(wide_urdf, tmp_path):
     grasp = document["grasp"]
     assert set(grasp["joint_positions"]) == {"left_jaw", "right_jaw"}
     assert grasp["aperture_m"] == pytest.approx(0.042, abs=0.002)
+
+
+def _wide_world(urdf):
+    """A PyBullet world offering the wide gripper next to the shipped hands, and a planner
+    naming it (what a plugin adding a hand registers)."""
+    from plugins.worlds.pybullet_world import Pybullet
+
+    class WidePybullet(Pybullet):
+        """The pybullet world with the wide gripper."""
+
+        name = "pybullet-wide"
+        extra_hands: ClassVar[dict[str, str]] = {"wide": str(urdf)}
+
+    class WideParallel(TopParallel):
+        """top-parallel for the wide gripper."""
+
+        name = "wide-parallel"
+        grippers = ("wide",)
+
+    return WidePybullet, WideParallel
+
+
+def test_a_simulated_world_offers_a_hand_named_by_its_urdf(wide_urdf):
+    from pipeline.sim.hand_models import HAND_MODELS
+
+    world_class, _ = _wide_world(wide_urdf)
+    assert world_class.hands == ("pg70", "sdh", "wide")
+    spec = world_class().gripper_spec("wide")
+    assert spec.name == "wide" and spec.max_aperture_m == pytest.approx(0.11)
+    assert [(p.rows, p.cols) for p in spec.pads] == [(8, 8), (8, 8)]
+    model = HAND_MODELS["wide"]
+    # The 10 mm the pads stand apart with both jaws at 0 is no joint's: 50 mm opens each
+    # jaw 20 mm.
+    assert model.open_configuration(0.05, 0.0) == pytest.approx(
+        {"left_jaw": 0.02, "right_jaw": 0.02}
+    )
+    assert [f.joints for f in model.fingers] == [("left_jaw",), ("right_jaw",)]
+    with pytest.raises(ConfigError, match="has no hand 'other'"):
+        world_class().gripper_spec("other")
+
+
+@pytest.mark.slow
+def test_a_pybullet_trial_grasps_with_the_hand_a_plugin_adds(wide_urdf, tmp_path):
+    world_class, planner_class = _wide_world(wide_urdf)
+    registry = registry_with(world_class, planner_class)
+    settings = ("world.use=pybullet-wide", "trial.gripper=wide", "trial.pictures=false")
+    run_trial(load_config(registry, overrides=list(settings)), registry, tmp_path / "trial")
+    document = json.loads((tmp_path / "trial" / "result.json").read_text())
+    assert document["gripper"] == "wide" and document["status"] == "converged"
+    contacts = json.loads((tmp_path / "trial" / "contacts.json").read_text())
+    assert {t["pad"] for g in contacts["grasps"] for t in g["taxels"]} == {"left", "right"}

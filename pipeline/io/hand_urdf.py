@@ -54,7 +54,7 @@ DIRECTION_DECIMALS = 5
 
 
 def _round(value: float) -> float:
-    return round(float(value), LENGTH_DECIMALS)
+    return round(float(value), LENGTH_DECIMALS) + 0.0  # no -0.0
 
 
 def _direction(vector: np.ndarray) -> tuple[float, ...]:
@@ -283,7 +283,7 @@ def read_hand_geometry(path: str | Path) -> HandGeometry:
     fingers = tuple(tree.finger_of(base.child) for base in bases)
     everything = tree.corners(name for name in tree.links if name != tree.palm)
     jaws = [base for base in bases if base.type == "prismatic"]
-    jaw_half_width = jaw_travel = 0.0
+    jaw_half_width = jaw_travel = jaw_speed = gap = 0.0
     if jaws and len(jaws) == len(bases):
         jaw_links = [name for base in jaws for name in tree.below(base.child)]
         jaw_corners = tree.corners(n for n in jaw_links if not n.endswith("_pad"))
@@ -292,6 +292,7 @@ def read_hand_geometry(path: str | Path) -> HandGeometry:
         surfaces = [np.asarray(by_name[c.pad].centre_m) @ (*c.facing, 0.0) for c in closing_pads]
         gap = -sum(surfaces)  # each pad's surface before the centre plane at joints 0
         jaw_travel = _round(gap + sum(_joint_limit(base) for base in jaws))
+        jaw_speed = min(float(base.limit.velocity or 0.0) for base in jaws)
     bending = tuple(
         finger
         for finger in (_bending_finger(tree, base, by_name) for base in bases)
@@ -305,19 +306,28 @@ def read_hand_geometry(path: str | Path) -> HandGeometry:
         fingertip_depth_m=_round(everything[:, 2].max()),
         jaw_half_width_m=jaw_half_width,
         jaw_travel_m=jaw_travel,
+        jaw_closed_m=_round(gap),
+        jaws=tuple(base.name for base in jaws) if jaw_travel else (),
+        jaw_speed_m_s=jaw_speed,
         bending=bending,
         closing=_closing(tree, bases, pads, bending),
     )
 
 
-@functools.cache
-def hand_geometry(urdf: str) -> HandGeometry:
-    """The :class:`HandGeometry` of the hand ``urdf`` (a path, or else a file of
-    ``robots/``), read once (:func:`read_hand_geometry`)."""
+def hand_urdf_path(urdf: str | Path) -> Path:
+    """Where the hand URDF ``urdf`` is: the path itself when it exists (relative to the
+    working directory), else the file of that name in ``robots/``, absolute."""
     from robots import ROOT
 
     path = Path(urdf)
-    return read_hand_geometry(path if path.is_absolute() or path.exists() else ROOT / path)
+    return (path if path.exists() else ROOT / path).resolve()
+
+
+@functools.cache
+def hand_geometry(urdf: str) -> HandGeometry:
+    """The :class:`HandGeometry` of the hand ``urdf`` (:func:`hand_urdf_path`), read once
+    (:func:`read_hand_geometry`)."""
+    return read_hand_geometry(hand_urdf_path(urdf))
 
 
 @dataclass(frozen=True)

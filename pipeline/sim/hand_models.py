@@ -34,11 +34,18 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from pipeline.errors import ConfigError
 from pipeline.geometry.pad_layout import pad_grid
-from pipeline.io.hand_urdf import PadGeometry, gripper_spec_from_urdf
+from pipeline.io.hand_urdf import (
+    PadGeometry,
+    gripper_spec_from_urdf,
+    hand_geometry,
+    hand_urdf_path,
+)
 from pipeline.planning import sdh_geometry
 from pipeline.sim.taxels import taxels_to_robot
 from pipeline.types import GraspPlan, GripperSpec, PadLayout, TaxelState
@@ -46,7 +53,10 @@ from pipeline.types import GraspPlan, GripperSpec, PadLayout, TaxelState
 #: Where an unused hand waits: high above the table, out of the camera's view (m).
 PARK_POSITION_M = (0.0, 0.0, 2.0)
 
+#: The taxels' pitch on every pad of the simulated hands (m): the Weiss DSA 9205's.
 TAXEL_PITCH_M = 0.0034
+#: How far (m) a parallel gripper's jaw targets move past the touch to press.
+JAW_SQUEEZE_M = 0.002
 
 SDH_FINGERS = sdh_geometry.FINGERS
 #: How far (rad, each bending joint) an SDH-2 finger's targets move past the contact to press.
@@ -107,16 +117,6 @@ class HandModel:
     facings: Callable[[float], np.ndarray]
 
 
-def _pg70_open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
-    half_m = opening_m / 2.0
-    return {"left_jaw": half_m, "right_jaw": half_m}
-
-
-def _pg70_aperture(hand: SimHand) -> float:
-    joints = hand.joint_positions()
-    return joints["left_jaw"] + joints["right_jaw"]
-
-
 def _sdh_open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
     alpha = sdh_geometry.alpha_for_opening(opening_m)
     configuration = {"f1_base": spread_rad, "f2_base": spread_rad}
@@ -138,24 +138,60 @@ def _sdh_aperture(hand: SimHand) -> float:
     return 2.0 * float(np.mean(radii))
 
 
-def _pg70_model() -> HandModel:
+def parallel_hand_model(name: str, urdf: str | Path) -> HandModel:
+    """The model of a parallel gripper from its URDF (a path, or a file of ``robots/``;
+    the convention of docs/hands.md): each jaw a finger closing its prismatic joint at the
+    joints' velocity limit and pressing :data:`JAW_SQUEEZE_M` past the touch, each pad a
+    grid of as many :data:`TAXEL_PITCH_M` taxels as fit it, the opening split evenly
+    between the jaws.
+
+    Raises:
+        ConfigError: the URDF is not a parallel gripper of the convention.
+    """
+    geometry = hand_geometry(str(urdf))
+    if not geometry.jaws or len(geometry.closing) != len(geometry.jaws):
+        raise ConfigError(
+            f"hand '{name}': {geometry.urdf} is not a parallel gripper (jaws on prismatic "
+            f"joints, each with a pad; docs/hands.md)"
+        )
+    mounts = [geometry.pad(closing.pad) for closing in geometry.closing]
     pads = tuple(
-        PadGeometry(PadLayout(side, f"{side}_pad", 14, 6, TAXEL_PITCH_M))
-        for side in ("left", "right")
+        PadGeometry(
+            PadLayout(
+                mount.pad,
+                mount.link,
+                int(mount.length_m / TAXEL_PITCH_M + 1e-9),
+                int(mount.width_m / TAXEL_PITCH_M + 1e-9),
+                TAXEL_PITCH_M,
+            )
+        )
+        for mount in mounts
     )
     fingers = tuple(
-        FingerDrive(side, (side,), (f"{side}_jaw",), (-1.0,), 0.041, (-0.002,))
-        for side in ("left", "right")
+        FingerDrive(
+            mount.finger, (mount.pad,), (joint,), (-1.0,), geometry.jaw_speed_m_s, (-JAW_SQUEEZE_M,)
+        )
+        for mount, joint in zip(mounts, geometry.jaws, strict=True)
     )
-    spec = gripper_spec_from_urdf("pg70", "pg70.urdf", pads)
+    closed_m = geometry.jaw_closed_m  # the part of the opening no joint makes
+    facings = np.array([closing.facing for closing in geometry.closing])
+
+    def open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
+        share_m = (opening_m - closed_m) / len(geometry.jaws)
+        return {joint: share_m for joint in geometry.jaws}
+
+    def aperture(hand: SimHand) -> float:
+        joints = hand.joint_positions()
+        return sum(joints[joint] for joint in geometry.jaws) + closed_m
+
     return HandModel(
-        spec,
-        "pg70.urdf",
+        gripper_spec_from_urdf(name, urdf, pads),
+        str(hand_urdf_path(urdf)),
         pads,
         fingers,
-        _pg70_open_configuration,
-        _pg70_aperture,
-        lambda spread_rad: np.array([[1.0, 0.0], [-1.0, 0.0]]),  # left jaw at -x, right at +x
+        open_configuration,
+        aperture,
+        lambda spread_rad: facings,
     )
 
 
@@ -192,10 +228,34 @@ def _sdh_model() -> HandModel:
     )
 
 
-HAND_MODELS: dict[str, HandModel] = {"pg70": _pg70_model(), "sdh": _sdh_model()}
+HAND_MODELS: dict[str, HandModel] = {
+    "pg70": parallel_hand_model("pg70", "pg70.urdf"),
+    "sdh": _sdh_model(),
+}
 
 #: What grasp planners need to know about each shipped hand, by name.
 GRIPPERS: dict[str, GripperSpec] = {name: model.spec for name, model in HAND_MODELS.items()}
+
+
+def add_parallel_hand(name: str, urdf: str | Path) -> GripperSpec:
+    """Make the parallel gripper of ``urdf`` (:func:`parallel_hand_model`) a hand the
+    simulated worlds can load under ``name`` (in this process), and give its spec; again
+    with the same URDF, nothing changes.
+
+    Raises:
+        ConfigError: ``name`` is a hand with another URDF, or the URDF is no parallel
+            gripper.
+    """
+    path = str(hand_urdf_path(urdf))
+    known = HAND_MODELS.get(name)
+    if known is not None:
+        if known.urdf != path:
+            raise ConfigError(f"hand '{name}' is {known.urdf} already, not {path}")
+        return known.spec
+    model = parallel_hand_model(name, path)
+    HAND_MODELS[name] = model
+    GRIPPERS[name] = model.spec
+    return model.spec
 
 
 class SimHand(ABC):
