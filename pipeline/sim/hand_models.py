@@ -58,7 +58,9 @@ TAXEL_PITCH_M = 0.0034
 #: How far (m) a parallel gripper's jaw targets move past the touch to press.
 JAW_SQUEEZE_M = 0.002
 
-SDH_FINGERS = sdh_geometry.FINGERS
+#: The SDH-2's finger kinematics, read from ``robots/sdh2.urdf``.
+SDH = sdh_geometry.shipped()
+SDH_FINGERS = SDH.fingers
 #: How far (rad, each bending joint) an SDH-2 finger's targets move past the contact to press.
 #: Fingers 1 and 2 together overpower the thumb and push the object toward it until they
 #: reach their targets, so theirs is small (about 4 mm at the distal pad); the thumb's is
@@ -118,7 +120,7 @@ class HandModel:
 
 
 def _sdh_open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
-    alpha = sdh_geometry.alpha_for_opening(opening_m)
+    alpha = SDH.alpha_for_opening(opening_m)
     configuration = {"f1_base": spread_rad, "f2_base": spread_rad}
     for finger in SDH_FINGERS:
         configuration[f"{finger}_proximal"] = alpha
@@ -215,7 +217,7 @@ def _sdh_model() -> HandModel:
                 finger, (proximal, distal), (proximal, distal), (1.0, -1.0), 1.0, (squeeze,) * 2
             )
         )
-    max_aperture_m = sdh_geometry.opening_for_alpha(-sdh_geometry.JOINT_LIMIT_RAD)
+    max_aperture_m = SDH.opening_for_alpha(-SDH.joint_limit_rad)
     spec = gripper_spec_from_urdf("sdh", "sdh2.urdf", pads, max_aperture_m)
     return HandModel(
         spec,
@@ -224,7 +226,7 @@ def _sdh_model() -> HandModel:
         tuple(fingers),
         _sdh_open_configuration,
         _sdh_aperture,
-        sdh_geometry.finger_facings,
+        SDH.finger_facings,
     )
 
 
