@@ -11,16 +11,17 @@ Two hands ship with symfuse, described by ``robots/pg70.urdf`` and ``robots/sdh2
 
 Hand frame (the URDF base link ``palm``): origin at the mounting flange on the palm axis,
 ``z`` along the approach direction toward the fingertips, ``x`` the closing direction. A
-:class:`pipeline.types.GraspPlan`'s ``T_robot_hand`` is this frame's pose. The PG-70's pad
-centres are 125 mm and its fingertips 154 mm down ``z``; the SDH-2's straight fingertips
-246 mm (``GripperSpec.finger_length_m`` holds the fingertip depth).
+:class:`pipeline.types.GraspPlan`'s ``T_robot_hand`` is this frame's pose. Where the pads
+and fingertips sit is read from the URDFs (:mod:`pipeline.io.hand_urdf`; docs/hands.md);
+``GripperSpec.finger_length_m`` holds the fingertip depth.
 
-Opening: for the PG-70 ``opening_m`` is the distance between the pad surfaces. For the
-SDH-2 it is twice the distance from the palm axis of the distal pads' flat surfaces when
-each proximal link is tilted by ``alpha`` and the distal link held parallel to the palm
-axis (distal joint ``-alpha``): ``opening = 2 (r_base - 14.8 mm - 86.5 mm sin(alpha))``
-with ``r_base = 38.1 mm`` (:mod:`pipeline.planning.sdh_geometry`); at spread 60 deg that
-is the diameter of the circle the three distal pads touch. Openings below 46.6 mm flex the
+Opening: for a parallel gripper ``opening_m`` is the distance between the pad surfaces,
+split evenly between the jaws (:func:`parallel_hand_model`, the PG-70's and a user's
+gripper's). For the SDH-2 it is twice the distance from the palm axis of the distal pads'
+flat surfaces when each proximal link is tilted by ``alpha`` and the distal link held
+parallel to the palm axis (distal joint ``-alpha``;
+:class:`pipeline.planning.sdh_geometry.FingerKinematics`); at spread 60 deg that is the
+diameter of the circle the three distal pads touch. The narrowest openings flex the
 proximal links inward (``alpha > 0``), for narrow objects.
 
 :class:`SimHand` is the engine-neutral part of a simulated hand; the PyBullet hand
