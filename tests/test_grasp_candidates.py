@@ -415,8 +415,7 @@ def test_sdh_fingers_that_would_meet_the_front_from_inside_are_rejected():
             0.0,
             0.06,
             0.0,
-            DISTAL,
-            0.3,
+            sdh_candidates.SdhHand(SDH, DISTAL, 0.3),
             JAW_SETTINGS,
         )
         assert candidate.summary.feasible == feasible
@@ -438,7 +437,8 @@ def test_a_top_edge_behind_the_distal_link_is_found(top_m, edge):
     direction = np.array([1.0, 0.0, 0.0])
     contact = pad_coverage(wall, np.zeros(3), direction, taxels, 0.003)
     assert contact.touch_m == pytest.approx(0.05)
-    assert sdh_candidates._top_edge_above_pad(wall, np.zeros(3), direction, taxels, contact) is edge
+    found = sdh_candidates._top_edge_above_pad(SDH, wall, np.zeros(3), direction, taxels, contact)
+    assert found is edge
 
 
 def test_a_jaw_finger_that_meets_a_shoulder_below_its_pad_is_rejected():

@@ -4,6 +4,7 @@ two-jaw gripper written here) planned for and grasped with in the analytic world
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from typing import ClassVar
@@ -15,7 +16,7 @@ from pipeline.config import load_config
 from pipeline.errors import ConfigError
 from pipeline.io.hand_urdf import read_hand_geometry
 from pipeline.planning.parallel_candidates import ParallelHand
-from pipeline.planning.sdh_geometry import opening_for_alpha
+from pipeline.planning.sdh_geometry import shipped
 from pipeline.run.trial import run_trial
 from pipeline.sim.hand_models import GRIPPERS
 from pipeline.testing import PARALLEL_HAND, AnalyticWorld, registry_with
@@ -136,7 +137,7 @@ def test_the_shipped_specs_keep_the_numbers_planners_used_before():
     pg70, sdh = GRIPPERS["pg70"], GRIPPERS["sdh"]
     assert (pg70.fingers, pg70.max_aperture_m, pg70.finger_length_m) == (2, 0.065, 0.154)
     assert (sdh.fingers, sdh.finger_length_m) == (3, 0.246)
-    assert sdh.max_aperture_m == pytest.approx(opening_for_alpha(-math.pi / 2), abs=1e-12)
+    assert sdh.max_aperture_m == pytest.approx(shipped().opening_for_alpha(-math.pi / 2), abs=1e-12)
     hand = ParallelHand.of(pg70, "top-parallel")
     assert (hand.palm_to_pad_centre_m, hand.pad_centre_to_fingertip_m) == (0.125, 0.029)
     assert (hand.finger_recess_m, hand.jaw_half_width_m) == (0.003, 0.04 / 2)
@@ -269,3 +270,22 @@ def test_a_pybullet_trial_grasps_with_the_hand_a_plugin_adds(wide_urdf, tmp_path
     assert document["gripper"] == "wide" and document["status"] == "converged"
     contacts = json.loads((tmp_path / "trial" / "contacts.json").read_text())
     assert {t["pad"] for g in contacts["grasps"] for t in g["taxels"]} == {"left", "right"}
+
+
+def test_the_sdh_candidates_take_the_fingers_of_the_hand_they_are_given():
+    from pipeline.planning.sdh_candidates import PINCH_SPREAD_RAD, SdhHand
+    from plugins.planners.top_three_finger import TopThreeFinger
+
+    sdh = SdhHand.of(GRIPPERS["sdh"], "top-three-finger")
+    assert sdh.pad.name == "f1_distal" and sdh.aperture_m == GRIPPERS["sdh"].max_aperture_m
+    # Thumb first, then fingers 1 and 2, 33 mm either side of the closing line.
+    assert sdh.parallel_finger_offsets_m() == (0.0, 0.033, -0.033)
+    assert sdh.turning_lateral_m() == 0.033
+    assert sdh.centre_offset_m(0.0) == pytest.approx((0.01905 - 0.03811) / 2, abs=1e-15)
+    assert sdh.centre_offset_m(PINCH_SPREAD_RAD) == 0.01905
+    assert sdh.centre_offset_m(math.radians(60.0)) == 0.0
+    bare = dataclasses.replace(GRIPPERS["sdh"], geometry=None)
+    cloud = PointCloud(np.array([[0.6, 0.0, 0.05], [0.61, 0.0, 0.06]]))
+    proposal = SymmetryInit(plane=SymmetryPlane(0.0, 0.6), bias=Bias())
+    with pytest.raises(ConfigError, match=r"planner 'top-three-finger'.*turn-and-bend"):
+        TopThreeFinger().plan(cloud, proposal, bare)

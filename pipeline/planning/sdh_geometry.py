@@ -37,7 +37,7 @@ DISTAL_PAD_CURVED_ROWS = 9
 DISTAL_PAD_CURVE_RADIUS_M = 0.059
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FingerKinematics:
     """A turn-and-bend hand's planning numbers (m, rad; palm frame), every finger alike but
     for its base and facing.
@@ -85,11 +85,16 @@ class FingerKinematics:
     @classmethod
     def of(cls, geometry: HandGeometry | None, hand: str = "") -> FingerKinematics:
         """The kinematics of a hand whose :class:`~pipeline.types.HandGeometry` has
-        turn-and-bend fingers alike in their links, one of them with a fixed base.
+        turn-and-bend fingers alike in their links, one of them with a fixed base; one
+        object per geometry (its cached profiles are the planner's).
 
         Raises:
             ConfigError: the hand (named ``hand``) has no such fingers.
         """
+        return _kinematics(geometry, hand)
+
+    @classmethod
+    def _read(cls, geometry: HandGeometry | None, hand: str) -> FingerKinematics:
         fingers = geometry.bending if geometry is not None else ()
         links = {_links(finger) for finger in fingers}
         fixed = [finger for finger in fingers if finger.spread_sign == 0]
@@ -254,33 +259,12 @@ def _links(finger) -> tuple[float, ...]:
 
 
 @functools.cache
+def _kinematics(geometry: HandGeometry | None, hand: str) -> FingerKinematics:
+    return FingerKinematics._read(geometry, hand)
+
+
 def shipped() -> FingerKinematics:
     """The shipped SDH-2's kinematics (``robots/sdh2.urdf``)."""
     from pipeline.io.hand_urdf import hand_geometry
 
     return FingerKinematics.of(hand_geometry("sdh2.urdf"), "sdh")
-
-
-# Transitional: the shipped SDH-2's numbers under their former names, read from its URDF,
-# until every caller takes a FingerKinematics.
-_SHIPPED = shipped()
-FINGERS = _SHIPPED.fingers
-FINGER_BASES_M = _SHIPPED.bases_m
-BASE_RADIUS_M = _SHIPPED.base_radius_m
-BASE_DEPTH_M = _SHIPPED.base_depth_m
-KNUCKLE_DEPTH_M = _SHIPPED.knuckle_depth_m
-PROXIMAL_LENGTH_M = _SHIPPED.proximal_length_m
-DISTAL_LENGTH_M = _SHIPPED.distal_length_m
-DISTAL_PAD_OFFSET_M = _SHIPPED.distal_pad_offset_m
-DISTAL_PAD_CENTRE_M = _SHIPPED.distal_pad_centre_m
-FINGER_HALF_WIDTH_M = _SHIPPED.finger_half_width_m
-PALM_RADIUS_M = _SHIPPED.palm_radius_m
-JOINT_LIMIT_RAD = _SHIPPED.joint_limit_rad
-finger_facings = _SHIPPED.finger_facings
-reach_m = _SHIPPED.reach_m
-alpha_for_reach = _SHIPPED.alpha_for_reach
-distal_pad_depth_m = _SHIPPED.distal_pad_depth_m
-opening_for_alpha = _SHIPPED.opening_for_alpha
-alpha_for_opening = _SHIPPED.alpha_for_opening
-finger_profile = _SHIPPED.finger_profile
-closing_hits = _SHIPPED.closing_hits
