@@ -242,14 +242,15 @@ def _wide_world(urdf):
 
 
 def test_a_simulated_world_offers_a_hand_named_by_its_urdf(wide_urdf):
-    from pipeline.sim.hand_models import HAND_MODELS
+    from pipeline.sim.hand_models import GRIPPERS, HAND_MODELS, hand_model
 
     world_class, _ = _wide_world(wide_urdf)
     assert world_class.hands == ("pg70", "sdh", "wide")
     spec = world_class().gripper_spec("wide")
     assert spec.name == "wide" and spec.max_aperture_m == pytest.approx(0.11)
     assert [(p.rows, p.cols) for p in spec.pads] == [(8, 8), (8, 8)]
-    model = HAND_MODELS["wide"]
+    model = hand_model("wide")
+    assert "wide" not in HAND_MODELS and "wide" not in GRIPPERS  # still the shipped hands
     # The 10 mm the pads stand apart with both jaws at 0 is no joint's: 50 mm opens each
     # jaw 20 mm.
     assert model.open_configuration(0.05, 0.0) == pytest.approx(

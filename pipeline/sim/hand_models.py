@@ -240,24 +240,42 @@ HAND_MODELS: dict[str, HandModel] = {
 GRIPPERS: dict[str, GripperSpec] = {name: model.spec for name, model in HAND_MODELS.items()}
 
 
-def add_parallel_hand(name: str, urdf: str | Path) -> GripperSpec:
-    """Make the parallel gripper of ``urdf`` (:func:`parallel_hand_model`) a hand the
-    simulated worlds can load under ``name`` (in this process), and give its spec; again
-    with the same URDF, nothing changes.
+#: Hands a world added in this process by their URDFs (:func:`add_parallel_hand`), by name.
+ADDED_HANDS: dict[str, HandModel] = {}
+
+
+def hand_model(name: str) -> HandModel:
+    """The model of the shipped or added hand ``name``.
 
     Raises:
-        ConfigError: ``name`` is a hand with another URDF, or the URDF is no parallel
-            gripper.
+        ConfigError: no hand has that name.
+    """
+    model = HAND_MODELS.get(name) or ADDED_HANDS.get(name)
+    if model is None:
+        known = ", ".join(sorted({*HAND_MODELS, *ADDED_HANDS}))
+        raise ConfigError(f"unknown gripper '{name}' (known: {known})")
+    return model
+
+
+def add_parallel_hand(name: str, urdf: str | Path) -> GripperSpec:
+    """Make the parallel gripper of ``urdf`` (:func:`parallel_hand_model`) a hand the
+    simulated worlds can load under ``name`` (in this process, :data:`ADDED_HANDS`), and
+    give its spec; again with the same URDF, nothing changes.
+
+    Raises:
+        ConfigError: ``name`` is a shipped hand or an added one with another URDF, or the
+            URDF is no parallel gripper.
     """
     path = str(hand_urdf_path(urdf))
-    known = HAND_MODELS.get(name)
+    if name in HAND_MODELS:
+        raise ConfigError(f"hand '{name}' is a shipped hand; name {path} otherwise")
+    known = ADDED_HANDS.get(name)
     if known is not None:
         if known.urdf != path:
             raise ConfigError(f"hand '{name}' is {known.urdf} already, not {path}")
         return known.spec
     model = parallel_hand_model(name, path)
-    HAND_MODELS[name] = model
-    GRIPPERS[name] = model.spec
+    ADDED_HANDS[name] = model
     return model.spec
 
 
@@ -452,7 +470,7 @@ def hand_link_meshes(
 
     from robots import ROOT
 
-    model = HAND_MODELS.get(gripper)
+    model = HAND_MODELS.get(gripper) or ADDED_HANDS.get(gripper)
     if model is None:
         return {}
     urdf = yourdfpy.URDF.load(str(ROOT / model.urdf))
