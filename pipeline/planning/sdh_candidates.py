@@ -359,16 +359,11 @@ def _clear_preshape(
     # the first that sweeps fewer than MIN_HITS of all the points is the answer.
     for first in range(0, len(steps), _STEPS_AT_ONCE):
         chunk = tuple(steps[first : first + _STEPS_AT_ONCE])
-        blocked = np.zeros(len(chunk), dtype=bool)
-        for t, d in corridors:
-            shallow = slice(-_SHALLOWEST, None)
-            hits = _profile_hits(chunk, t[shallow], d[shallow], s.descent_clearance_m)
-            blocked |= hits >= MIN_HITS
-        for k in np.flatnonzero(~blocked):
-            if all(
-                _profile_hits(chunk[k : k + 1], t, d, s.descent_clearance_m)[0] < MIN_HITS
-                for t, d in corridors
-            ):
+        shallowest = [(t[-_SHALLOWEST:], d[-_SHALLOWEST:]) for t, d in corridors]
+        hits = _profile_hits(chunk, shallowest, s.descent_clearance_m)
+        for k in np.flatnonzero(np.all(hits < MIN_HITS, axis=1)):
+            hits = _profile_hits(chunk[k : k + 1], corridors, s.descent_clearance_m)
+            if np.all(hits < MIN_HITS):
                 return chunk[k] * _OPEN_STEP_RAD
     return None
 
@@ -475,19 +470,26 @@ def _profile_table(steps: tuple[int, ...], clearance_m: float) -> tuple[np.ndarr
 
 
 def _profile_hits(
-    steps: tuple[int, ...], t: np.ndarray, d: np.ndarray, clearance_m: float
+    steps: tuple[int, ...], corridors: list[tuple[np.ndarray, np.ndarray]], clearance_m: float
 ) -> np.ndarray:
-    """``(K,)``: how many points at distance ``t`` along a finger's facing and depth ``d``
-    below the palm (both ``(N,)``) each pre-shape of ``steps`` sweeps on its descent."""
+    """``(K, F)``: how many points of each finger's corridor (distances ``t`` along its
+    facing and depths ``d`` below the palm, both ``(N_f,)``) each pre-shape of ``steps``
+    sweeps on its descent."""
     starts, reaches, deepest = _profile_table(steps, clearance_m)
+    t = np.concatenate([t for t, _ in corridors])
+    d = np.concatenate([d for _, d in corridors])
     # A point deeper than every profile reaches is hit by none.
     shallow = d <= deepest
+    kept = np.concatenate([[0], np.cumsum(shallow)])
+    ends = kept[np.cumsum([len(t) for t, _ in corridors])]
     t, d = t[shallow], d[shallow]
     index = np.round((t[None, :] - starts[:, None]) / _PROFILE_STEP_M).astype(int)
     # Cells before a grid's start read column 0 and after its end a later one: -inf.
     width = reaches.shape[1]
     cells = np.clip(index + 1, 0, width - 1) + width * np.arange(len(steps))[:, None]
-    return np.count_nonzero(d[None, :] <= reaches.take(cells), axis=1)
+    running = np.zeros((len(steps), len(t) + 1), dtype=np.int64)
+    np.cumsum(d[None, :] <= reaches.take(cells), axis=1, out=running[:, 1:])
+    return np.diff(running[:, np.concatenate([[0], ends])], axis=1)
 
 
 #: How deep behind a pad's touch the surface counts as the side it closes on, looking for
