@@ -216,7 +216,10 @@ def _checked(
     opening = sdh.opening_for_alpha(open_alpha)
     if opening > aperture_m + 1e-9:
         return Candidate.rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
-    if _closing_collides(cloud.visible, bases, facings, palm_z, open_alpha, alphas, s):
+    # Points deeper than the proximal link reaches from its joint are never hit closing.
+    reach = _closing_reach_m(s.touch_tolerance_m)
+    within = cloud.above(palm_z - sdh.KNUCKLE_DEPTH_M - reach - _MARGIN_M, visible=True)
+    if _closing_collides(within, bases, facings, palm_z, open_alpha, alphas, s):
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "a proximal link would hit the object while closing"
         )
@@ -385,12 +388,26 @@ def _closing_collides(
     corridors = _corridors(
         visible, bases, facings, palm_z, sdh.FINGER_HALF_WIDTH_M + s.touch_tolerance_m
     )
+    reach = _closing_reach_m(s.touch_tolerance_m) + _MARGIN_M
     for (t, d), contact in zip(corridors, contact_alphas, strict=True):
+        near = t * t + (d - sdh.KNUCKLE_DEPTH_M) ** 2 <= reach * reach
         alphas = [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]
-        hits = sdh.closing_hits(t, d, alphas, s.touch_tolerance_m)
+        hits = sdh.closing_hits(t[near], d[near], alphas, s.touch_tolerance_m)
         if np.any(np.count_nonzero(hits, axis=1) >= MIN_HITS):
             return True
     return False
+
+
+def _closing_reach_m(clearance_m: float) -> float:
+    """The farthest from the proximal joint a point inside the knuckle or the proximal
+    link with its pad, grown by ``clearance_m`` (:func:`sdh_geometry.closing_hits`), can
+    lie (m), at any proximal angle."""
+    thickest = max(-sdh.PROXIMAL_BACK_M, sdh.PROXIMAL_PAD_OFFSET_M) + clearance_m
+    link = math.hypot(sdh.PROXIMAL_LENGTH_M + clearance_m, thickest)
+    knuckle = math.hypot(
+        sdh.KNUCKLE_RADIUS_M + clearance_m, sdh.KNUCKLE_DEPTH_M - sdh.BASE_DEPTH_M + clearance_m
+    )
+    return max(link, knuckle)
 
 
 def _corridors(
