@@ -260,7 +260,10 @@ def _checked(
     opening = k.opening_for_alpha(open_alpha)
     if opening > sdh.aperture_m + 1e-9:
         return Candidate.rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
-    if _closing_collides(k, cloud.visible, bases, facings, palm_z, open_alpha, alphas, s):
+    # Points deeper than the proximal link reaches from its joint are never hit closing.
+    reach = _closing_reach_m(k, s.touch_tolerance_m)
+    within = cloud.above(palm_z - k.knuckle_depth_m - reach - _MARGIN_M, visible=True)
+    if _closing_collides(k, within, bases, facings, palm_z, open_alpha, alphas, s):
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "a proximal link would hit the object while closing"
         )
@@ -407,17 +410,11 @@ def _clear_preshape(
     # the first that sweeps fewer than MIN_HITS of all the points is the answer.
     for first in range(0, len(steps), _STEPS_AT_ONCE):
         chunk = tuple(steps[first : first + _STEPS_AT_ONCE])
-        blocked = np.zeros(len(chunk), dtype=bool)
-        for t, d in corridors:
-            shallow = slice(-_SHALLOWEST, None)
-            hits = _profile_hits(kinematics, chunk, t[shallow], d[shallow], s.descent_clearance_m)
-            blocked |= hits >= MIN_HITS
-        for k in np.flatnonzero(~blocked):
-            if all(
-                _profile_hits(kinematics, chunk[k : k + 1], t, d, s.descent_clearance_m)[0]
-                < MIN_HITS
-                for t, d in corridors
-            ):
+        shallowest = [(t[-_SHALLOWEST:], d[-_SHALLOWEST:]) for t, d in corridors]
+        hits = _profile_hits(kinematics, chunk, shallowest, s.descent_clearance_m)
+        for k in np.flatnonzero(np.all(hits < MIN_HITS, axis=1)):
+            hits = _profile_hits(kinematics, chunk[k : k + 1], corridors, s.descent_clearance_m)
+            if np.all(hits < MIN_HITS):
                 return chunk[k] * _OPEN_STEP_RAD
     return None
 
@@ -440,12 +437,26 @@ def _closing_collides(
     corridors = _corridors(
         visible, bases, facings, palm_z, kinematics.finger_half_width_m + s.touch_tolerance_m
     )
+    reach = _closing_reach_m(kinematics, s.touch_tolerance_m) + _MARGIN_M
     for (t, d), contact in zip(corridors, contact_alphas, strict=True):
+        near = t * t + (d - kinematics.knuckle_depth_m) ** 2 <= reach * reach
         alphas = [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]
-        hits = kinematics.closing_hits(t, d, alphas, s.touch_tolerance_m)
+        hits = kinematics.closing_hits(t[near], d[near], alphas, s.touch_tolerance_m)
         if np.any(np.count_nonzero(hits, axis=1) >= MIN_HITS):
             return True
     return False
+
+
+def _closing_reach_m(kinematics: FingerKinematics, clearance_m: float) -> float:
+    """The farthest from the proximal joint a point inside the knuckle or the proximal
+    link with its pad, grown by ``clearance_m`` (:meth:`FingerKinematics.closing_hits`),
+    can lie (m), at any proximal angle."""
+    k, c = kinematics, clearance_m
+    thickest = max(abs(k.proximal_back_m - c), abs(k.proximal_pad_offset_m + c))
+    link = math.hypot(k.proximal_length_m + c, thickest)
+    depth = max(abs(k.base_depth_m - c - k.knuckle_depth_m), c)
+    knuckle = math.hypot(k.knuckle_radius_m + c, depth)
+    return max(link, knuckle)
 
 
 def _corridors(
@@ -531,21 +542,27 @@ def _profile_table(
 def _profile_hits(
     kinematics: FingerKinematics,
     steps: tuple[int, ...],
-    t: np.ndarray,
-    d: np.ndarray,
+    corridors: list[tuple[np.ndarray, np.ndarray]],
     clearance_m: float,
 ) -> np.ndarray:
-    """``(K,)``: how many points at distance ``t`` along a finger's facing and depth ``d``
-    below the palm (both ``(N,)``) each pre-shape of ``steps`` sweeps on its descent."""
+    """``(K, F)``: how many points of each finger's corridor (distances ``t`` along its
+    facing and depths ``d`` below the palm, both ``(N_f,)``) each pre-shape of ``steps``
+    sweeps on its descent."""
     starts, reaches, deepest = _profile_table(kinematics, steps, clearance_m)
+    t = np.concatenate([t for t, _ in corridors])
+    d = np.concatenate([d for _, d in corridors])
     # A point deeper than every profile reaches is hit by none.
     shallow = d <= deepest
+    kept = np.concatenate([[0], np.cumsum(shallow)])
+    ends = kept[np.cumsum([len(t) for t, _ in corridors])]
     t, d = t[shallow], d[shallow]
     index = np.round((t[None, :] - starts[:, None]) / _PROFILE_STEP_M).astype(int)
     # Cells before a grid's start read column 0 and after its end a later one: -inf.
     width = reaches.shape[1]
     cells = np.clip(index + 1, 0, width - 1) + width * np.arange(len(steps))[:, None]
-    return np.count_nonzero(d[None, :] <= reaches.take(cells), axis=1)
+    running = np.zeros((len(steps), len(t) + 1), dtype=np.int64)
+    np.cumsum(d[None, :] <= reaches.take(cells), axis=1, out=running[:, 1:])
+    return np.diff(running[:, np.concatenate([[0], ends])], axis=1)
 
 
 #: How deep behind a pad's touch the surface counts as the side it closes on, looking for
