@@ -331,18 +331,29 @@ def _validate(raw: Mapping[str, Any], registry: StageRegistry) -> Config:
         registration = _registration(registry, stage, use, f"{stage}.use")
         choices[stage] = use
         params[stage].setdefault(use, registration.cls.Params())
-    _check_gripper(settings["trial"].gripper, registry.get("world", choices["world"]).cls)
+    _check_gripper(settings["trial"].gripper, choices["world"], registry)
     return Config(settings=settings, choices=choices, params=params)
 
 
-def _check_gripper(gripper: str, world: Any) -> None:
-    """``trial.gripper`` must be ``auto`` or a hand of the selected world."""
-    allowed = ("auto", *world.hands)
-    if gripper not in allowed:
-        raise ConfigError(
-            f"config key 'trial.gripper': {gripper!r} is not one of "
-            + ", ".join(repr(name) for name in allowed)
-        )
+def _check_gripper(gripper: str, world: str, registry: StageRegistry) -> None:
+    """``trial.gripper`` must be ``auto`` or a hand of the selected world; when it is not,
+    the message names the installed worlds that offer that hand."""
+    hands = registry.get("world", world).cls.hands
+    if gripper == "auto" or gripper in hands:
+        return
+    offering = [
+        name for name in registry.names("world") if gripper in registry.get("world", name).cls.hands
+    ]
+    if not offering:
+        hint = "no installed world offers it (symfuse plugins lists the worlds)"
+    elif len(offering) == 1:
+        hint = f"world {offering[0]} offers it: --set world.use={offering[0]}"
+    else:
+        hint = f"worlds {', '.join(offering)} offer it: --set world.use={offering[0]}"
+    raise ConfigError(
+        f"config key 'trial.gripper': {gripper!r} is not a hand of world '{world}' "
+        f"(auto, {', '.join(hands)}); {hint}"
+    )
 
 
 def changed_settings(config: Mapping[str, Any], base: Mapping[str, Any]) -> dict[str, Any]:

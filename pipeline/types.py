@@ -593,14 +593,24 @@ class GraspPlan:
             direction (toward the table), its x axis is the closing direction.
         pregrasp_height_m: how far above ``T_robot_hand`` the hand starts its descent.
         opening_m: aperture to open to before the descent.
-        closing_direction: ``(3,)`` unit vector along which the fingers close.
+        closing_direction: ``(3,)`` horizontal unit vector along which the fingers close,
+            equal to ``T_robot_hand``'s x axis, pointing from the *front* finger (the jaw or
+            the SDH thumb on the camera's side) to the back one, so that the front pad
+            touches the visible surface and the back pad the hidden one
+            (``pipeline.api.planning.front_to_back`` orients a direction so).
         predicted_contacts: ``(K, 3)`` points on the cloud where the pads are expected to
             touch first (used by PS initialisation for the initial bias).
         spread_rad: SDH base rotation (0 for a parallel gripper).
         reason: why a plan was refused, else empty.
         score: how good the planner deems the grasp, in [0, 1] (higher is better; the
             same scale for every planner, so that ``trial.gripper = "auto"`` can compare
-            hands); NaN when the planner does not score.
+            hands); NaN when the planner does not score. The built-in planners score
+            *contact x alignment x stability*: the smallest predicted pad contact quality
+            over the fingers (0 to 1: how squarely each pad meets a side), ``(1 + |cos a|)
+            / 2`` for a closing direction ``a`` from the plane normal, and ``1 / (1 + w h /
+            f)`` for the contact height ``h`` above the table over the object's
+            half-footprint ``f`` along the closing direction (``w``: ``tipping_weight``,
+            0.2 by default); ``pipeline.api.planning.CandidatePlanner`` computes it.
         candidates: the grasps the planner considered, best first (empty when it
             considered only one).
     """

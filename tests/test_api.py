@@ -20,6 +20,16 @@ def test_importing_the_api_loads_no_heavy_library():
     assert loaded_after("import pipeline.api", (*HEAVY, "scipy", "open3d")) == []
 
 
+def test_the_simulated_worlds_and_built_in_planners_are_public_without_their_engines():
+    code = (
+        "from pipeline.api.sim import Pybullet, Mujoco; "
+        "from pipeline.api.planning import TopParallel, TopThreeFinger; "
+        "assert (Pybullet.name, Mujoco.name) == ('pybullet', 'mujoco'); "
+        "assert (TopParallel.name, TopThreeFinger.name) == ('top-parallel', 'top-three-finger')"
+    )
+    assert loaded_after(code, ("pybullet", "mujoco")) == []
+
+
 def test_stage_estimate_completes_the_model_with_the_mirror_and_the_bias():
     rng = np.random.default_rng(4)
     points = rng.uniform(-0.05, 0.05, (50, 3)) + np.array([0.5, 0.1, 0.05])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import tomllib
 from dataclasses import dataclass
-from typing import Literal
+from typing import ClassVar, Literal
 
 import pytest
 
@@ -13,6 +13,7 @@ from pipeline.errors import ConfigError
 from pipeline.params import param
 from pipeline.registry import load_registry
 from pipeline.stages import STAGES
+from pipeline.testing import registry_with
 
 
 @pytest.fixture(scope="module")
@@ -93,8 +94,27 @@ def test_wrong_type_is_named(registry):
     with pytest.raises(ConfigError) as error:
         load_config(registry, overrides=["trial.gripper=robotiq"])
     assert str(error.value) == (
-        "config key 'trial.gripper': 'robotiq' is not one of 'auto', 'pg70', 'sdh'"
+        "config key 'trial.gripper': 'robotiq' is not a hand of world 'pybullet' "
+        "(auto, pg70, sdh); no installed world offers it (symfuse plugins lists the worlds)"
     )
+
+
+def test_a_hand_of_another_world_names_that_world(registry):
+    from pipeline.api.sim import Pybullet
+
+    class WidePybullet(Pybullet):
+        name = "pybullet-wide"
+        extra_hands: ClassVar[dict[str, str]] = {"wide": "wide.urdf"}
+
+    wide = registry_with(WidePybullet)
+    with pytest.raises(ConfigError) as error:
+        load_config(wide, overrides=["trial.gripper=wide"])
+    assert str(error.value) == (
+        "config key 'trial.gripper': 'wide' is not a hand of world 'pybullet' "
+        "(auto, pg70, sdh); world pybullet-wide offers it: --set world.use=pybullet-wide"
+    )
+    config = load_config(wide, overrides=["trial.gripper=wide", "world.use=pybullet-wide"])
+    assert config.settings["trial"].gripper == "wide"
 
 
 def test_bad_files_are_named(registry, tmp_path):

@@ -130,6 +130,53 @@ def test_the_api_page_check_flags_a_name_the_rendered_page_lacks(caplog):
     ]
 
 
+def test_every_theme_module_of_the_api_has_its_reference_page():
+    hooks = _hooks()
+    themes = sorted(
+        path.stem
+        for path in (ROOT / "pipeline" / "api").glob("*.py")
+        if not path.stem.startswith("_")
+    )
+    assert sorted(hooks.API_THEMES) == themes
+    for page, module in hooks.API_PAGES.items():
+        assert f"::: {module}\n" in (DOCS / page).read_text(encoding="utf-8"), page
+
+
+def test_a_theme_page_missing_a_name_of_its_module_is_flagged(caplog):
+    hooks = _hooks()
+
+    class Page:
+        class file:
+            src_uri = "reference/api-planning.md"
+
+    names = hooks.api_names("pipeline.api.planning")
+    assert "TopParallel" in names and "ParallelHand" in names
+    shown = "".join(
+        f'<h2 id="pipeline.api.planning.{name}">' for name in names if name != "hand_pose"
+    )
+    with caplog.at_level("WARNING"):
+        hooks.on_page_content(shown, Page, None, None)
+    assert [record.getMessage() for record in caplog.records] == [
+        "reference/api-planning.md: pipeline.api.planning.hand_pose is in __all__ "
+        "but not on the page"
+    ]
+
+
+def test_every_snippet_the_docs_include_exists_with_its_section():
+    """``--8<--`` includes (pymdownx.snippets) show the examples' tested code: each names a
+    file of the repository and, after a colon, a section marked in it (a missing section
+    would be shown empty)."""
+    pages = "\n".join(page.read_text(encoding="utf-8") for page in DOCS.glob("*.md"))
+    includes = re.findall(r'--8<-- "([^"]+)"', pages)
+    includes += re.findall(r"^--8<--\n(.+?)\n--8<--$", pages, flags=re.MULTILINE)
+    assert len(includes) >= 3
+    for include in includes:
+        path, _, section = include.partition(":")
+        text = (ROOT / path).read_text(encoding="utf-8")
+        if section:
+            assert f"--8<-- [start:{section}]" in text and f"--8<-- [end:{section}]" in text
+
+
 def test_every_cli_option_has_help_and_is_in_the_cli_reference():
     hooks = _hooks()
     assert hooks.CLI_MARKER in (DOCS / "cli.md").read_text(encoding="utf-8")

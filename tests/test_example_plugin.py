@@ -43,6 +43,18 @@ def installing(example: Path, dist: str) -> Iterator[None]:
         pip("uninstall", "-y", dist)
 
 
+def run_own_tests(example: Path) -> str:
+    """Run ``example``'s own tests against the installed symfuse; their pytest summary."""
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(example / "tests")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
+
+
 def listing_after_uninstalling(example: Path, dist: str) -> str:
     """``symfuse plugins`` after installing ``example`` and uninstalling it again."""
     with installing(example, dist):

@@ -5,12 +5,10 @@ analytic world with it, uninstall it and see it gone."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
-from test_example_plugin import installing, listing_after_uninstalling, symfuse
+from test_example_plugin import installing, listing_after_uninstalling, run_own_tests, symfuse
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "symfuse-threshold-taxels"
 DIST = "symfuse-threshold-taxels"
@@ -41,14 +39,7 @@ def test_listed_and_selectable(installed):
 
 @pytest.mark.slow
 def test_its_own_tests_pass_against_the_installed_symfuse(installed):
-    done = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(EXAMPLE / "tests")],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert done.returncode == 0, done.stdout + done.stderr
-    assert " passed" in done.stdout
+    assert " passed" in run_own_tests(EXAMPLE)
 
 
 @pytest.mark.slow

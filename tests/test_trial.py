@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 from pipeline.cli import main
-from pipeline.cli.trial import grasps_summary, run_name
+from pipeline.cli.trial import grasp_line, grasps_summary, run_name
 from pipeline.io.formats import read_cloud
 from pipeline.reports.tables import TERMINAL_WIDTH
 from pipeline.run.trial import PICTURE_FILES, TRIAL_FILES
@@ -242,3 +242,18 @@ def test_the_trial_writes_a_closed_model_a_simulator_loads(trial_dir):
     # The model scores beside the point model's: a closed surface covers the unseen base.
     stages = json.loads((trial_dir / "result.json").read_text())["stages"]
     assert stages[2]["metrics"]["mesh_chamfer_mm"] < stages[2]["metrics"]["chamfer_mm"]
+
+
+def test_the_grasp_line_counts_the_taxels_in_contact_within_the_terminal():
+    from pipeline.reports.tables import wrapped
+
+    document = {
+        "hand": {"reason": "longjaw (longjaw-normal) scored 0.41, the only feasible grasp"},
+        "grasp": {"reapproaches": 0, "object_shift_mm": 1.24, "object_turn_deg": 0.5,
+                  "object_tilt_deg": 0.04},
+        "grasps": [{"taxels_in_contact": 176, "pads_in_contact": ["left", "right"]}],
+    }  # fmt: skip
+    line = grasp_line(document)
+    assert "; 176 taxels in contact (left, right); the object moved 1.2 mm" in line
+    assert max(len(row) for row in wrapped(line).splitlines()) <= TERMINAL_WIDTH
+    assert "taxels" not in grasp_line({**document, "grasps": []})

@@ -3,9 +3,10 @@
 * The command line reference (``cli.md``) is rendered from symfuse's own argparse parsers:
   the line ``<!-- symfuse-cli-reference -->`` becomes one section per verb with its usage,
   description and a table of its arguments, so the page cannot fall behind the options.
-* The API reference of ``pipeline.api`` must show every name of ``pipeline.api.__all__``: a
-  name the rendered page lacks is a warning, which ``mkdocs build --strict`` turns into a
-  failed build.
+* The API reference of ``pipeline.api`` and of each of its theme modules
+  (``pipeline.api.planning`` ...) must show every name of the module's ``__all__``: a name
+  the rendered page lacks is a warning, which ``mkdocs build --strict`` turns into a failed
+  build.
 
 ``tests/test_docs.py`` imports this module to check the same things without mkdocs.
 """
@@ -18,6 +19,13 @@ import re
 
 CLI_MARKER = "<!-- symfuse-cli-reference -->"
 API_PAGE = "reference/api.md"
+#: The theme modules of ``pipeline.api``, each rendered on ``reference/api-<theme>.md``.
+API_THEMES = ("planning", "io", "sim", "perception", "estimation", "symmetry")
+#: Page -> the module whose ``__all__`` it must show.
+API_PAGES = {
+    API_PAGE: "pipeline.api",
+    **{f"reference/api-{theme}.md": f"pipeline.api.{theme}" for theme in API_THEMES},
+}
 
 log = logging.getLogger("mkdocs.hooks.symfuse_docs")
 
@@ -107,11 +115,11 @@ def render_cli_reference(parser: argparse.ArgumentParser) -> str:
     return "\n".join(sections)
 
 
-def api_names() -> list[str]:
-    """``pipeline.api.__all__``."""
-    from pipeline import api
+def api_names(module: str = "pipeline.api") -> list[str]:
+    """``module.__all__`` (``pipeline.api`` or one of its theme modules)."""
+    from importlib import import_module
 
-    return list(api.__all__)
+    return list(import_module(module).__all__)
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
@@ -121,9 +129,13 @@ def on_page_markdown(markdown: str, page, config, files) -> str:
 
 
 def on_page_content(html: str, page, config, files) -> str:
-    if page.file.src_uri == API_PAGE:
-        shown = set(re.findall(r'id="pipeline\.api\.([A-Za-z_][A-Za-z0-9_]*)"', html))
-        for name in api_names():
+    module = API_PAGES.get(page.file.src_uri)
+    if module is not None:
+        prefix = re.escape(module + ".")
+        shown = set(re.findall(f'id="{prefix}([A-Za-z_][A-Za-z0-9_]*)"', html))
+        for name in api_names(module):
             if name not in shown:
-                log.warning(f"{API_PAGE}: pipeline.api.{name} is in __all__ but not on the page")
+                log.warning(
+                    f"{page.file.src_uri}: {module}.{name} is in __all__ but not on the page"
+                )
     return html

@@ -1,5 +1,7 @@
 """Grasp-planning kernels the built-in planners are made of: candidates, their
-geometry and predicted pad contacts.
+geometry and predicted pad contacts; and the built-in planners themselves
+(``TopParallel``, ``TopThreeFinger``), for a planner plugin that subclasses one to plan
+for a hand of its own by name (``grippers``, docs/hands.md).
 
 What is named here keeps its meaning across releases, as :mod:`pipeline.api` does.
 Each name loads its module when it is first imported, so a plugin pays only for the
@@ -47,6 +49,8 @@ if TYPE_CHECKING:
         sdh_candidates,
     )
     from pipeline.planning.sdh_geometry import FingerKinematics
+    from plugins.planners.top_parallel import TopParallel
+    from plugins.planners.top_three_finger import TopThreeFinger
 
 #: Where each name comes from: (module, name there).
 _SOURCES = {
@@ -66,6 +70,8 @@ _SOURCES = {
     "SdhHand": ("pipeline.planning.sdh_candidates", "SdhHand"),
     "FingerKinematics": ("pipeline.planning.sdh_geometry", "FingerKinematics"),
     "TOO_NARROW": ("pipeline.planning.sdh_candidates", "TOO_NARROW"),
+    "TopParallel": ("plugins.planners.top_parallel", "TopParallel"),
+    "TopThreeFinger": ("plugins.planners.top_three_finger", "TopThreeFinger"),
     "back_face_is_flat": ("pipeline.planning.grasp_geometry", "back_face_is_flat"),
     "candidate_frame": ("pipeline.planning.candidate", "candidate_frame"),
     "closing_angles": ("pipeline.planning.grasp_candidates", "closing_angles"),
@@ -96,6 +102,8 @@ __all__ = [
     "MeasurementModel",
     "ParallelHand",
     "SdhHand",
+    "TopParallel",
+    "TopThreeFinger",
     "back_face_is_flat",
     "candidate_frame",
     "closing_angles",

@@ -1,5 +1,8 @@
 """Simulation kernels the built-in sensors and tactile model are made of: camera
-rendering, depth-noise models, the shipped hands.
+rendering, depth-noise models, the shipped hands; and the simulated worlds themselves
+(``Pybullet``, ``Mujoco``), for a world plugin that subclasses one to offer a hand of its
+own (``extra_hands``, docs/hands.md). Importing a world class does not import its
+simulator: that happens when a scene is loaded.
 
 What is named here keeps its meaning across releases, as :mod:`pipeline.api` does.
 Each name loads its module when it is first imported, so a plugin pays only for the
@@ -28,11 +31,15 @@ if TYPE_CHECKING:
         simulate_kinect_v1,
         simulate_stereo,
     )
+    from plugins.worlds.mujoco_world import Mujoco
+    from plugins.worlds.pybullet_world import Pybullet
 
 #: Where each name comes from: (module, name there).
 _SOURCES = {
     "CameraParams": ("pipeline.sim.camera", "CameraParams"),
     "KinectV1Noise": ("pipeline.sim.depth_noise", "KinectV1Noise"),
+    "Mujoco": ("plugins.worlds.mujoco_world", "Mujoco"),
+    "Pybullet": ("plugins.worlds.pybullet_world", "Pybullet"),
     "ShippedHandsWorld": ("pipeline.shipped_hands", "ShippedHandsWorld"),
     "SimulatedCamera": ("pipeline.sim.camera", "SimulatedCamera"),
     "SimulatedDepth": ("pipeline.sim.depth_noise", "SimulatedDepth"),
@@ -47,6 +54,8 @@ _SOURCES = {
 __all__ = [
     "CameraParams",
     "KinectV1Noise",
+    "Mujoco",
+    "Pybullet",
     "ShippedHandsWorld",
     "SimulatedCamera",
     "SimulatedDepth",

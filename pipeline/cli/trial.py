@@ -43,7 +43,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument(
         "--gripper",
         metavar="NAME",
-        help="hand, one the world offers (pybullet, mujoco: pg70, sdh), planned by planner.use "
+        help="hand, one the world offers (pybullet, mujoco: pg70, sdh, and those of a world "
+        "plugin: symfuse plugins lists the worlds), planned by planner.use "
         "when it plans for that hand, else by the best-scored installed planner that does; auto "
         "(the default): the hand with the best feasible grasp of any installed planner",
     )
@@ -225,6 +226,30 @@ def grasps_summary(document: dict, wide: bool = False) -> str:
     return table + "\n" + wrapped(f"stopped: {document['stop_reason']}")
 
 
+def grasp_line(document: dict) -> str:
+    """The first grasp in one line (before wrapping): why its hand was chosen, how the
+    descent went, what the pads touched and how the object moved (``result.json``'s
+    ``hand``, ``grasp`` and first fused ``grasps`` entry)."""
+    grasp = document["grasp"]
+    moved_aside = (
+        f"; the descent met the object and moved aside {grasp['reapproaches']} time(s)"
+        if grasp["reapproaches"]
+        else ""
+    )
+    fused = document.get("grasps") or [{}]
+    taxels = fused[0].get("taxels_in_contact")
+    touched = (
+        f"; {taxels} taxels in contact ({', '.join(fused[0]['pads_in_contact'])})"
+        if taxels is not None
+        else ""
+    )
+    return (
+        f"grasp: {document['hand']['reason']}{moved_aside}{touched}; the object moved "
+        f"{grasp['object_shift_mm']:.1f} mm, turned {grasp['object_turn_deg']:.1f} deg "
+        f"and tilted {grasp['object_tilt_deg']:.1f} deg"
+    )
+
+
 def _progress(message: str) -> None:
     stop_if_interrupted()
     print(f"... {message}", flush=True)
@@ -247,19 +272,7 @@ def run(args: argparse.Namespace) -> int:
         record = run_trial(config, registry, staging, report=_progress)
     print(trial_summary(record, args.wide))
     print(wrapped(selection_line(record.result)))
-    grasp = record.document["grasp"]
-    moved_aside = (
-        f"; the descent met the object and moved aside {grasp['reapproaches']} time(s)"
-        if grasp["reapproaches"]
-        else ""
-    )
-    print(
-        wrapped(
-            f"grasp: {record.document['hand']['reason']}{moved_aside}; the object moved "
-            f"{grasp['object_shift_mm']:.1f} mm, turned {grasp['object_turn_deg']:.1f} deg "
-            f"and tilted {grasp['object_tilt_deg']:.1f} deg"
-        )
-    )
+    print(wrapped(grasp_line(record.document)))
     if settings.grasps > 1 or settings.until_std_mm > 0:
         print(grasps_summary(record.document, args.wide))
     timings = ", ".join(f"{k} {v:.2f}" for k, v in record.timings.items())

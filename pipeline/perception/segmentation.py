@@ -16,6 +16,7 @@ import numpy as np
 
 from pipeline.perception.clustering import dbscan_labels, voxel_subsample_indices
 from pipeline.perception.table import TablePlane
+from pipeline.types import CameraIntrinsics
 
 
 @dataclass(frozen=True)
@@ -202,7 +203,7 @@ def touches_view_edge(pixels: np.ndarray, outside: np.ndarray, margin_px: int) -
 
 def segment_image(
     depth_m: np.ndarray,
-    intrinsics,
+    intrinsics: CameraIntrinsics,
     T_robot_camera: np.ndarray,
     table: TablePlane,
     *,
@@ -224,16 +225,20 @@ def segment_image(
     object unless one stands on the other (:func:`merge_overlapping_footprints`).
 
     Args:
-        depth_m, intrinsics, T_robot_camera: the view (:func:`backproject_depth`).
+        depth_m: the view's depth image (:func:`backproject_depth`).
+        intrinsics: the view's camera intrinsics.
+        T_robot_camera: the view's camera pose.
         table: the supporting plane, frame R.
         backprojected: the view's points and pixels when the caller has them already.
-        min_height_m, max_height_m: the band of heights above the table kept (m;
-            ``min_height_m`` may be ``(N,)``, one for each of the view's points).
+        min_height_m: the lowest height above the table kept (m; may be ``(N,)``, one
+            for each of the view's points).
+        max_height_m: the highest height above the table kept (m).
         eps_m: largest gap between neighbouring pixels' points of one region at 1 m depth
             (scaled with the depth, as the pixels' spacing is).
         min_points: smallest region that stands on its own.
         window_px: side of the pixel square each normal is fitted to.
-        step_px, min_turn: the crease test (:func:`concave_creases`).
+        step_px: the crease test's step (:func:`concave_creases`).
+        min_turn: the crease test's least turn (:func:`concave_creases`).
         min_height_overlap: see :func:`merge_overlapping_footprints`.
 
     Returns:

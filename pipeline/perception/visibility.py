@@ -86,9 +86,11 @@ def visibility_violations(
 
     Args:
         points_robot: ``(N, 3)`` object points in the robot frame, metres.
-        theta_rad, offset_m: ``(H,)`` (or any equal shapes) plane normal angles and offsets.
+        theta_rad: ``(H,)`` (or any shape equal to ``offset_m``'s) plane normal angles.
+        offset_m: the planes' offsets, metres.
         depth_m: ``(rows, cols)`` measured depth, NaN where missing.
-        intrinsics, T_robot_camera: the camera the image was taken with (as believed).
+        intrinsics: the camera the image was taken with.
+        T_robot_camera: its pose (as believed).
         tolerance_m: how far in front of the measured surface a point may be before it
             counts as a violation (sensor noise and quantisation).
         chunk: hypotheses per vectorised block.

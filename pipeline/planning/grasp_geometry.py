@@ -277,13 +277,13 @@ def parallel_top_grasp(
     )
 
 
-#: SDH finger directions from the palm axis in the palm frame at spread 60 degrees: thumb
-#: at 180 deg (front), fingers 1 and 2 at +-60 deg (the SDH-2's finger base triangle).
 SDH_FINGER_ANGLES_RAD = (np.pi, np.pi / 3, -np.pi / 3)
-#: Finger directions at spread 0: thumb, finger 1, finger 2 (fingers 1 and 2 face the thumb,
-#: closing along -x; their lateral offsets are the hand's finger bases,
-#: :meth:`pipeline.planning.sdh_candidates.SdhHand.parallel_finger_offsets_m`).
+"""SDH finger directions from the palm axis in the palm frame at spread 60 degrees: thumb at 180
+deg (front), fingers 1 and 2 at +-60 deg (the SDH-2's finger base triangle)."""
 SDH_PARALLEL_FINGER_ANGLES_RAD = (np.pi, 0.0, 0.0)
+"""Finger directions at spread 0: thumb, finger 1, finger 2 (fingers 1 and 2 face the thumb,
+closing along -x; their lateral offsets are the hand's finger bases,
+:meth:`pipeline.planning.sdh_candidates.SdhHand.parallel_finger_offsets_m`)."""
 
 
 def back_face_is_flat(

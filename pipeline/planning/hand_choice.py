@@ -249,13 +249,17 @@ def _refusal(
     grippers: Mapping[str, GripperSpec],
     table_height_m: float,
 ) -> PlannerAnswer:
-    """A refused plan whose reason names the object's size and each hand's limit."""
+    """A refused plan whose reason names the object's size, then each hand's own reason
+    for refusing with its opening after it (its planner's reason is what to act on; the
+    object's narrowest width is only a summary and may fit a hand that refused for another
+    reason)."""
     points = cloud.points
     completed = np.concatenate([points, proposal.plane.mirror(points)])
     width_m, _ = narrowest_width(completed[:, :2])
     height_m = float(np.percentile(points[:, 2], 98.0)) - table_height_m
     hands = "; ".join(
-        f"{a.gripper} opens {grippers[a.gripper].max_aperture_m * 1e3:.0f} mm ({a.plan.reason})"
+        f"{a.gripper}: {a.plan.reason} ({a.gripper} opens "
+        f"{grippers[a.gripper].max_aperture_m * 1e3:.0f} mm)"
         for a in answers
     )
     reason = (

@@ -26,9 +26,25 @@ from pipeline.types import GraspCandidate, GripperSpec, PadLayout
 
 @dataclass(frozen=True)
 class ParallelHand:
-    """A parallel-jaw gripper's geometry (m) for :func:`parallel_candidate`; the finger
-    carrying each pad reaches ``pad_centre_to_fingertip_m`` below the pad's centre, its
-    face ``finger_recess_m`` behind the pad's surface."""
+    """A parallel-jaw gripper's geometry for :func:`parallel_candidate` and for a jaw
+    planner of your own, in metres, in the hand frame (z down the approach from the palm's
+    flange, x the closing direction; docs/hands.md). :meth:`of` gathers it from a
+    :class:`~pipeline.types.GripperSpec`.
+
+    Attributes:
+        pad: the front jaw's pad (its first pad): name, taxel rows along the finger and
+            columns across it, pitch.
+        aperture_m: the widest opening between the pads' surfaces.
+        palm_to_pad_centre_m: how far the pads' centres lie below the palm's origin: a
+            palm at height ``z`` puts them at ``z - palm_to_pad_centre_m``.
+        pad_centre_to_fingertip_m: how far the finger carrying a pad reaches below the
+            pad's centre.
+        finger_recess_m: how far the finger's face stands behind the pad's surface.
+        jaw_half_width_m: half the jaws' widest extent across the closing direction (y).
+        housing_half_length_m: half the housing's extent along the closing direction.
+        housing_half_width_m: half the housing's extent across it.
+        housing_depth_m: how far the housing reaches below the palm's origin.
+    """
 
     pad: PadLayout
     aperture_m: float

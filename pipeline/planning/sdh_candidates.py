@@ -25,17 +25,16 @@ from pipeline.planning.pad_contact import PadContact, PadTaxels, pad_coverages, 
 from pipeline.planning.sdh_geometry import FingerKinematics
 from pipeline.types import GraspCandidate, GripperSpec, PadLayout
 
-#: SDH-2 pre-shapes every grasp is tried with, as base rotations: at 60 deg the fingers face
-#: the palm axis (a tripod); at 0 fingers 1 and 2 face the thumb (where the object's centre
-#: sits: :meth:`SdhHand.centre_offset_m`).
 SDH_SPREADS = (math.radians(60.0), 0.0)
-#: The pinch: at 90 deg fingers 1 and 2 face each other across the palm and close on the
-#: object from two sides, its centre on the line between their bases, while the thumb
-#: closes on a third side. Tried where the object is too narrow across for fingers 1 and 2
-#: facing the thumb.
+"""SDH-2 pre-shapes every grasp is tried with, as base rotations: at 60 deg the fingers face the
+palm axis (a tripod); at 0 fingers 1 and 2 face the thumb (where the object's centre sits:
+:meth:`SdhHand.centre_offset_m`)."""
 PINCH_SPREAD_RAD = math.pi / 2.0
-#: Why :func:`sdh_candidate` rejects a grasp at spread 0 that the pinch may take instead.
+"""The pinch: at 90 deg fingers 1 and 2 face each other across the palm and close on the object
+from two sides, its centre on the line between their bases, while the thumb closes on a third
+side. Tried where the object is too narrow across for fingers 1 and 2 facing the thumb."""
 TOO_NARROW = "too narrow for fingers facing the thumb"
+"""Why :func:`sdh_candidate` rejects a grasp at spread 0 that the pinch may take instead."""
 #: Steps of the pre-shape search: proximal angles tried below the contact angle (rad).
 _OPEN_STEP_RAD = math.radians(3.0)
 
