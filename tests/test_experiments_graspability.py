@@ -12,7 +12,7 @@ from pipeline.errors import ConfigError
 from pipeline.experiments import EXPERIMENTS, ExperimentOptions, graspability, objects
 from pipeline.geometry.poses import rotation_z
 from pipeline.testing import AnalyticWorld, registry_with
-from pipeline.types import SymmetryPlane
+from pipeline.types import Bias, Symmetry, SymmetryPlane
 
 
 def test_the_trials_are_those_of_sweep_objects_with_the_grasps_to_make():
@@ -124,7 +124,7 @@ def test_the_models_are_carried_to_the_resting_pose_and_the_truth_lies_on_the_me
     resting = ObjectPose(np.array([0.40, 0.0, 0.0]), np.array([0.0, 0.0, 0.0, 1.0]))
     completed = np.array([[0.41, 0.02, 0.05], [0.45, 0.0, 0.1]])
     plane = SymmetryPlane.from_normal(np.array([1.0, 0.0]), 0.41)
-    stage = SimpleNamespace(completed=completed, plane=plane)
+    stage = SimpleNamespace(completed=completed, plane=plane, bias=Bias())
     record = SimpleNamespace(
         result=SimpleNamespace(stages=(stage,), selected=stage),
         document={
@@ -164,3 +164,80 @@ def test_the_models_are_carried_to_the_resting_pose_and_the_truth_lies_on_the_me
     assert np.all(points[:, 2] > 1e-6)
     np.testing.assert_allclose(abs(models["true"].plane.normal[0]), 1.0, atol=1e-12)
     np.testing.assert_allclose(abs(models["true"].plane.offset_m), 0.40, atol=1e-12)
+
+
+def _record(stage, pose):
+    return SimpleNamespace(
+        result=SimpleNamespace(stages=(stage,), selected=stage),
+        document={
+            "object_pose_after": {
+                "position": pose.position_m.tolist(),
+                "quaternion_xyzw": pose.quaternion_xyzw.tolist(),
+            }
+        },
+    )
+
+
+def test_a_fused_model_is_planned_with_the_plane_it_mirrors_onto():
+    # The estimator holds its plane before the bias; the completed model {f_b(p)} U
+    # {f_b(f_m(p))} is symmetric about the plane the bias moved. The planner mirrors the
+    # cloud it is given through the model's plane: with the plane before the bias it
+    # would add a copy turned by twice the bias's yaw.
+    from pipeline.catalogue.objects import load_object
+    from pipeline.types import ObjectPose
+
+    rng = np.random.default_rng(5)
+    seen = rng.uniform([0.35, -0.05, 0.01], [0.40, 0.05, 0.08], (200, 3))
+    plane = SymmetryPlane.from_normal(np.array([1.0, 0.2]), 0.43)
+    bias = Bias(np.radians(4.0), np.array([0.004, -0.003, 0.001]), np.array([0.4, 0.0, 0.0]))
+    completed = np.concatenate([bias.apply(seen), bias.apply(plane.mirror(seen))])
+    stage = SimpleNamespace(completed=completed, plane=plane, bias=bias)
+    pose = ObjectPose(np.array([0.40, 0.0, 0.0]), np.array([0.0, 0.0, 0.0, 1.0]))
+    models = graspability.planning_models(_record(stage, pose), load_object("cd_drive"), pose, 3)
+    for name in ("stage0", "fused"):
+        model = models[name]
+        # Mirroring through the model's plane swaps its two halves, point for point.
+        halves = np.split(model.points, 2)
+        np.testing.assert_allclose(model.plane.mirror(halves[0]), halves[1], atol=1e-12)
+    # The plane before the bias does not: its mirror image is the turned copy.
+    assert np.abs(plane.mirror(completed[:200]) - completed[200:]).max() > 5e-3
+
+
+def _vertical(normal, point):
+    return Symmetry("plane", np.asarray(normal, float), np.asarray(point, float))
+
+
+def test_the_true_plane_is_the_upright_symmetry_nearest_the_fused_one():
+    centre = np.array([0.4, 0.1, 0.05])
+    near = SymmetryPlane.from_normal(np.array([np.cos(0.3), np.sin(0.3)]), 0.15)
+    lean = np.radians(graspability.UPRIGHT_DEG)
+    box = [
+        _vertical([1.0, 0.0, 0.0], centre),  # 17 deg from near
+        _vertical([0.0, 1.0, 0.0], centre),  # 73 deg
+        _vertical([0.0, 0.0, 1.0], centre),  # the horizontal mid-plane: never vertical
+    ]
+    plane = graspability.true_plane(box, near, centre)
+    np.testing.assert_allclose(abs(plane.normal[0]), 1.0, atol=1e-12)
+    np.testing.assert_allclose(plane.normal @ centre, plane.offset_m, atol=1e-12)
+    # A plane leaning more than UPRIGHT_DEG is not the planner's vertical plane; one leaning
+    # less is, projected onto the table's normal.
+    steep = [_vertical([np.cos(1.1 * lean), 0.0, np.sin(1.1 * lean)], centre)]
+    assert graspability.true_plane(steep, near, centre) is None
+    slight = graspability.true_plane(
+        [_vertical([np.cos(0.9 * lean), 0.0, np.sin(0.9 * lean)], centre)], near, centre
+    )
+    np.testing.assert_allclose(abs(slight.normal[0]), 1.0, atol=1e-12)
+    # An upright axis: the plane through it parallel to the fused one.
+    axis = [Symmetry("axis", np.array([0.0, 0.05, 1.0]), centre)]
+    through = graspability.true_plane(axis, near, centre)
+    np.testing.assert_allclose(through.normal, near.normal, atol=1e-12)
+    np.testing.assert_allclose(through.normal @ centre, through.offset_m, atol=1e-12)
+    # A sphere (two axes apart, through its centre): the plane through the centre.
+    ball = [
+        Symmetry("axis", np.array([1.0, 0.0, 0.3]), centre),
+        Symmetry("axis", np.array([0.0, 1.0, 0.4]), centre),
+    ]
+    round_plane = graspability.true_plane(ball, near, centre)
+    np.testing.assert_allclose(round_plane.normal @ centre, round_plane.offset_m, atol=1e-12)
+    # Nothing upright (a lying banana): none.
+    assert graspability.true_plane([], near, centre) is None

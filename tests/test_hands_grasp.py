@@ -100,6 +100,22 @@ def test_load_parks_the_hand_high_open_and_pointing_down(client):
         Hand.load(client, "nope")
 
 
+def test_the_hand_turns_to_each_orientation_it_is_moved_to(client):
+    # The orientation's quaternion is kept per orientation: moving back to an earlier one
+    # must not reuse another's.
+    from pipeline.geometry.poses import rotation_z
+
+    hand = Hand.load(client, "pg70")
+    for angle in (0.4, -0.7, 0.4, 1.2):
+        T = np.eye(4)
+        T[:3, :3] = rotation_z(angle) @ TOP_DOWN
+        T[:3, 3] = [0.1, 0.0, 1.0]
+        hand.move_to(T)
+        for _ in range(240):
+            pb.stepSimulation(physicsClientId=client)
+        np.testing.assert_allclose(hand.pose()[:3, :3], T[:3, :3], atol=1e-2)
+
+
 @pytest.mark.parametrize("gripper", ["pg70", "sdh"])
 def test_taxel_frames_follow_the_urdf_kinematics(client, gripper):
     hand = Hand.load(client, gripper)

@@ -10,13 +10,18 @@ on each of three models (:data:`MODELS`):
 - ``stage0``: Stage 0's completed cloud (vision and the initial plane);
 - ``fused``: the completed cloud of the stage the estimator selected;
 - ``true``: as many points drawn evenly on the true mesh but the face it stands on (the
-  ceiling), with the true mirror plane where the object has one (the selected stage's
-  plane otherwise: the planner completes a cloud by its plane).
+  ceiling), with the true vertical mirror plane nearest the fused model's
+  (:func:`true_plane`; the fused model's own where the object has none: the planner
+  completes a cloud by its plane).
 
-Each model is the planner's cloud with its own plane (a completed cloud mirrors onto
-itself), moved by the object's true motion from where the model was scored (the object
-after the trial's grasps) to its resting pose, so that the three differ by their shape
-and by where the estimate put it, not by the trial's grasp. Each grasp is executed on the
+Each model is the planner's cloud with the plane it is symmetric about (a completed cloud
+mirrors onto itself): a stage's plane moved by its bias
+(:func:`~pipeline.metrics.plane_after_bias`; the plane the estimator holds is the one
+before the bias, and mirroring a fused model through it adds a copy turned by twice the
+bias's yaw, too wide for the jaws). Each is moved by the object's true motion from where
+the model was scored (the object after the trial's grasps) to its resting pose, so that
+the three differ by their shape and by where the estimate put it, not by the trial's
+grasp. Each grasp is executed on the
 true object in a freshly built scene (the object at its resting pose, every attempt
 alike), then lifted :data:`LIFT_M` and held :data:`HOLD_S` (:meth:`World.lift
 <pipeline.stages.World.lift>`): it succeeds when the object is still held
@@ -52,7 +57,7 @@ from pipeline.experiments.sweep import write_csv
 
 if TYPE_CHECKING:
     from pipeline.run.trial import TrialRecord
-    from pipeline.types import GraspPlan, ObjectPose, SymmetryPlane
+    from pipeline.types import GraspPlan, ObjectPose, StageEstimate, Symmetry, SymmetryPlane
 
 NAME = "graspability"
 DESCRIPTION = (
@@ -72,6 +77,9 @@ MODEL_LABELS = {"stage0": "Stage 0", "fused": "fused", "true": "true mesh"}
 #: The claims checked: fused at least Stage 0 on average, and within this many
 #: percentage points of the true mesh.
 CEILING_GAP_POINTS = 10.0
+#: How far from upright a true mirror plane or rotation axis may lean and still give the
+#: true mesh's vertical plane (deg): a scanned mesh rests a few degrees off its axes.
+UPRIGHT_DEG = 10.0
 
 
 def tasks(options: ExperimentOptions) -> list[SweepTask]:
@@ -142,6 +150,7 @@ def planning_models(
     record: TrialRecord, obj: Any, resting: ObjectPose, seed: int
 ) -> dict[str, PlanningModel]:
     """:data:`MODELS` for the planner, the object at ``resting`` (see the module doc)."""
+    from pipeline.metrics import plane_after_bias
     from pipeline.metrics.shape_scores import sample_surface
     from pipeline.run.trial import ground_truth
 
@@ -152,19 +161,59 @@ def planning_models(
     def moved(points: np.ndarray) -> np.ndarray:
         return points @ motion[:3, :3].T + motion[:3, 3]
 
-    stage0, fused = result.stages[0], result.selected
+    def model(stage: StageEstimate) -> PlanningModel:
+        plane = moved_plane(plane_after_bias(stage.plane, stage.bias), motion)
+        return PlanningModel(moved(stage.completed), plane)
+
+    stage0, fused = model(result.stages[0]), model(result.selected)
     T = resting.transform
     # The true surface but the face it stands on, which no model has either.
-    samples = sample_surface(obj.mesh.vertices, obj.mesh.faces, len(fused.completed), seed=seed)
-    truth_plane = ground_truth(obj, resting, resting, None).plane
+    samples = sample_surface(
+        obj.mesh.vertices, obj.mesh.faces, len(result.selected.completed), seed=seed
+    )
+    truth = ground_truth(obj, resting, resting, None)
+    plane = truth.plane
+    if plane is None:
+        centre = (truth.vertices.min(axis=0) + truth.vertices.max(axis=0)) / 2.0
+        plane = true_plane(truth.symmetries, fused.plane, centre)
     return {
-        "stage0": PlanningModel(moved(stage0.completed), moved_plane(stage0.plane, motion)),
-        "fused": PlanningModel(moved(fused.completed), moved_plane(fused.plane, motion)),
-        "true": PlanningModel(
-            samples @ T[:3, :3].T + T[:3, 3],
-            truth_plane if truth_plane is not None else moved_plane(fused.plane, motion),
-        ),
+        "stage0": stage0,
+        "fused": fused,
+        "true": PlanningModel(samples @ T[:3, :3].T + T[:3, 3], plane or fused.plane),
     }
+
+
+def true_plane(
+    symmetries: Sequence[Symmetry], near: SymmetryPlane, centre_m: np.ndarray
+) -> SymmetryPlane | None:
+    """The object's true vertical mirror plane nearest ``near`` by angle, then by offset
+    (:func:`pipeline.symmetry.scoring.pair_errors`, measured at ``centre_m``, frame R): a
+    true plane whose normal lies within :data:`UPRIGHT_DEG` of horizontal, or the plane
+    parallel to ``near`` through an axis within :data:`UPRIGHT_DEG` of vertical or through
+    a sphere's centre (every plane containing them is a symmetry); None when the object
+    has none of them (an asymmetric object, a lying body of revolution)."""
+    from pipeline.symmetry.scoring import pair_errors, round_centre
+    from pipeline.types import Symmetry, SymmetryPlane
+
+    level = math.sin(math.radians(UPRIGHT_DEG))
+    found = []
+    centre = round_centre(symmetries)
+    anchors = [] if centre is None else [centre]
+    for truth in symmetries:
+        if truth.is_plane and abs(truth.direction[2]) <= level:
+            normal = truth.direction[:2]
+            found.append(SymmetryPlane.from_normal(normal, float(normal @ truth.point_m[:2])))
+        elif not truth.is_plane and abs(truth.direction[2]) >= math.cos(math.radians(UPRIGHT_DEG)):
+            anchors.append(truth.point_m)
+    normal = near.normal[:2]
+    found += [SymmetryPlane.from_normal(normal, float(normal @ a[:2])) for a in anchors]
+    if not found:
+        return None
+    estimate = Symmetry.from_plane(near)
+    return min(
+        found,
+        key=lambda plane: pair_errors(estimate, Symmetry.from_plane(plane), centre_m),
+    )
 
 
 @dataclass(frozen=True)
