@@ -144,7 +144,8 @@ def estimate_result(
     With ``refuse`` (the estimator's fusion, run on another problem) and ``view``, a fused
     stage that only the free-space test flags is first conditioned on free space
     (:mod:`.free_space_conditioning`); an inconsistent fused stage may then be replaced by
-    an alternative that passes every test: with several grasps the earlier grasps' shape
+    an alternative that passes every test: the fusion again from Stage 0 when the searched
+    start's failed (:mod:`.paper_start`), with several grasps the earlier grasps' shape
     located by the last (:mod:`.later_grasps`), then a hypothesis with part of the plane
     held (:func:`.hypotheses.revise`).
     """
@@ -217,7 +218,9 @@ def estimate_result(
         from pipeline.estimation.hypotheses import revise
         from pipeline.estimation.later_grasps import earlier_shape_stages
         from pipeline.estimation.outlier_pads import outlier_pad_stages
+        from pipeline.estimation.paper_start import paper_start_stages
 
+        diagnosed = paper_start_stages(fusion, diagnosed, outcomes, refuse, view, consistency, tree)
         diagnosed = earlier_shape_stages(fusion, diagnosed, refuse, view, consistency, tree)
         diagnosed = revise(fusion, diagnosed, refuse, view, consistency, tree)
         diagnosed = outlier_pad_stages(fusion, diagnosed, refuse, view, consistency, tree)
