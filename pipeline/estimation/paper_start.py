@@ -30,7 +30,7 @@ from pipeline.errors import estimate_failed
 from pipeline.estimation.consistency import ConsistencySettings, assess
 from pipeline.estimation.hypotheses import Refuse
 from pipeline.estimation.iekf import FusionProblem, StageOutcome, after_first_view
-from pipeline.estimation.problem import stage_estimate
+from pipeline.estimation.problem import outcome_estimate
 from pipeline.types import DepthObservation, Hypothesis, StageEstimate
 
 #: ``Hypothesis.name`` of a stage fused again from Stage 0.
@@ -72,19 +72,13 @@ def paper_start_stages(
         return [stages[0], *(replace(s, seconds=s.seconds + spent) for s in stages[1:])]
     revised = [stages[0]]
     for stage, outcome, verdict in zip(stages[1:], again, verdicts, strict=True):
-        estimate = stage_estimate(
+        estimate = outcome_estimate(
             stage.stage,
-            outcome.g,
-            outcome.covariance,
-            outcome.points,
+            outcome,
             fusion.pivot_m,
             stage.iterations + outcome.iterations,
             outcome.status,
             stage.seconds + spent,
-            outcome.active_points,
-            outcome.trace,
-            outcome.grasp_g,
-            outcome.filter_covariance,
         )
         reason = stage.consistency.reason if stage.consistency is not None else ""
         hypothesis = Hypothesis(NAME, 1.0, reason or f"Stage {stage.stage} {stage.status}")

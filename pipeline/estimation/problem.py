@@ -114,6 +114,32 @@ def stage_estimate(
     )
 
 
+def outcome_estimate(
+    stage: int,
+    outcome: StageOutcome,
+    pivot_m: np.ndarray,
+    iterations: int,
+    status: EstimateStatus,
+    seconds: float,
+) -> StageEstimate:
+    """:func:`stage_estimate` of a fused ``outcome`` standing as Stage ``stage``, with the
+    iterations, status and time it reports (a re-fusion's add the fused stage's)."""
+    return stage_estimate(
+        stage,
+        outcome.g,
+        outcome.covariance,
+        outcome.points,
+        pivot_m,
+        iterations,
+        status,
+        seconds,
+        outcome.active_points,
+        outcome.trace,
+        outcome.grasp_g,
+        outcome.filter_covariance,
+    )
+
+
 def _plane(g: np.ndarray) -> SymmetryPlane:
     return SymmetryPlane(theta_rad=float(g[5]), offset_m=float(g[4]))
 
@@ -163,20 +189,7 @@ def estimate_result(
         grasp_g=[fusion.g_init] * len(fusion.grasps),
     )
     fused = [
-        stage_estimate(
-            stage,
-            o.g,
-            o.covariance,
-            o.points,
-            fusion.pivot_m,
-            o.iterations,
-            o.status,
-            o.seconds,
-            o.active_points,
-            o.trace,
-            o.grasp_g,
-            o.filter_covariance,
-        )
+        outcome_estimate(stage, o, fusion.pivot_m, o.iterations, o.status, o.seconds)
         for stage, o in enumerate(outcomes, start=1)
     ]
     if consistency is None:
