@@ -45,6 +45,7 @@ if TYPE_CHECKING:
         SDH_SPREADS,
         TOO_NARROW,
         sdh_candidate,
+        sdh_candidates,
     )
 
 #: Where each name comes from: (module, name there).
@@ -83,6 +84,7 @@ _SOURCES = {
     "plan_from_candidates": ("pipeline.planning.grasp_candidates", "plan_from_candidates"),
     "rotate_z": ("pipeline.planning.grasp_geometry", "rotate_z"),
     "sdh_candidate": ("pipeline.planning.sdh_candidates", "sdh_candidate"),
+    "sdh_candidates": ("pipeline.planning.sdh_candidates", "sdh_candidates"),
     "sdh_flat_part_edge_m": ("pipeline.planning.pad_contact", "sdh_flat_part_edge_m"),
 }
 
@@ -112,6 +114,7 @@ __all__ = [
     "plan_from_candidates",
     "rotate_z",
     "sdh_candidate",
+    "sdh_candidates",
     "sdh_flat_part_edge_m",
 ]
 

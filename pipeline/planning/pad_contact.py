@@ -174,8 +174,8 @@ def pad_coverages(
     u = laterals @ points_robot[at_rows, :2].T - starts[:, None]
     query, index = np.nonzero((u >= taxels.col_u.min() - half) & (u <= taxels.col_u.max() + half))
     u = u[query, index]
-    kept = points_robot[at_rows[index]]
-    z = kept[:, 2]
+    source = at_rows[index]
+    z = points_robot[source, 2]
     cols = len(taxels.col_u)
     per_pad = len(taxels.row_z) * cols
     col = np.clip(np.round((u - taxels.col_u[0]) / taxels.pitch_m).astype(int), 0, cols - 1)
@@ -183,9 +183,10 @@ def pad_coverages(
     sorted_z = taxels.row_z[order]
     row = order[np.searchsorted((sorted_z[1:] + sorted_z[:-1]) / 2.0, z)]
     inside = np.abs(z - taxels.row_z[row]) <= half
-    query, kept = query[inside], kept[inside]
+    query = query[inside]
     if len(query) == 0:
         return [None] * len(origins_m)
+    kept = points_robot[source[inside]]
     # Each pad's taxels numbered apart: taxel // per_pad is the pad.
     taxel = query * per_pad + (row * cols + col)[inside]
     # Depths along each pad's motion as one pad alone computes them (the same rounding).
@@ -198,71 +199,63 @@ def pad_coverages(
             )
         ]
     )
+    # Each taxel's layer, before sorting: the sort then orders that layer alone.
+    nearest = np.full(len(origins_m) * per_pad, np.inf)
+    np.minimum.at(nearest, taxel, depth)
+    layer = depth <= nearest[taxel] + LAYER_M
+    taxel, depth, kept = taxel[layer], depth[layer], kept[layer]
     by_taxel = np.lexsort((depth, taxel))
     taxel, depth, kept = taxel[by_taxel], depth[by_taxel], kept[by_taxel]
-    first, counts = _runs(taxel)
-    layer = depth <= np.repeat(depth[first], counts) + LAYER_M
-    taxel, depth, kept = taxel[layer], depth[layer], kept[layer]
     first, counts = _runs(taxel)  # every taxel keeps its nearest point
     seen = taxel[first]
-    surface = depth[first + counts // 2] + taxels.row_recess[seen % per_pad // cols]
-    pads, pad_first = np.unique(seen // per_pad, return_index=True)
-    pad_end = np.append(pad_first[1:], len(seen))
+    local = seen % per_pad
+    surface = depth[first + counts // 2] + taxels.row_recess[local // cols]
+    # Every pad's first touch at once: the nearest surface seen by at least two points (a
+    # single point may be a mixed pixel at the silhouette), else the nearest.
+    pad_first, pad_cells = _runs(seen // per_pad)
+    pads = seen[pad_first] // per_pad
+    touch_supported = np.minimum.reduceat(np.where(counts >= 2, surface, np.inf), pad_first)
+    touch = np.where(
+        np.isfinite(touch_supported), touch_supported, np.minimum.reduceat(surface, pad_first)
+    )
+    of_cell = np.repeat(np.arange(len(pads)), pad_cells)
+    touches = surface <= touch[of_cell] + tolerance_m
+    rows = local // cols
+    touched_rows = np.zeros((len(pads), len(taxels.row_z)), dtype=bool)
+    touched_rows[of_cell[touches], rows[touches]] = True
+    row_counts = np.count_nonzero(touched_rows, axis=1)
+    touching = np.add.reduceat(touches, pad_first)
     contacts: list[PadContact | None] = [None] * len(origins_m)
-    for pad, start, end in zip(pads, pad_first, pad_end, strict=True):
-        cells = slice(start, end)
-        contacts[pad] = _contact(
-            seen[cells] % per_pad,
-            surface[cells],
-            counts[cells],
-            kept[first[start] : first[end - 1] + counts[end - 1]],
-            taxels,
-            tolerance_m,
-            float(origins_m[pad] @ directions[pad]),
+    for k in np.flatnonzero(row_counts >= _MIN_CONTACT_ROWS):  # else an edge or a top
+        cells = slice(pad_first[k], pad_first[k] + pad_cells[k])
+        pad = pads[k]
+        in_pad = kept[first[cells.start] : first[cells.stop - 1] + counts[cells.stop - 1]]
+        contacts[pad] = PadContact(
+            touch_m=float(touch[k]) + float(origins_m[pad] @ directions[pad]),
+            coverage=int(touching[k]) / per_pad,
+            points=in_pad[np.repeat(touches[cells], counts[cells])],
+            surface_fit=(
+                taxels.col_u[local[cells] % cols],
+                taxels.row_z[rows[cells]],
+                surface[cells],
+                float(touch[k]),
+                tolerance_m,
+            ),
         )
     return contacts
-
-
-def _contact(
-    seen: np.ndarray,
-    surface: np.ndarray,
-    counts: np.ndarray,
-    kept: np.ndarray,
-    taxels: PadTaxels,
-    tolerance_m: float,
-    start_m: float,
-) -> PadContact | None:
-    """One pad's contact from the taxels that see the surface (``seen``, row-major), the
-    surface in front of each (m along the motion from the pad's start ``start_m``), how
-    many points each holds and those points (``kept``, by taxel)."""
-    cols = len(taxels.col_u)
-    # The first touch: the nearest surface seen by at least two points (a single point may
-    # be a mixed pixel at the silhouette).
-    supported = counts >= 2
-    touch = float(surface[supported].min() if np.any(supported) else surface.min())
-    touches = surface <= touch + tolerance_m
-    touching = seen[touches]
-    if len(np.unique(touching // cols)) < _MIN_CONTACT_ROWS:
-        return None  # an edge or a horizontal top, not a side
-    return PadContact(
-        touch_m=touch + start_m,
-        coverage=len(touching) / (len(taxels.row_z) * cols),
-        points=kept[np.repeat(touches, counts)],
-        surface_fit=(
-            taxels.col_u[seen % cols],
-            taxels.row_z[seen // cols],
-            surface,
-            touch,
-            tolerance_m,
-        ),
-    )
 
 
 def _runs(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Where each run of equal values of the sorted, non-empty ``ids`` starts, and its
     length (``np.unique``'s first indices and counts, without its sort)."""
-    starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
-    return starts, np.diff(np.append(starts, len(ids)))
+    changes = np.empty(len(ids), dtype=bool)
+    changes[0] = True
+    np.not_equal(ids[1:], ids[:-1], out=changes[1:])
+    starts = np.flatnonzero(changes)
+    lengths = np.empty_like(starts)
+    lengths[:-1] = starts[1:] - starts[:-1]
+    lengths[-1] = len(ids) - starts[-1]
+    return starts, lengths
 
 
 def _slopes(

@@ -1,11 +1,13 @@
 """SDH-2 grasp candidates: one candidate at a pre-shape (base rotation, :data:`SDH_SPREADS`),
-closing direction and pad height (:func:`sdh_candidate`), with the fingers' predicted
-contacts, the pre-shape search and the closing check it needs."""
+closing direction and pad height (:func:`sdh_candidate`; many at once,
+:func:`sdh_candidates`), with the fingers' predicted contacts, the pre-shape search and the
+closing check it needs."""
 
 from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -71,35 +73,126 @@ def sdh_candidate(
     there to its contact no finger's knuckle or proximal link may meet the cloud
     (:func:`sdh_geometry.closing_hits`).
     """
+    return sdh_candidates(
+        cloud,
+        centre_m,
+        [(angle_rad, direction, height_m)],
+        spread_rad,
+        pad,
+        aperture_m,
+        settings,
+    )[0]
+
+
+@dataclass
+class _Hand:
+    """One SDH-2 grasp on its way through :func:`sdh_candidates`' checks: its pose, the
+    hand's axes and fingers (robot xy), and the fingers' contacts once found; ``verdict``
+    the rejected candidate once a check rejects it."""
+
+    angle_rad: float
+    height_m: float
+    x_hand: np.ndarray
+    y_hand: np.ndarray
+    palm_xy: np.ndarray
+    rotation: np.ndarray
+    facings: np.ndarray
+    taxels: PadTaxels
+    in_band: np.ndarray
+    bases: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    contacts: list[PadContact] = field(default_factory=list)
+    alphas: list[float] = field(default_factory=list)
+    verdict: Candidate | None = None
+
+
+def sdh_candidates(
+    cloud: CandidateCloud,
+    centre_m: np.ndarray,
+    poses: list[tuple[float, np.ndarray, float]],
+    spread_rad: float,
+    pad: PadLayout,
+    aperture_m: float,
+    settings: CandidateSettings,
+) -> list[Candidate]:
+    """:func:`sdh_candidate` at each of ``poses`` (closing angle, direction, pad height),
+    with the fingers' pad contacts of every pose at one height predicted together (one
+    pass over the points at the pads' rows, :func:`pad_coverages`)."""
     s = settings
-    x_hand = np.array([direction[0], direction[1], 0.0])
-    y_hand = np.array([direction[1], -direction[0], 0.0])
-    palm_xy = centre_m - _CENTRES[spread_rad] * x_hand
-    rotation = np.column_stack([x_hand[:2], y_hand[:2]])
-    facings = sdh.finger_facings(spread_rad) @ rotation.T
-    taxels = _distal_taxels(pad, height_m)
-    in_band = cloud.band(height_m, pad.rows * pad.pitch_m / 2.0)
-    if spread_rad == 0.0:
-        # Fingers 1 and 2 facing the thumb meet the back 33 mm either side of the closing
-        # line: the object must be wide enough there for both their pads.
-        across = in_band @ y_hand
-        span = sdh.FINGER_BASES_M[0, 1] + pad.cols * pad.pitch_m / 2.0
-        if len(across) == 0 or np.ptp(np.percentile(across, [2.0, 98.0])) < 2.0 * span:
-            return Candidate.rejected(angle_rad, height_m, spread_rad, TOO_NARROW)
-    # Only the points at the pads' rows can touch them.
-    reachable = cloud.slab(*taxels.z_range_m)
+    hands = []
+    for angle_rad, direction, height_m in poses:
+        x_hand = np.array([direction[0], direction[1], 0.0])
+        y_hand = np.array([direction[1], -direction[0], 0.0])
+        rotation = np.column_stack([x_hand[:2], y_hand[:2]])
+        hand = _Hand(
+            angle_rad,
+            height_m,
+            x_hand,
+            y_hand,
+            centre_m - _CENTRES[spread_rad] * x_hand,
+            rotation,
+            sdh.finger_facings(spread_rad) @ rotation.T,
+            _distal_taxels(pad, height_m),
+            cloud.band(height_m, pad.rows * pad.pitch_m / 2.0),
+        )
+        hands.append(hand)
+        if spread_rad == 0.0:
+            # Fingers 1 and 2 facing the thumb meet the back 33 mm either side of the
+            # closing line: the object must be wide enough there for both their pads.
+            across = hand.in_band @ y_hand
+            span = sdh.FINGER_BASES_M[0, 1] + pad.cols * pad.pitch_m / 2.0
+            if len(across) == 0 or np.ptp(np.percentile(across, [2.0, 98.0])) < 2.0 * span:
+                hand.verdict = Candidate.rejected(angle_rad, height_m, spread_rad, TOO_NARROW)
     # Fingers meet an object off the palm axis inclined, so the palm is moved once, onto
     # the centre of the contacts predicted from the first guess.
     for attempt in range(2):
-        bases = palm_xy[:2] + sdh.FINGER_BASES_M @ rotation.T
-        found = _finger_contacts(reachable, bases, facings, taxels, s.touch_tolerance_m)
-        if isinstance(found, str):
-            return Candidate.rejected(angle_rad, height_m, spread_rad, found)
-        contacts, alphas = found
-        if attempt == 0:
-            palm_xy = _contact_centre(contacts, x_hand, y_hand, spread_rad) - (
-                _CENTRES[spread_rad] * x_hand
+        by_height: dict[float, list[_Hand]] = {}
+        for hand in hands:
+            if hand.verdict is None:
+                by_height.setdefault(hand.height_m, []).append(hand)
+        for group in by_height.values():
+            taxels = group[0].taxels
+            for hand in group:
+                hand.bases = hand.palm_xy[:2] + sdh.FINGER_BASES_M @ hand.rotation.T
+            # Only the points at the pads' rows can touch them.
+            found = _fingers_contacts(
+                cloud.slab(*taxels.z_range_m),
+                [hand.bases for hand in group],
+                [hand.facings for hand in group],
+                taxels,
+                s.touch_tolerance_m,
             )
+            for hand, contacts in zip(group, found, strict=True):
+                if isinstance(contacts, str):
+                    hand.verdict = Candidate.rejected(
+                        hand.angle_rad, hand.height_m, spread_rad, contacts
+                    )
+                    continue
+                hand.contacts, hand.alphas = contacts
+                if attempt == 0:
+                    hand.palm_xy = _contact_centre(
+                        hand.contacts, hand.x_hand, hand.y_hand, spread_rad
+                    ) - (_CENTRES[spread_rad] * hand.x_hand)
+    return [
+        hand.verdict
+        if hand.verdict is not None
+        else _checked(cloud, centre_m, hand, spread_rad, aperture_m, s)
+        for hand in hands
+    ]
+
+
+def _checked(
+    cloud: CandidateCloud,
+    centre_m: np.ndarray,
+    hand: _Hand,
+    spread_rad: float,
+    aperture_m: float,
+    s: CandidateSettings,
+) -> Candidate:
+    """The checks of :func:`sdh_candidate` after the fingers' contacts are found, and the
+    feasible candidate's score and plan."""
+    angle_rad, height_m, taxels = hand.angle_rad, hand.height_m, hand.taxels
+    x_hand, palm_xy, in_band = hand.x_hand, hand.palm_xy, hand.in_band
+    bases, facings, contacts, alphas = hand.bases, hand.facings, hand.contacts, hand.alphas
     if not all(
         contact.stops_before(centre_m, np.append(facing, 0.0))
         for contact, facing in zip(contacts, facings, strict=True)
@@ -167,23 +260,38 @@ def sdh_candidate(
     )
 
 
-def _finger_contacts(
+def _fingers_contacts(
     points: np.ndarray,
-    bases: np.ndarray,
-    facings: np.ndarray,
+    bases: list[np.ndarray],
+    facings: list[np.ndarray],
     taxels: PadTaxels,
     tolerance_m: float,
-) -> tuple[list[PadContact], list[float]] | str:
-    """Each finger's predicted distal pad contact with ``points`` (the completed cloud, or
-    the part of it at the pads' rows) and its proximal angle there, or why a finger finds
-    none."""
-    origins = np.column_stack([bases, np.zeros(len(bases))])
-    directions = np.column_stack([facings, np.zeros(len(facings))])
+) -> list[tuple[list[PadContact], list[float]] | str]:
+    """Each hand's (its finger bases and facings, ``(3, 2)`` each) fingers' predicted
+    distal pad contacts with ``points`` (the completed cloud, or the part of it at the
+    pads' rows) and their proximal angles there, or why a finger finds none; every pad of
+    every hand in one :func:`pad_coverages`."""
+    origins = np.column_stack([np.concatenate(bases), np.zeros(3 * len(bases))])
+    directions = np.column_stack([np.concatenate(facings), np.zeros(3 * len(facings))])
     found = pad_coverages(points, origins, directions, taxels, tolerance_m)
+    hands: list[tuple[list[PadContact], list[float]] | str] = []
+    for first in range(0, len(found), 3):
+        fingers = zip(
+            sdh.FINGERS,
+            origins[first : first + 3],
+            directions[first : first + 3],
+            found[first : first + 3],
+            strict=True,
+        )
+        hands.append(_finger_angles(fingers))
+    return hands
+
+
+def _finger_angles(fingers) -> tuple[list[PadContact], list[float]] | str:
+    """The contacts and proximal angles of one hand's fingers (name, pad origin and
+    direction, contact or None each), or why a finger finds none."""
     contacts, alphas = [], []
-    for finger, origin, direction, contact in zip(
-        sdh.FINGERS, origins, directions, found, strict=True
-    ):
+    for finger, origin, direction, contact in fingers:
         if contact is None:
             return f"{finger} meets no surface"
         alpha = float(sdh.alpha_for_reach(contact.touch_m - origin @ direction))
@@ -239,22 +347,29 @@ def _clear_preshape(
     # grid, are never hit.
     deepest, t_low, t_high = _profile_bounds(s.descent_clearance_m)
     points = cloud.above(palm_z - deepest - _MARGIN_M)
-    depth_below_palm = palm_z - points[:, 2]
     corridors = []
-    for base, facing in zip(bases, facings, strict=True):
-        relative = points[:, :2] - base
-        across = np.abs(relative @ np.array([-facing[1], facing[0]]))
-        near = across <= sdh.FINGER_HALF_WIDTH_M + s.descent_clearance_m
-        t, d = relative[near] @ facing, depth_below_palm[near]
+    for t, d in _corridors(
+        points, bases, facings, palm_z, sdh.FINGER_HALF_WIDTH_M + s.descent_clearance_m
+    ):
         within = (t >= t_low) & (t <= t_high)
         corridors.append((t[within], d[within]))
+    # The corridors run from the deepest point up (``cloud.above``'s order): their last
+    # points are the shallowest below the palm, the first any pre-shape sweeps. A pre-shape
+    # that sweeps MIN_HITS of those is blocked whatever the rest; of the others, in order,
+    # the first that sweeps fewer than MIN_HITS of all the points is the answer.
     for first in range(0, len(steps), _STEPS_AT_ONCE):
         chunk = tuple(steps[first : first + _STEPS_AT_ONCE])
-        clear = np.ones(len(chunk), dtype=bool)
+        blocked = np.zeros(len(chunk), dtype=bool)
         for t, d in corridors:
-            clear &= _profile_hits(chunk, t, d, s.descent_clearance_m) < MIN_HITS
-        if np.any(clear):
-            return chunk[int(np.argmax(clear))] * _OPEN_STEP_RAD
+            shallow = slice(-_SHALLOWEST, None)
+            hits = _profile_hits(chunk, t[shallow], d[shallow], s.descent_clearance_m)
+            blocked |= hits >= MIN_HITS
+        for k in np.flatnonzero(~blocked):
+            if all(
+                _profile_hits(chunk[k : k + 1], t, d, s.descent_clearance_m)[0] < MIN_HITS
+                for t, d in corridors
+            ):
+                return chunk[k] * _OPEN_STEP_RAD
     return None
 
 
@@ -272,12 +387,10 @@ def _closing_collides(
     object a low grasp swings the proximal links into its upper part. Only seen points
     count: the mirrored ones are where the plane guesses the back, too uncertain to veto a
     grasp on."""
-    depth_below_palm = palm_z - visible[:, 2]
-    for base, facing, contact in zip(bases, facings, contact_alphas, strict=True):
-        relative = visible[:, :2] - base
-        across = np.abs(relative @ np.array([-facing[1], facing[0]]))
-        near = across <= sdh.FINGER_HALF_WIDTH_M + s.touch_tolerance_m
-        t, d = relative[near] @ facing, depth_below_palm[near]
+    corridors = _corridors(
+        visible, bases, facings, palm_z, sdh.FINGER_HALF_WIDTH_M + s.touch_tolerance_m
+    )
+    for (t, d), contact in zip(corridors, contact_alphas, strict=True):
         alphas = [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]
         hits = sdh.closing_hits(t, d, alphas, s.touch_tolerance_m)
         if np.any(np.count_nonzero(hits, axis=1) >= MIN_HITS):
@@ -285,10 +398,38 @@ def _closing_collides(
     return False
 
 
+def _corridors(
+    points: np.ndarray,
+    bases: np.ndarray,
+    facings: np.ndarray,
+    palm_z: float,
+    half_width_m: float,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """For each finger (base and facing, ``(F, 2)`` each), the ``points`` within
+    ``half_width_m`` of the line along its facing through its base: their distance ``t``
+    along the facing from the base and their depth ``d`` below the palm at ``palm_z`` (m),
+    in the order of ``points``."""
+    normals = np.column_stack([-facings[:, 1], facings[:, 0]])
+    xy = points[:, :2].T
+    # Every finger's offsets in one product each, ``(F, N)``.
+    across = np.abs(normals @ xy - np.sum(bases * normals, axis=1)[:, None])
+    along = facings @ xy - np.sum(bases * facings, axis=1)[:, None]
+    depth = palm_z - points[:, 2]
+    corridors = []
+    for t, offset in zip(along, across, strict=True):
+        near = offset <= half_width_m
+        corridors.append((t[near], depth[near]))
+    return corridors
+
+
 #: Resolution of the finger profiles the pre-shape search compares the cloud with (m).
 _PROFILE_STEP_M = 0.001
-#: Pre-shapes the search compares the cloud with at once: most are found within a few.
+#: Pre-shapes the search compares the cloud's shallowest points with at once: most are
+#: found within a few.
 _STEPS_AT_ONCE = 8
+#: How many of each finger's shallowest points rule out a pre-shape before the rest are
+#: compared with it.
+_SHALLOWEST = 256
 #: Slack of the cheap height bounds that select the points an exact test then checks (m).
 _MARGIN_M = 1e-6
 
@@ -322,14 +463,15 @@ def _profile_bounds(clearance_m: float) -> tuple[float, float, float]:
 @functools.lru_cache(maxsize=1024)
 def _profile_table(steps: tuple[int, ...], clearance_m: float) -> tuple[np.ndarray, ...]:
     """The grown profiles of ``steps`` (:func:`_swept_profile`) as arrays: each grid's
-    first distance ``(K,)``, its length ``(K,)`` and the reaches ``(K, longest)``, padded
-    with -inf."""
+    first distance ``(K,)``, the reaches ``(K, longest + 2)``, each grid's cells from
+    column 1 on and -inf before and after them (no part of the finger there), and the
+    deepest reach of them all (0-d)."""
     profiles = [_swept_profile(step, clearance_m) for step in steps]
-    lengths = np.array([len(grid) for grid, _ in profiles])
-    reaches = np.full((len(steps), lengths.max()), -np.inf)
+    longest = max(len(grid) for grid, _ in profiles)
+    reaches = np.full((len(steps), longest + 2), -np.inf)
     for row, (_, reach) in enumerate(profiles):
-        reaches[row, : len(reach)] = reach
-    return np.array([grid[0] for grid, _ in profiles]), lengths, reaches
+        reaches[row, 1 : len(reach) + 1] = reach
+    return np.array([grid[0] for grid, _ in profiles]), reaches, np.max(reaches)
 
 
 def _profile_hits(
@@ -337,11 +479,15 @@ def _profile_hits(
 ) -> np.ndarray:
     """``(K,)``: how many points at distance ``t`` along a finger's facing and depth ``d``
     below the palm (both ``(N,)``) each pre-shape of ``steps`` sweeps on its descent."""
-    starts, lengths, reaches = _profile_table(steps, clearance_m)
+    starts, reaches, deepest = _profile_table(steps, clearance_m)
+    # A point deeper than every profile reaches is hit by none.
+    shallow = d <= deepest
+    t, d = t[shallow], d[shallow]
     index = np.round((t[None, :] - starts[:, None]) / _PROFILE_STEP_M).astype(int)
-    inside = (index >= 0) & (index < lengths[:, None])
-    reach = np.take_along_axis(reaches, np.clip(index, 0, reaches.shape[1] - 1), axis=1)
-    return np.count_nonzero(inside & (d[None, :] <= reach), axis=1)
+    # Cells before a grid's start read column 0 and after its end a later one: -inf.
+    width = reaches.shape[1]
+    cells = np.clip(index + 1, 0, width - 1) + width * np.arange(len(steps))[:, None]
+    return np.count_nonzero(d[None, :] <= reaches.take(cells), axis=1)
 
 
 #: How deep behind a pad's touch the surface counts as the side it closes on, looking for

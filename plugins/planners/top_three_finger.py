@@ -35,7 +35,7 @@ from pipeline.api.planning import (
     pad_band,
     plan_from_candidates,
     rotate_z,
-    sdh_candidate,
+    sdh_candidates,
     sdh_flat_part_edge_m,
 )
 
@@ -52,7 +52,7 @@ class TopThreeFinger(CandidatePlanner):
     the completed cloud; the palm height puts the pads at the chosen height there; the
     pre-shape is the most closed opening at which fingers, knuckles and palm descend
     ``descent_clearance_m`` clear of the cloud
-    (:func:`pipeline.planning.sdh_candidates.sdh_candidate`). Candidates are ranked by
+    (:func:`pipeline.planning.sdh_candidates.sdh_candidates`). Candidates are ranked by
     predicted pad contact, alignment with the plane normal and tipping lever;
     ``GraspPlan.candidates`` holds the ranking.
 
@@ -228,32 +228,28 @@ class TopThreeFinger(CandidatePlanner):
             for angle in closing_angles(p.angle_step_deg)
         ]
 
-        def candidate(spread: float, angle: float, direction: np.ndarray, height: float):
-            return sdh_candidate(
-                clouds,
-                centre,
-                direction,
-                angle,
-                height,
-                spread,
-                pad,
-                gripper.max_aperture_m,
-                frame.settings,
-            )
-
         poses = [
             (angle, direction, height)
             for angle, direction in directions
             for height in frame.heights_m
         ]
-        by_spread = {spread: [candidate(spread, *pose) for pose in poses] for spread in SDH_SPREADS}
+
+        def candidates(spread: float, tried: list) -> list[Candidate]:
+            return sdh_candidates(
+                clouds, centre, tried, spread, pad, gripper.max_aperture_m, frame.settings
+            )
+
+        by_spread = {spread: candidates(spread, poses) for spread in SDH_SPREADS}
         # Where the object is too narrow across for fingers 1 and 2 facing the thumb, they
         # can pinch it from two sides instead.
-        pinches = [
-            candidate(PINCH_SPREAD_RAD, *pose)
-            for pose, parallel in zip(poses, by_spread[0.0], strict=True)
-            if parallel.summary.reason == TOO_NARROW
-        ]
+        pinches = candidates(
+            PINCH_SPREAD_RAD,
+            [
+                pose
+                for pose, parallel in zip(poses, by_spread[0.0], strict=True)
+                if parallel.summary.reason == TOO_NARROW
+            ],
+        )
         candidates = [c for group in by_spread.values() for c in group] + pinches
         return candidates
 
