@@ -26,6 +26,7 @@ from summary import record
 from pipeline.perception.principal_axes import table_axes
 from pipeline.perception.visibility import plane_grid, visibility_violations
 from pipeline.planning.grasp_geometry import PadBand, corridor
+from pipeline.sim.hand_models import GRIPPERS
 from pipeline.synthetic import (
     box_object,
     cylinder_object,
@@ -34,20 +35,14 @@ from pipeline.synthetic import (
     spray_bottle_object,
     synthetic_observation,
 )
-from pipeline.types import GripperSpec, PadLayout, SymmetryPlane
+from pipeline.types import SymmetryPlane
 from plugins.initialisers.pca import PcaInitialiser
 from plugins.initialisers.ps import PsInitialiser
 from plugins.initialisers.vc import VcInitialiser
 from plugins.planners.top_parallel import TopParallel
 from plugins.segmenters.table_cluster import TableCluster
 
-PG70 = GripperSpec(
-    "pg70",
-    2,
-    0.065,
-    tuple(PadLayout(s, f"{s}_pad", 14, 6, 0.0034) for s in ("left", "right")),
-    0.154,
-)
+PG70 = GRIPPERS["pg70"]
 CENTRE_XY = np.array([0.6, 0.0])
 VC_SCORING_TARGET_S = 0.2
 

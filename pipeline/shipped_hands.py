@@ -12,7 +12,7 @@ imports a simulator, so listing the plugins stays quick.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -30,9 +30,18 @@ class ShippedHandsWorld(World):
     """
 
     #: The hands in ``robots/`` (:data:`pipeline.sim.hand_models.HAND_MODELS`; importing
-    #: :mod:`pipeline.sim` loads PyBullet, so they are named here; a test keeps the two equal).
-    hands = ("pg70", "sdh")
+    #: :mod:`pipeline.sim` loads PyBullet, so they are named here; a test keeps the two equal),
+    #: then :attr:`extra_hands`.
+    hands: ClassVar[tuple[str, ...]] = ("pg70", "sdh")
+    #: Parallel grippers a subclass adds, by name: their URDFs (a path, or a file of
+    #: ``robots/``; docs/hands.md), loaded as the shipped ones are
+    #: (:func:`pipeline.sim.hand_models.add_parallel_hand`).
+    extra_hands: ClassVar[dict[str, str]] = {}
     changes_hands = True
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        cls.hands = tuple(dict.fromkeys((*cls.hands, *cls.extra_hands)))
 
     @dataclass(frozen=True)
     class Params:
@@ -55,9 +64,14 @@ class ShippedHandsWorld(World):
         return self._sim
 
     def gripper_spec(self, name: str) -> GripperSpec:
-        from pipeline.sim.hand_models import GRIPPERS
+        from pipeline.sim.hand_models import GRIPPERS, add_parallel_hand
 
-        if name not in GRIPPERS:
+        if name in self.extra_hands:
+            try:
+                return add_parallel_hand(name, self.extra_hands[name])
+            except ConfigError as error:
+                raise ConfigError(f"world '{self.name}': {error}") from None
+        if name not in self.hands or name not in GRIPPERS:
             hands = ", ".join(self.hands)
             raise ConfigError(f"world '{self.name}' has no hand '{name}' (hands: {hands})")
         return GRIPPERS[name]

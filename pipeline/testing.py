@@ -35,7 +35,7 @@ import numpy as np
 from pipeline.config import load_config
 from pipeline.errors import ConfigError
 from pipeline.geometry.pad_layout import pad_grid
-from pipeline.params import check_ordered, param
+from pipeline.params import param
 from pipeline.registry import Origin, StageRegistry, load_registry
 from pipeline.run.trial import run_trial
 from pipeline.stages import StageImplementation, World
@@ -43,7 +43,6 @@ from pipeline.types import (
     Bias,
     CameraImage,
     CameraIntrinsics,
-    ClosingPad,
     Contacts,
     EstimationProblem,
     GraspOutcome,
@@ -87,13 +86,18 @@ class AnalyticWorld(World):
     """No physics: the object on an infinite table, ray-cast images, pads that close until
     they touch (a test world; the object never moves).
 
-    The hand (``"parallel"``) has two flat pads of ``rows x cols`` taxels facing each other
-    across the hand's x axis, their centres ``palm_to_pad_centre_m`` down the hand's z axis
-    (the pad at -x is ``"left"``). A grasp puts the open hand at ``plan.T_robot_hand``
-    (no collision check on the way down) and moves each pad along its normal until the
-    first point of the object within the pad's area touches it, or until the pads meet;
-    a pad that touched then presses ``press_m`` further in and feels
-    ``pad_stiffness_N_per_m * press_m``. Cameras do not see the hand.
+    The hand (``"parallel"``) is the parallel gripper of ``hand_urdf`` (the PG-70 unless
+    set; any two-jaw URDF of the convention of docs/hands.md): its
+    :class:`~pipeline.types.GripperSpec`, aperture and pad placement are read from it
+    (:func:`pipeline.io.hand_urdf.gripper_spec_from_urdf`). Its two flat pads of ``rows x cols``
+    taxels (by default as many as fit the pad at ``pitch_m``) face each other across the
+    hand's x axis, their centres as far down the hand's z axis as the URDF puts them. A
+    grasp puts the open hand at ``plan.T_robot_hand`` (no collision check on the way down)
+    and moves each pad along its normal until the first point of the object within the
+    pad's area touches it, or until the pads meet; a pad that touched then presses
+    ``press_m`` further in and feels ``pad_stiffness_N_per_m * press_m``. Cameras do not
+    see the hand. :attr:`~pipeline.types.GraspOutcome.joint_positions` names each jaw's
+    travel ``<pad>_jaw``.
     """
 
     name = "analytic"
@@ -102,13 +106,15 @@ class AnalyticWorld(World):
     @dataclass(frozen=True)
     class Params:
         table_height_m: float = param(0.0, "z of the table top in frame R (m)")
-        max_aperture_m: float = param(0.065, "widest opening between the pads (m)", above=0.0)
-        palm_to_pad_centre_m: float = param(
-            0.125, "palm origin to pad centre along z (m)", above=0.0
+        hand_urdf: str = param(
+            "pg70.urdf", "the parallel gripper's URDF: a path, or a file of robots/"
         )
-        finger_length_m: float = param(0.154, "palm origin to fingertips along z (m)", above=0.0)
-        rows: int = param(14, "taxel rows per pad, along the finger", at_least=1)
-        cols: int = param(6, "taxel columns per pad, across the finger", at_least=1)
+        rows: int = param(
+            0, "taxel rows per pad, along the finger (0: as many as fit the pad)", at_least=0
+        )
+        cols: int = param(
+            0, "taxel columns per pad, across the finger (0: as many as fit the pad)", at_least=0
+        )
         pitch_m: float = param(0.0034, "taxel centre-to-centre distance (m)", above=0.0)
         press_m: float = param(0.0005, "how far a touching pad presses in (m)", at_least=0.0)
         pad_stiffness_N_per_m: float = param(
@@ -117,7 +123,7 @@ class AnalyticWorld(World):
 
     def __init__(self, params: Params | None = None) -> None:
         super().__init__(params)
-        check_ordered(self.params, f"world.{self.name}", "palm_to_pad_centre_m", "finger_length_m")
+        self.hand = self._read_hand()
         self._scene: Any = None
         self._object_mesh: Any = None
         self._pose: ObjectPose | None = None
@@ -219,18 +225,44 @@ class AnalyticWorld(World):
         )
 
     # ------------------------------------------------------------------ hand
-    def _spec(self) -> GripperSpec:
+    def _read_hand(self) -> GripperSpec:
+        """The hand of ``hand_urdf`` with this world's taxel grids.
+
+        Raises:
+            ConfigError: naming ``world.analytic.hand_urdf``: the file is not a URDF of
+                the convention, or not a two-jaw gripper.
+        """
+        from pipeline.io.hand_urdf import PadGeometry, gripper_spec_from_urdf, hand_geometry
+
         p = self.params
-        pads = tuple(
-            PadLayout(name, f"{name}_pad", p.rows, p.cols, p.pitch_m) for name in ("left", "right")
-        )
-        closing = ClosingPad.jaws("left", "right")
-        return GripperSpec(PARALLEL_HAND, 2, p.max_aperture_m, pads, p.finger_length_m, closing)
+        key = f"config key 'world.{self.name}.hand_urdf'"
+        try:
+            geometry = hand_geometry(p.hand_urdf)
+        except ConfigError as error:
+            raise ConfigError(f"{key}: {error}") from None
+        if len(geometry.closing) != 2 or geometry.jaw_travel_m <= 0.0:
+            raise ConfigError(
+                f"{key}: {geometry.urdf} is not a parallel gripper: world 'analytic' needs "
+                f"two jaws on prismatic joints, each with a pad (docs/hands.md)"
+            )
+        pads = []
+        for closing in geometry.closing:
+            mount = geometry.pad(closing.pad)
+            rows = p.rows or int(mount.length_m / p.pitch_m + 1e-9)
+            cols = p.cols or int(mount.width_m / p.pitch_m + 1e-9)
+            if rows < 1 or cols < 1:
+                raise ConfigError(
+                    f"config key 'world.{self.name}.pitch_m': {p.pitch_m} m fits no taxel on "
+                    f"the {mount.length_m * 1e3:.1f} x {mount.width_m * 1e3:.1f} mm pad "
+                    f"'{mount.pad}' of {geometry.urdf}"
+                )
+            pads.append(PadGeometry(PadLayout(mount.pad, mount.link, rows, cols, p.pitch_m)))
+        return gripper_spec_from_urdf(PARALLEL_HAND, p.hand_urdf, pads)
 
     def gripper_spec(self, name: str) -> GripperSpec:
         if name != PARALLEL_HAND:
             raise ConfigError(f"world 'analytic' has no hand '{name}' (hands: {PARALLEL_HAND})")
-        return self._spec()
+        return self.hand
 
     def add_hand(self, name: str) -> None:
         if self.gripper is not None:
@@ -242,7 +274,7 @@ class AnalyticWorld(World):
         self._T_robot_hand = np.eye(4)
         self._T_robot_hand[:3, :3] = np.diag([1.0, -1.0, -1.0])
         self._T_robot_hand[:3, 3] = PARKED_AT_M
-        self._pad_offsets_m = np.full(2, self.params.max_aperture_m / 2.0)
+        self._pad_offsets_m = np.full(2, self.hand.max_aperture_m / 2.0)
         self._pressed = np.zeros(2, dtype=bool)
 
     def _require_hand(self) -> np.ndarray:
@@ -251,14 +283,15 @@ class AnalyticWorld(World):
         return self._T_robot_hand
 
     def _pad_frame(self, pad: int, T_robot_hand: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rotation and origin in frame R of pad 0 (``left``, at -x) or 1: x along the
-        finger (hand +z), z its outward normal, origin its surface centre."""
-        side = -1.0 if pad == 0 else 1.0
+        """Rotation and origin in frame R of pad 0 or 1 (in the hand's closing order; the
+        PG-70's ``left`` is at -x): x along the finger (hand +z), z its outward normal,
+        origin its surface centre."""
+        closing = self.hand.closing[pad]
+        side = -math.copysign(1.0, closing.facing[0])
         x_axis, z_axis = np.array([0.0, 0.0, 1.0]), np.array([-side, 0.0, 0.0])
         rotation_hand = np.column_stack([x_axis, np.cross(z_axis, x_axis), z_axis])
-        centre_hand = np.array(
-            [side * self._pad_offsets_m[pad], 0.0, self.params.palm_to_pad_centre_m]
-        )
+        depth = self.hand.geometry.pad(closing.pad).centre_m[2]
+        centre_hand = np.array([side * self._pad_offsets_m[pad], 0.0, depth])
         R, t = T_robot_hand[:3, :3], T_robot_hand[:3, 3]
         return R @ rotation_hand, R @ centre_hand + t
 
@@ -266,8 +299,10 @@ class AnalyticWorld(World):
         self, pad: int, T_robot_hand: np.ndarray, subdivide: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
         """Taxel centres (``subdivide`` x finer for probing) and the pad normal in frame R."""
-        p = self.params
-        grid, _ = pad_grid(subdivide * p.rows, subdivide * p.cols, p.pitch_m / subdivide)
+        layout = self.hand.pads[pad]
+        grid, _ = pad_grid(
+            subdivide * layout.rows, subdivide * layout.cols, layout.pitch_m / subdivide
+        )
         rotation, origin = self._pad_frame(pad, T_robot_hand)
         return grid @ rotation.T + origin, rotation[:, 2]
 
@@ -318,7 +353,7 @@ class AnalyticWorld(World):
                 f"'{PARALLEL_HAND}'"
             )
         before = self.object_pose()
-        if plan.status != "ok" or not 0.0 <= plan.opening_m <= self.params.max_aperture_m:
+        if plan.status != "ok" or not 0.0 <= plan.opening_m <= self.hand.max_aperture_m:
             reason = plan.reason or f"opening {plan.opening_m * 1e3:.1f} mm is out of range"
             return self._outcome(before, False, reason)
         self._park()
@@ -340,8 +375,8 @@ class AnalyticWorld(World):
             executed=executed,
             aperture_m=float(self._pad_offsets_m.sum()) if executed else math.nan,
             joint_positions={
-                "left_jaw": float(self._pad_offsets_m[0]),
-                "right_jaw": float(self._pad_offsets_m[1]),
+                f"{pad.name}_jaw": float(offset)
+                for pad, offset in zip(self.hand.pads, self._pad_offsets_m, strict=True)
             },
             T_robot_hand=np.array(self._require_hand()),
             object_before=before,

@@ -385,6 +385,146 @@ class ClosingPad:
 
 
 @dataclass(frozen=True)
+class PadMount:
+    """Where a tactile pad sits on its finger and how large it is, read from the hand's URDF
+    (:func:`pipeline.io.hand_urdf.read_hand_geometry`). Palm frame (the URDF's root link:
+    z along the approach toward the fingertips), every joint at 0, metres.
+
+    Attributes:
+        pad: the pad's name, its link's without the ``_pad`` suffix (``"left"``,
+            ``"f1_distal"``).
+        link: the pad's URDF link; its frame is at the pad surface's centre, z along the
+            outward normal, x along the rows toward the fingertip.
+        finger: the finger carrying it (see :class:`HandGeometry`).
+        centre_m: ``(x, y, z)`` the pad surface's centre.
+        normal: ``(x, y, z)`` its outward unit normal (toward the grasped object).
+        length_m, width_m: the pad's collision shapes' extent along its rows and across.
+        centre_to_fingertip_m: how far its finger reaches beyond the pad's centre along
+            the rows (the farthest collision shape of the pad's link, the link carrying
+            it and every link below).
+        recess_m: how far the link carrying the pad stays behind the pad's surface.
+    """
+
+    pad: str
+    link: str
+    finger: str
+    centre_m: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    length_m: float
+    width_m: float
+    centre_to_fingertip_m: float
+    recess_m: float
+
+
+@dataclass(frozen=True)
+class Housing:
+    """The palm's collision shapes (the URDF's root link), palm frame, metres: how deep
+    they reach along z, their half extents along x (the closing direction) and y, and the
+    radius about the palm axis they stay within (a cylinder's own radius)."""
+
+    depth_m: float
+    half_length_m: float
+    half_width_m: float
+    radius_m: float
+
+
+@dataclass(frozen=True)
+class BendingFinger:
+    """A finger of a turn-and-bend hand (the SDH-2's): a base joint about the palm's z at
+    ``base_m`` (or fixed), a knuckle, then two bending joints about the link's y, the
+    proximal link and the distal link carrying one pad each. Link frames: z along the
+    finger toward the tip, x toward the side the pads face. Metres and radians.
+
+    Attributes:
+        name: the finger's name (its links' prefix).
+        base_m: ``(x, y)`` the base joint's origin in the palm's xy plane.
+        base_depth_m: the base joint's origin below the palm origin (along z).
+        spread_sign: how the finger's facing turns with the base joint: ``1`` or ``-1``
+            (its axis along +z or -z), ``0`` for a fixed base.
+        facing: ``(x, y)`` unit direction its pads face at base angle 0.
+        knuckle_length_m: base joint to the first bending joint.
+        knuckle_radius_m: radius of the knuckle's cylinder.
+        proximal_length_m: first to second bending joint.
+        distal_length_m: second bending joint to the fingertip.
+        half_width_m: half the proximal link's width across the facing.
+        proximal_back_m: the proximal link's back (negative: behind its axis).
+        proximal_pad_offset_m: the proximal pad's surface in front of the link's axis.
+        distal_back_m: the distal link's back behind its axis (negative).
+        distal_pad_offset_m: the distal pad's surface in front of the link's axis.
+        distal_pad_centre_m: the distal pad's centre along the link from its joint.
+        bend_limit_rad: the bending joints' range, ``[-limit, limit]``.
+    """
+
+    name: str
+    base_m: tuple[float, float]
+    base_depth_m: float
+    spread_sign: int
+    facing: tuple[float, float]
+    knuckle_length_m: float
+    knuckle_radius_m: float
+    proximal_length_m: float
+    distal_length_m: float
+    half_width_m: float
+    proximal_back_m: float
+    proximal_pad_offset_m: float
+    distal_back_m: float
+    distal_pad_offset_m: float
+    distal_pad_centre_m: float
+    bend_limit_rad: float
+
+
+@dataclass(frozen=True)
+class HandGeometry:
+    """A hand's shape as planners and the next-grasp scoring use it, read once from its URDF
+    (:func:`pipeline.io.hand_urdf.read_hand_geometry`; the naming convention is there and
+    in docs/hands.md). Palm frame, every joint at 0, metres.
+
+    Attributes:
+        urdf: the file it was read from.
+        fingers: the fingers' names, one per chain of links hanging from the palm (a link's
+            finger is its name's prefix before the first ``_``).
+        pads: every pad (links named ``<name>_pad``), in the URDF's order.
+        housing: the palm's collision shapes.
+        fingertip_depth_m: the deepest collision shape below the palm origin (along z).
+        jaw_half_width_m: for a parallel gripper (fingers on prismatic joints), half the
+            jaws' widest extent across the closing direction (y); 0 otherwise.
+        jaw_travel_m: for a parallel gripper, the pad surfaces' distance at joints 0 plus
+            every jaw's stroke: the widest opening between the pads; 0 otherwise.
+        jaw_closed_m: for a parallel gripper, the pad surfaces' distance at joints 0.
+        jaws: a parallel gripper's prismatic joints, in :attr:`fingers` order.
+        jaw_speed_m_s: the slowest of their velocity limits (m/s; 0 without jaws).
+        bending: the fingers of a turn-and-bend hand (:class:`BendingFinger`).
+        closing: each finger's pad nearest its fingertip, closing from the finger's base
+            joint along the pad's normal (flat: the taxel layout, not the URDF, says which
+            rows curve; :attr:`GripperSpec.closing` has them).
+    """
+
+    urdf: str
+    fingers: tuple[str, ...]
+    pads: tuple[PadMount, ...]
+    housing: Housing
+    fingertip_depth_m: float
+    jaw_half_width_m: float = 0.0
+    jaw_travel_m: float = 0.0
+    jaw_closed_m: float = 0.0
+    jaws: tuple[str, ...] = ()
+    jaw_speed_m_s: float = 0.0
+    bending: tuple[BendingFinger, ...] = ()
+    closing: tuple[ClosingPad, ...] = ()
+
+    def pad(self, name: str) -> PadMount:
+        """The pad ``name``.
+
+        Raises:
+            KeyError: the hand has no such pad.
+        """
+        for mount in self.pads:
+            if mount.pad == name:
+                return mount
+        raise KeyError(f"the hand of {self.urdf} has no pad '{name}'")
+
+
+@dataclass(frozen=True)
 class GripperSpec:
     """What grasp planners need to know about a hand.
 
@@ -398,6 +538,9 @@ class GripperSpec:
             the next-grasp scoring predicts each candidate's touch from. A hand without
             them has no predicted touch, so an information-scored later grasp cannot
             prefer its candidates.
+        geometry: the hand's shape read from its URDF (:class:`HandGeometry`): where the
+            pads sit, the fingers' links, the housing. Planners place the hand with it;
+            None for a hand described by these numbers alone.
     """
 
     name: str
@@ -406,6 +549,7 @@ class GripperSpec:
     pads: tuple[PadLayout, ...]
     finger_length_m: float
     closing: tuple[ClosingPad, ...] = ()
+    geometry: HandGeometry | None = None
 
 
 @dataclass(frozen=True)

@@ -126,3 +126,38 @@ def test_the_scan_target_by_hand():
     assert meets(6.0, 4.0)  # better, under 5 mm
     assert not meets(6.0, 5.5)  # better than Stage 0 but above 5 mm
     assert not meets(None, 1.0) and not meets(1.0, float("nan"))
+
+
+@pytest.mark.slow
+def test_the_planner_check_plans_a_catalogue_object_as_a_trial_would(tmp_path):
+    out = run_in_bench(
+        f"""
+        import json
+        from pathlib import Path
+        import planner_check
+        inputs, out = Path({str(tmp_path)!r}) / "inputs.npz", Path({str(tmp_path)!r}) / "out.json"
+        print(planner_check.make_inputs(["salt_cylinder"], [0.0], inputs))
+        planner_check.plan_cases(inputs, out)
+        found = json.loads(out.read_text())
+        table = found["cases"]["salt_cylinder@0"]["candidates"]
+        print(len(table) > 0, found["seconds"] > 0, planner_check.differences(found, found))
+        """
+    )
+    assert out.split("\n")[:2] == ["['salt_cylinder@0']", "True True []"]
+
+
+def test_planner_check_differences_by_hand():
+    out = run_in_bench(
+        """
+        import math
+        from planner_check import differences
+        print(differences({"a": [1.0, math.nan, "x"]}, {"a": [1.5, math.nan, "x"]}))
+        print(differences({"a": [1.0]}, {"a": [1.0, 2.0]}))
+        print(differences({"a": True}, {"b": True}))
+        """
+    )
+    assert out.split("\n")[:3] == [
+        "[('/a', 0.5)]",
+        "[('/a: length 1 vs 2', nan)]",
+        "[(': keys', nan)]",
+    ]

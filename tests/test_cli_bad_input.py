@@ -33,7 +33,19 @@ def one_error_line(err: str) -> str:
         (["sweep", "nope"], "sweep: argument EXPERIMENT: invalid choice: 'nope'"),
         (["trial", "--seed", "x"], "trial: argument --seed: expected an integer, got 'x'"),
         (["fuse", "--cloud", "c.ply"], "fuse: the following arguments are required"),
-        (["plugins", "--foo"], "unrecognized arguments: --foo"),
+        (
+            ["plugins", "--foo"],
+            "plugins: unrecognized arguments: --foo (see symfuse plugins --help)",
+        ),
+        (["complete", "x.pcd", "--wide", "--out", "o"], "see symfuse complete --help"),
+        (
+            ["trial", "--grasps", "2", "--until-std", "0"],
+            "--until-std: expected a number of mm above 0",
+        ),
+        (
+            ["trial", "--grasps", "2", "--until-std", "nan"],
+            "expected a number of mm above 0, got nan",
+        ),
         ([], "the following arguments are required: VERB"),
     ],
 )
@@ -539,3 +551,49 @@ def test_a_planner_set_to_its_default_for_another_hand_is_refused(run, tmp_path)
     assert code == EXIT_BAD_INPUT
     assert "planner 'top-parallel' does not plan for the hand 'sdh'" in one_error_line(err)
     assert not (tmp_path / "o").exists()
+
+
+def test_a_set_for_an_implementation_not_in_use_is_refused(run, tmp_path):
+    code, _, err = run("trial", "--set", "estimator.icp.max_iterations=5", "--out", tmp_path / "o")
+    assert code == EXIT_BAD_INPUT
+    assert "--set estimator.icp.max_iterations=5: estimator.use is 'iekf'" in one_error_line(err)
+    assert not (tmp_path / "o").exists()
+    code, _, err = run("trial", "--set", "initialiser.ps.bias=full", "--out", tmp_path / "o")
+    assert "initialiser.use is 'vc'" in one_error_line(err)
+
+
+def test_a_set_for_an_implementation_a_run_may_read_is_accepted(run):
+    # Every hand's planner plans with trial.gripper = "auto"; `config` prints any key.
+    code, out, _ = run("config", "--set", "estimator.icp.max_iterations=5")
+    assert code == 0 and "max_iterations = 5" in out
+    from pipeline.cli import check_selected
+    from pipeline.config import load_config
+    from pipeline.registry import load_registry
+
+    registry = load_registry()
+    config = load_config(registry)
+    check_selected(["planner.top-three-finger.spread_deg=10"], config, registry)
+
+
+def test_symmetry_refuses_an_unwritable_out_before_it_searches(run, monkeypatch):
+    import pipeline.symmetry.search as search
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("searched before checking --out")
+
+    monkeypatch.setattr(search, "mesh_symmetries", no_search)
+    code, _, err = run("symmetry", "cd_drive", "--out", "/proc/symmetry.json")
+    assert code == EXIT_BAD_INPUT
+    assert "/proc/symmetry.json: cannot write" in one_error_line(err)
+
+
+def test_an_interrupted_symmetry_search_leaves_no_file(run, monkeypatch, tmp_path):
+    import pipeline.symmetry.search as search
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(search, "mesh_symmetries", interrupted)
+    code, _, _ = run("symmetry", "cd_drive", "--out", tmp_path / "s.json")
+    assert code == 130
+    assert not (tmp_path / "s.json").exists()

@@ -27,6 +27,14 @@ def test_a_synthetic_sweep_refuses_settings_its_trials_do_not_read(tmp_path, run
     assert not out.exists()
 
 
+def test_a_set_to_the_default_in_a_section_a_sweep_does_not_read_is_refused(tmp_path, run):
+    out = tmp_path / "sweep"
+    code, _, err = run(*QUICK, "--set", "planner.use=top-parallel", "--out", out)
+    assert code == EXIT_BAD_INPUT
+    assert "its trials read only [estimator] of the config, not [planner]" in err
+    assert not out.exists()
+
+
 def test_grid_is_refused_by_an_experiment_without_random_cases(tmp_path, run):
     out = tmp_path / "sweep"
     code, _, err = run("sweep", "table1", "--grid", "--workers", "1", "--out", out)

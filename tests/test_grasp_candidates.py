@@ -10,8 +10,7 @@ import pytest
 import yourdfpy
 from test_planners import _true_plane, _view
 
-from pipeline.planning import sdh_candidates
-from pipeline.planning import sdh_geometry as sdh
+from pipeline.planning import sdh_candidates, sdh_geometry
 from pipeline.planning.candidate import (
     BEYOND_CENTRE,
     BLIND_PAD_FACTOR,
@@ -37,6 +36,8 @@ from robots import ROOT
 PAD = PadLayout("left", "left_pad", 14, 6, 0.0034)
 DISTAL = PadLayout("thumb_distal", "thumb_distal_pad", 13, 6, 0.0034)
 
+SDH = sdh_geometry.shipped()  # the SDH-2's kinematics, read from its URDF
+
 
 @pytest.fixture(scope="module")
 def sdh2() -> yourdfpy.URDF:
@@ -45,7 +46,7 @@ def sdh2() -> yourdfpy.URDF:
 
 def _configure(robot: yourdfpy.URDF, spread: float, alpha: float) -> None:
     joints = {"f1_base": spread, "f2_base": spread}
-    for finger in sdh.FINGERS:
+    for finger in SDH.fingers:
         joints[f"{finger}_proximal"] = alpha
         joints[f"{finger}_distal"] = -alpha
     robot.update_cfg(np.array([joints[name] for name in robot.actuated_joint_names]))
@@ -56,23 +57,23 @@ def _configure(robot: yourdfpy.URDF, spread: float, alpha: float) -> None:
 def test_distal_pad_reach_depth_and_facing_match_the_urdf(sdh2, spread_deg, alpha_deg):
     spread, alpha = math.radians(spread_deg), math.radians(alpha_deg)
     _configure(sdh2, spread, alpha)
-    facings = sdh.finger_facings(spread)
-    for i, finger in enumerate(sdh.FINGERS):
+    facings = SDH.finger_facings(spread)
+    for i, finger in enumerate(SDH.fingers):
         pad = sdh2.get_transform(f"{finger}_distal_pad", "palm")
         base = sdh2.get_transform(f"{finger}_knuckle", "palm")
         # The pad frame sits on the pad's flat surface, its normal along the facing.
         np.testing.assert_allclose(pad[:2, 2], facings[i], atol=1e-6)
         assert pad[2, 2] == pytest.approx(0.0, abs=1e-6)
-        np.testing.assert_allclose(base[:2, 3], sdh.FINGER_BASES_M[i], atol=1e-5)
+        np.testing.assert_allclose(base[:2, 3], SDH.bases_m[i], atol=1e-5)
         along = (pad[:2, 3] - base[:2, 3]) @ facings[i]
-        assert along == pytest.approx(sdh.reach_m(alpha), abs=1e-6)
-        assert pad[2, 3] == pytest.approx(sdh.distal_pad_depth_m(alpha), abs=1e-6)
+        assert along == pytest.approx(SDH.reach_m(alpha), abs=1e-6)
+        assert pad[2, 3] == pytest.approx(SDH.distal_pad_depth_m(alpha), abs=1e-6)
         # The fingertip: the distal link's end, the profile's deepest point.
-        tip = sdh2.get_transform(f"{finger}_distal", "palm") @ [0.0, 0.0, sdh.DISTAL_LENGTH_M, 1]
-        _, depth = sdh.finger_profile(alpha)
+        tip = sdh2.get_transform(f"{finger}_distal", "palm") @ [0.0, 0.0, SDH.distal_length_m, 1]
+        _, depth = SDH.finger_profile(alpha)
         assert depth.max() == pytest.approx(tip[2], abs=1e-6)
-    assert sdh.alpha_for_reach(sdh.reach_m(alpha)) == pytest.approx(alpha)
-    assert sdh.alpha_for_opening(sdh.opening_for_alpha(alpha)) == pytest.approx(alpha)
+    assert SDH.alpha_for_reach(SDH.reach_m(alpha)) == pytest.approx(alpha)
+    assert SDH.alpha_for_opening(SDH.opening_for_alpha(alpha)) == pytest.approx(alpha)
 
 
 def test_finger_profile_covers_the_finger_and_is_exact_behind_the_pad(sdh2):
@@ -82,7 +83,7 @@ def test_finger_profile_covers_the_finger_and_is_exact_behind_the_pad(sdh2):
     the tip's depth for the pad that curves up and away from it."""
     alpha = math.radians(-30.0)
     _configure(sdh2, math.radians(60.0), alpha)
-    grid, depth = sdh.finger_profile(alpha)
+    grid, depth = SDH.finger_profile(alpha)
     base = sdh2.get_transform("thumb_knuckle", "palm")
     samples = []
     for link in ("thumb_proximal", "thumb_distal", "thumb_proximal_pad", "thumb_distal_pad"):
@@ -95,7 +96,7 @@ def test_finger_profile_covers_the_finger_and_is_exact_behind_the_pad(sdh2):
             samples.append(local @ T[:3, :3].T + T[:3, 3])
     points = np.concatenate(samples)
     t = points[:, 0] - base[0, 3]  # the thumb faces +x
-    distal_front = sdh.reach_m(alpha) - sdh.DISTAL_PAD_OFFSET_M + 0.005
+    distal_front = SDH.reach_m(alpha) - SDH.distal_pad_offset_m + 0.005
     for value in np.linspace(t.min() + 0.003, t.max() - 0.003, 40):
         deepest = points[np.abs(t - value) < 0.0015, 2].max()
         profile = depth[int(np.argmin(np.abs(grid - value)))]
@@ -209,14 +210,14 @@ def test_sdh_pre_shape_puts_the_pads_on_a_narrow_cylinder_at_the_chosen_height()
     best = plan.candidates[0]
     assert best.feasible and min(best.contact_coverage) > 0.15
     # Pre-shaped around the object with the descent clearance, far from fully open.
-    alpha_open = sdh.alpha_for_opening(plan.opening_m)
+    alpha_open = SDH.alpha_for_opening(plan.opening_m)
     assert 0.045 + 2 * 0.01 < plan.opening_m < 0.13
     # Every finger's contact angle is where its pad meets the 22.5 mm radius; at that
     # angle the distal pad centre is at the planned height.
-    facings = sdh.finger_facings(plan.spread_rad)
+    facings = SDH.finger_facings(plan.spread_rad)
     rotation = plan.T_robot_hand[:2, :2]
     centre = np.array([0.6, 0.0])
-    for base, facing in zip(sdh.FINGER_BASES_M, facings, strict=True):
+    for base, facing in zip(SDH.bases_m, facings, strict=True):
         base_robot = plan.T_robot_hand[:2, 3] + rotation @ base
         facing_robot = rotation @ facing
         # distance along the facing to the cylinder's near surface
@@ -224,9 +225,9 @@ def test_sdh_pre_shape_puts_the_pads_on_a_narrow_cylinder_at_the_chosen_height()
         along = offset @ facing_robot
         across = offset @ np.array([-facing_robot[1], facing_robot[0]])
         surface = along - math.sqrt(0.0225**2 - min(across**2, 0.0225**2))
-        alpha = sdh.alpha_for_reach(surface)
+        alpha = SDH.alpha_for_reach(surface)
         assert alpha > alpha_open
-        depth = sdh.distal_pad_depth_m(alpha)
+        depth = SDH.distal_pad_depth_m(alpha)
         assert plan.T_robot_hand[2, 3] - depth == pytest.approx(best.height_m, abs=0.004)
 
 
@@ -331,17 +332,7 @@ JAW_SETTINGS = CandidateSettings(
 def _jaw_hand():
     from pipeline.sim.hands import GRIPPERS
 
-    return ParallelHand(
-        pad=GRIPPERS["pg70"].pads[0],
-        aperture_m=0.065,
-        palm_to_pad_centre_m=0.125,
-        pad_centre_to_fingertip_m=0.029,
-        finger_recess_m=0.003,
-        jaw_half_width_m=0.02,
-        housing_half_length_m=0.056,
-        housing_half_width_m=0.04,
-        housing_depth_m=0.078,
-    )
+    return ParallelHand.of(GRIPPERS["pg70"], "test")
 
 
 def _jaws_closing_along_y(visible: np.ndarray, completed: np.ndarray):
@@ -424,8 +415,7 @@ def test_sdh_fingers_that_would_meet_the_front_from_inside_are_rejected():
             0.0,
             0.06,
             0.0,
-            DISTAL,
-            0.3,
+            sdh_candidates.SdhHand(SDH, DISTAL, 0.3),
             JAW_SETTINGS,
         )
         assert candidate.summary.feasible == feasible
@@ -447,7 +437,8 @@ def test_a_top_edge_behind_the_distal_link_is_found(top_m, edge):
     direction = np.array([1.0, 0.0, 0.0])
     contact = pad_coverage(wall, np.zeros(3), direction, taxels, 0.003)
     assert contact.touch_m == pytest.approx(0.05)
-    assert sdh_candidates._top_edge_above_pad(wall, np.zeros(3), direction, taxels, contact) is edge
+    found = sdh_candidates._top_edge_above_pad(SDH, wall, np.zeros(3), direction, taxels, contact)
+    assert found is edge
 
 
 def test_a_jaw_finger_that_meets_a_shoulder_below_its_pad_is_rejected():

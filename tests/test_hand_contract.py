@@ -19,6 +19,8 @@ from pipeline.planning.next_grasp import pad_approaches
 from pipeline.sim.hand_models import GRIPPERS
 from pipeline.types import ClosingPad, GraspPlan
 
+SDH = sdh_geometry.shipped()  # the SDH-2's kinematics, read from its URDF
+
 
 def _plan(gripper, yaw_rad, spread_rad=0.0):
     closing = np.array([math.cos(yaw_rad), math.sin(yaw_rad), 0.0])
@@ -44,8 +46,8 @@ def test_the_sdh_pads_close_from_their_bases_along_the_finger_facings():
         assert [a.name for a in approaches] == ["f1_distal", "f2_distal", "thumb_distal"]
         for approach, base, facing in zip(
             approaches,
-            sdh_geometry.FINGER_BASES_M,
-            sdh_geometry.finger_facings(spread),
+            SDH.bases_m,
+            SDH.finger_facings(spread),
             strict=True,
         ):
             # The palm's xy plane in R: x the hand's x axis, y its y axis (z points down).

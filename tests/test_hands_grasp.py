@@ -28,6 +28,8 @@ from robots import ROOT
 MM = 1e-3
 TOP_DOWN = np.diag([1.0, -1.0, -1.0])
 
+SDH = sdh_geometry.shipped()  # the SDH-2's kinematics, read from its URDF
+
 
 @pytest.fixture
 def client() -> Iterator[int]:
@@ -385,9 +387,9 @@ def test_object_pose_is_the_link_frame_not_the_centre_of_mass_and_timestep_is_re
     ("facings", "expected"),
     [
         ([[-1.0, 0.0], [1.0, 0.0]], [True, True]),  # parallel jaws
-        (sdh_geometry.finger_facings(np.radians(60.0)), [True, True, True]),  # tripod
-        (sdh_geometry.finger_facings(0.0), [True, True, True]),  # f1, f2 facing the thumb
-        (sdh_geometry.finger_facings(np.pi / 2), [True, True, False]),  # pinch: thumb alone
+        (SDH.finger_facings(np.radians(60.0)), [True, True, True]),  # tripod
+        (SDH.finger_facings(0.0), [True, True, True]),  # f1, f2 facing the thumb
+        (SDH.finger_facings(np.pi / 2), [True, True, False]),  # pinch: thumb alone
         ([[1.0, 0.0], [0.0, 1.0]], [False, False]),  # at right angles
     ],
 )

@@ -9,6 +9,7 @@ import pytest
 from pipeline.errors import ConfigError
 from pipeline.params import build
 from pipeline.perception.visibility import visibility_violations
+from pipeline.sim.hand_models import GRIPPERS
 from pipeline.synthetic import (
     box_object,
     cylinder_object,
@@ -16,8 +17,6 @@ from pipeline.synthetic import (
 )
 from pipeline.types import (
     Contacts,
-    GripperSpec,
-    PadLayout,
     PointCloud,
     SymmetryPlane,
 )
@@ -28,13 +27,7 @@ from plugins.initialisers.vc import VcInitialiser
 from plugins.planners.top_parallel import TopParallel
 from plugins.segmenters.table_cluster import TableCluster
 
-PG70 = GripperSpec(
-    "pg70",
-    2,
-    0.065,
-    tuple(PadLayout(s, f"{s}_pad", 14, 6, 0.0034) for s in ("left", "right")),
-    0.154,
-)
+PG70 = GRIPPERS["pg70"]
 
 
 def _violations_by_loop(points, planes, observation, tolerance_m):

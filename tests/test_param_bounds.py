@@ -55,9 +55,9 @@ BAD_VALUES = [
     ("initialiser.vc.max_angle_deg", "0"),  # with 19 orientations
     ("initialiser.vc.max_violation_fraction", "-1"),
     ("initialiser.vc.max_violation_fraction", "1.5"),
-    ("planner.top-parallel.palm_to_pad_centre_m", "-1"),
+    ("planner.top-parallel.jaw_clearance_m", "-1"),
     ("planner.top-parallel.flat_radius_m", "0"),
-    ("planner.top-parallel.housing_depth_m", "0.2"),  # below the pads
+    ("planner.top-parallel.back_margin_m", "-0.01"),
     ("planner.top-parallel.descent_clearance_m", "-0.01"),
     ("planner.top-three-finger.spread_deg", "91"),
     ("planner.top-three-finger.contact_band_m", "-0.001"),
@@ -65,7 +65,10 @@ BAD_VALUES = [
     ("estimator.mirror-only.prior_b_theta_rad", "-1"),
     ("estimator.mirror-only.prior_m_r_m", "0"),
     ("world.analytic.pitch_m", "0"),
-    ("world.analytic.palm_to_pad_centre_m", "0.2"),  # beyond the fingertips
+    ("world.analytic.rows", "-1"),
+    ("world.analytic.hand_urdf", '"no-such-hand.urdf"'),
+    ("world.analytic.hand_urdf", '"sdh2.urdf"'),  # not a parallel gripper
+    ("world.analytic.pitch_m", "0.05"),  # no taxel fits the 22 mm wide pad
 ]
 
 
@@ -75,6 +78,20 @@ def test_a_nonsense_value_is_refused_naming_its_key(registry, key, value):
     with pytest.raises(ConfigError) as error:
         build_stages(registry, [f"{stage}.use={implementation}", f"{key}={value}"])
     assert f"config key '{key}'" in str(error.value)
+
+
+@pytest.mark.parametrize(
+    "key",
+    [
+        "planner.top-parallel.palm_to_pad_centre_m",
+        "planner.top-parallel.housing_depth_m",
+        "world.analytic.max_aperture_m",
+    ],
+)
+def test_a_setting_the_hands_urdf_now_gives_is_refused_naming_its_key(registry, key):
+    stage, implementation, _ = key.split(".")
+    with pytest.raises(ConfigError, match=f"'{key}'"):
+        build_stages(registry, [f"{stage}.use={implementation}", f"{key}=0.1"])
 
 
 @pytest.mark.parametrize(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -13,30 +15,15 @@ from pipeline.planning.grasp_geometry import (
     first_touched,
     pad_touch,
 )
+from pipeline.sim.hand_models import GRIPPERS
 from pipeline.synthetic import box_object, cylinder_object, synthetic_observation
-from pipeline.types import Bias, GripperSpec, PadLayout, SymmetryInit, SymmetryPlane
+from pipeline.types import Bias, SymmetryInit, SymmetryPlane
 from plugins.planners.top_parallel import TopParallel
 from plugins.planners.top_three_finger import TopThreeFinger
 from plugins.segmenters.table_cluster import TableCluster
 
-PG70 = GripperSpec(
-    "pg70",
-    2,
-    0.065,
-    tuple(PadLayout(s, f"{s}_pad", 14, 6, 0.0034) for s in ("left", "right")),
-    0.154,
-)
-SDH = GripperSpec(
-    "sdh",
-    3,
-    0.2196,
-    tuple(
-        PadLayout(f"{f}_{link}", f"{f}_{link}_pad", rows, 6, 0.0034)
-        for f in ("f1", "f2", "thumb")
-        for link, rows in (("proximal", 14), ("distal", 13))
-    ),
-    0.246,
-)
+PG70 = GRIPPERS["pg70"]
+SDH = GRIPPERS["sdh"]
 
 
 def _view(obj, yaw=0.0):
@@ -236,7 +223,7 @@ def test_three_finger_pads_stay_above_the_cloud_bottom_on_a_low_object():
 
 def test_three_finger_refuses_when_the_aperture_is_too_small():
     cloud = _view(cylinder_object(0.04, 0.15))
-    small = GripperSpec("sdh", 3, 0.06, SDH.pads, 0.246)
+    small = dataclasses.replace(SDH, max_aperture_m=0.06)
     plan = TopThreeFinger(TopThreeFinger.Params(strategy="paper")).plan(cloud, _true_plane(), small)
     assert plan.status == "refused" and "60.0 mm" in plan.reason
 

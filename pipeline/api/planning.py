@@ -27,8 +27,6 @@ if TYPE_CHECKING:
     from pipeline.planning.grasp_geometry import (
         SDH_FINGER_ANGLES_RAD,
         SDH_PARALLEL_FINGER_ANGLES_RAD,
-        SDH_PARALLEL_FINGER_LATERAL_M,
-        SDH_PARALLEL_FINGER_OFFSETS_M,
         back_face_is_flat,
         cylindrical_top_grasp,
         front_to_back,
@@ -44,9 +42,11 @@ if TYPE_CHECKING:
         PINCH_SPREAD_RAD,
         SDH_SPREADS,
         TOO_NARROW,
+        SdhHand,
         sdh_candidate,
         sdh_candidates,
     )
+    from pipeline.planning.sdh_geometry import FingerKinematics
 
 #: Where each name comes from: (module, name there).
 _SOURCES = {
@@ -62,15 +62,9 @@ _SOURCES = {
         "pipeline.planning.grasp_geometry",
         "SDH_PARALLEL_FINGER_ANGLES_RAD",
     ),
-    "SDH_PARALLEL_FINGER_LATERAL_M": (
-        "pipeline.planning.grasp_geometry",
-        "SDH_PARALLEL_FINGER_LATERAL_M",
-    ),
-    "SDH_PARALLEL_FINGER_OFFSETS_M": (
-        "pipeline.planning.grasp_geometry",
-        "SDH_PARALLEL_FINGER_OFFSETS_M",
-    ),
     "SDH_SPREADS": ("pipeline.planning.sdh_candidates", "SDH_SPREADS"),
+    "SdhHand": ("pipeline.planning.sdh_candidates", "SdhHand"),
+    "FingerKinematics": ("pipeline.planning.sdh_geometry", "FingerKinematics"),
     "TOO_NARROW": ("pipeline.planning.sdh_candidates", "TOO_NARROW"),
     "back_face_is_flat": ("pipeline.planning.grasp_geometry", "back_face_is_flat"),
     "candidate_frame": ("pipeline.planning.candidate", "candidate_frame"),
@@ -92,16 +86,16 @@ __all__ = [
     "PINCH_SPREAD_RAD",
     "SDH_FINGER_ANGLES_RAD",
     "SDH_PARALLEL_FINGER_ANGLES_RAD",
-    "SDH_PARALLEL_FINGER_LATERAL_M",
-    "SDH_PARALLEL_FINGER_OFFSETS_M",
     "SDH_SPREADS",
     "TOO_NARROW",
     "Candidate",
     "CandidateCloud",
     "CandidateParams",
     "CandidatePlanner",
+    "FingerKinematics",
     "MeasurementModel",
     "ParallelHand",
+    "SdhHand",
     "back_face_is_flat",
     "candidate_frame",
     "closing_angles",

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -95,13 +95,20 @@ def counting_number(least: int) -> Callable[[str], int]:
     return parse
 
 
-def _load(args: argparse.Namespace, reads: Sequence[str] | None = None, registry=None):
+def _load(
+    args: argparse.Namespace,
+    reads: Sequence[str] | None = None,
+    registry=None,
+    defaults: Mapping[str, Any] | None = None,
+):
     """The registry and the config of ``--config``, ``--set`` and the verb's own options
     that stand for config keys (:mod:`pipeline.cli.options`, applied last).
 
     Args:
         reads: the config sections the verb reads (None: all); see :func:`check_overrides`.
         registry: the installed plugins, when the caller has loaded them already.
+        defaults: the verb's own defaults (a nested dict), merged over the shipped ones
+            before ``--config``.
     """
     from pipeline.cli.options import option_overrides
     from pipeline.config import load_config
@@ -109,8 +116,16 @@ def _load(args: argparse.Namespace, reads: Sequence[str] | None = None, registry
 
     registry = registry or load_registry()
     options = option_overrides(args)
-    config = load_config(registry, args.config, args.overrides, options=options)
+    config = load_config(
+        registry,
+        args.config,
+        args.overrides,
+        options=options,
+        command_defaults=(f"symfuse {args.verb}", defaults) if defaults else None,
+    )
     check_overrides(args.verb, args.overrides, [text for text, _ in options], reads)
+    if args.verb != "config":  # `symfuse config` writes a config to use later: any key goes
+        check_selected(args.overrides, config, registry)
     if args.config and reads is not None:
         note_unread_sections(args.verb, args.config, config, reads)
     return registry, config
@@ -157,6 +172,35 @@ def check_overrides(
             raise ConfigError(
                 f"--set {text}: symfuse {verb} sets {key} from its arguments; drop this --set"
             )
+
+
+def check_selected(overrides: Sequence[str], config, registry) -> None:
+    """Refuse a ``--set STAGE.NAME.KEY=VALUE`` for an implementation the run does not use:
+    ``STAGE.use`` names another, so the value would be ignored without a word. Two stages
+    read more than the one they use: every hand's planner plans with ``trial.gripper =
+    "auto"``, and an estimator without a taxel model of its own takes another's for the
+    next-grasp score.
+
+    Raises:
+        ConfigError: naming the ``--set`` and the implementation in use.
+    """
+    from pipeline.stages import Estimator
+
+    for text in overrides:
+        parts = text.partition("=")[0].strip().split(".")
+        if len(parts) != 3 or parts[0] not in STAGES or parts[1] == config.choices[parts[0]]:
+            continue
+        stage, name = parts[0], parts[1]
+        used = config.choices[stage]
+        if stage == "planner" or (
+            stage == "estimator"
+            and registry.get(stage, used).cls.measurement_model is Estimator.measurement_model
+        ):
+            continue
+        raise ConfigError(
+            f"--set {text}: {stage}.use is '{used}', so {stage}.{name}'s parameters have no "
+            f"effect; add --set {stage}.use={name}, or drop this --set"
+        )
 
 
 # --- symfuse plugins -------------------------------------------------------------------
@@ -290,7 +334,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; its exit code. Ctrl-C gives 130 whatever error it caused, or none
     (:mod:`pipeline.entry`, the console script, notes it from the first instant)."""
     parser = build_parser()
-    args = parser.parse_args(_join_signed_values(sys.argv[1:] if argv is None else argv))
+    args, unknown = parser.parse_known_args(
+        _join_signed_values(sys.argv[1:] if argv is None else argv)
+    )
+    if unknown:
+        # Named by the verb's parser, so the message points at the verb's own --help.
+        verb_parser(parser, args.verb).error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
         code = args.run(args)
     except SymfuseError as exc:
@@ -312,6 +361,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         return report_interrupt()
     return report_interrupt() if interrupt_received() else code
+
+
+def verb_parser(parser: argparse.ArgumentParser, verb: str) -> argparse.ArgumentParser:
+    """The sub-parser of ``verb`` in :func:`build_parser`'s ``parser``."""
+    verbs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return verbs.choices[verb]
 
 
 def interrupted(exc: BaseException) -> bool:

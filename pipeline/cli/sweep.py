@@ -80,7 +80,9 @@ def _planned_tasks(args: argparse.Namespace, registry, config, experiment):
     resolved = config.to_dict()
     user = user_settings(config)
     sections = experiment.config_sections or tuple(resolved)
-    unread = sorted(set(user) - set(sections))
+    # A --set counts even where it repeats the default: it would be ignored all the same.
+    typed = {key.split(".")[0] for key, source in config.changed.items() if source == "--set"}
+    unread = sorted((set(user) | typed) - set(sections))
     if unread:
         raise ConfigError(
             f"sweep {args.experiment}: its trials read only [{'], ['.join(sections)}] of the "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TextIO
 
 from pipeline.errors import InputError
 
@@ -41,7 +42,16 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None and args.out.exists():
         raise InputError(f"{args.out}: already exists; --out writes a new file")
     obj = load_object(args.object, recentre=False, units=args.units or "m")
-    found = mesh_symmetries(obj.mesh.vertices, obj.mesh.faces)
+    # The file is created before the search, which takes a while, so a place it cannot be
+    # written is refused before anything runs; it is removed again if the search fails.
+    handle = _create(args.out) if args.out is not None else None
+    try:
+        found = mesh_symmetries(obj.mesh.vertices, obj.mesh.faces)
+    except BaseException:
+        if handle is not None:
+            handle.close()
+            args.out.unlink()
+        raise
     rows = [
         [
             symmetry.kind,
@@ -61,14 +71,24 @@ def run(args: argparse.Namespace) -> int:
         f"surface farther than {found.tolerance_m * 1e3:.2f} mm from it (sampling floor "
         f"{found.floor_m * 1e3:.2f} mm)"
     )
-    if args.out is not None:
+    if handle is not None:
         name = Path(obj.source).name if obj.source != "catalogue" else obj.name
         search = {"floor": found.floor_m, "tolerance": found.tolerance_m}
-        document = symmetries_to_json(found.symmetries, name, search)
-        try:
-            with args.out.open("x") as handle:
-                json.dump(document, handle, indent=2)
-        except OSError as exc:
-            raise InputError(f"{args.out}: cannot write ({exc.strerror})") from None
+        with handle:
+            json.dump(symmetries_to_json(found.symmetries, name, search), handle, indent=2)
         print(args.out)
     return 0
+
+
+def _create(path: Path) -> TextIO:
+    """``path`` opened as a new file for writing.
+
+    Raises:
+        InputError: it exists, or its folder cannot be written.
+    """
+    try:
+        return path.open("x")
+    except FileExistsError:
+        raise InputError(f"{path}: already exists; --out writes a new file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write ({exc.strerror})") from None

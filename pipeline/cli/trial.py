@@ -63,9 +63,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument(
         "--until-std",
-        type=float,
+        type=positive_mm,
         metavar="MM",
-        help="stop once the plane offset and hidden side posterior stds are <= MM",
+        help="stop once the plane offset and hidden side posterior stds are <= MM (> 0)",
     )
     parser.add_argument(
         "--symmetry",
@@ -276,3 +276,16 @@ def run(args: argparse.Namespace) -> int:
         )
         return EXIT_ESTIMATE_FAILED
     return EXIT_OK
+
+
+def positive_mm(text: str) -> float:
+    """An argparse ``type`` for ``--until-std``: a finite number above 0 (mm). A threshold
+    of 0 is never reached, so the option would stop nothing (the config's 0 means off)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of mm, got '{text}'") from None
+    if not (math.isfinite(value) and value > 0.0):
+        never = " (0 would never stop the trial)" if value == 0.0 else ""
+        raise argparse.ArgumentTypeError(f"expected a number of mm above 0, got {text}{never}")
+    return value

@@ -280,12 +280,10 @@ def parallel_top_grasp(
 #: SDH finger directions from the palm axis in the palm frame at spread 60 degrees: thumb
 #: at 180 deg (front), fingers 1 and 2 at +-60 deg (the SDH-2's finger base triangle).
 SDH_FINGER_ANGLES_RAD = (np.pi, np.pi / 3, -np.pi / 3)
-#: At spread 0 fingers 1 and 2 face the thumb (closing along -x), their distal pads this far
-#: either side of the closing line along the palm's y axis (robots/sdh2.urdf).
-SDH_PARALLEL_FINGER_LATERAL_M = 0.033
-#: Finger directions and lateral offsets (palm y, m) at spread 0: thumb, finger 1, finger 2.
+#: Finger directions at spread 0: thumb, finger 1, finger 2 (fingers 1 and 2 face the thumb,
+#: closing along -x; their lateral offsets are the hand's finger bases,
+#: :meth:`pipeline.planning.sdh_candidates.SdhHand.parallel_finger_offsets_m`).
 SDH_PARALLEL_FINGER_ANGLES_RAD = (np.pi, 0.0, 0.0)
-SDH_PARALLEL_FINGER_OFFSETS_M = (0.0, SDH_PARALLEL_FINGER_LATERAL_M, -SDH_PARALLEL_FINGER_LATERAL_M)
 
 
 def back_face_is_flat(

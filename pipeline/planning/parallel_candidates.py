@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.errors import ConfigError
 from pipeline.planning.candidate import (
     BEYOND_CENTRE,
     BLIND_PAD_FACTOR,
@@ -20,7 +21,7 @@ from pipeline.planning.candidate import (
 )
 from pipeline.planning.grasp_geometry import hand_pose
 from pipeline.planning.pad_contact import PadContact, PadTaxels, flat_pad_taxels, pad_coverage
-from pipeline.types import GraspCandidate, PadLayout
+from pipeline.types import GraspCandidate, GripperSpec, PadLayout
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,42 @@ class ParallelHand:
     housing_half_length_m: float
     housing_half_width_m: float
     housing_depth_m: float
+
+    @classmethod
+    def of(cls, gripper: GripperSpec, planner: str) -> ParallelHand:
+        """The geometry of ``gripper``'s front jaw (its first pad) and housing, from its
+        :attr:`~pipeline.types.GripperSpec.geometry` (the hand's URDF).
+
+        Raises:
+            ConfigError: ``gripper`` has no URDF geometry or no jaws on prismatic joints,
+                or its pads hang no lower than its housing (named with ``planner``).
+        """
+        geometry = gripper.geometry
+        if geometry is None or geometry.jaw_travel_m <= 0.0:
+            raise ConfigError(
+                f"planner '{planner}' needs a parallel gripper read from its URDF, but hand "
+                f"'{gripper.name}' has no jaw geometry (GripperSpec.geometry; docs/hands.md)"
+            )
+        pad = gripper.pads[0]
+        mount = geometry.pad(pad.name)
+        housing = geometry.housing
+        if housing.depth_m >= mount.centre_m[2]:
+            raise ConfigError(
+                f"planner '{planner}': hand '{gripper.name}' ({geometry.urdf}) has its pad "
+                f"centres {mount.centre_m[2]:.4f} m below the palm, inside the housing "
+                f"({housing.depth_m:.4f} m deep)"
+            )
+        return cls(
+            pad=pad,
+            aperture_m=gripper.max_aperture_m,
+            palm_to_pad_centre_m=mount.centre_m[2],
+            pad_centre_to_fingertip_m=mount.centre_to_fingertip_m,
+            finger_recess_m=mount.recess_m,
+            jaw_half_width_m=geometry.jaw_half_width_m,
+            housing_half_length_m=housing.half_length_m,
+            housing_half_width_m=housing.half_width_m,
+            housing_depth_m=housing.depth_m,
+        )
 
 
 def front_jaw_gap(

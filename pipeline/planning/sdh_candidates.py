@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.planning import sdh_geometry as sdh
+from pipeline.errors import ConfigError
 from pipeline.planning.candidate import (
     BEYOND_CENTRE,
     MIN_HITS,
@@ -22,26 +22,75 @@ from pipeline.planning.candidate import (
 )
 from pipeline.planning.grasp_geometry import hand_pose
 from pipeline.planning.pad_contact import PadContact, PadTaxels, pad_coverages, sdh_distal_taxels
-from pipeline.types import GraspCandidate, PadLayout
+from pipeline.planning.sdh_geometry import FingerKinematics
+from pipeline.types import GraspCandidate, GripperSpec, PadLayout
 
-#: SDH-2 pre-shapes every grasp is tried with: base rotation -> where the object's centre
-#: sits on the palm's x axis (m): at 60 deg the fingers face the palm axis (a tripod); at 0
-#: fingers 1 and 2 face the thumb and the object sits midway between the thumb's base and
-#: theirs.
-SDH_SPREADS = {
-    math.radians(60.0): 0.0,
-    0.0: (sdh.FINGER_BASES_M[0, 0] + sdh.FINGER_BASES_M[2, 0]) / 2.0,
-}
+#: SDH-2 pre-shapes every grasp is tried with, as base rotations: at 60 deg the fingers face
+#: the palm axis (a tripod); at 0 fingers 1 and 2 face the thumb (where the object's centre
+#: sits: :meth:`SdhHand.centre_offset_m`).
+SDH_SPREADS = (math.radians(60.0), 0.0)
 #: The pinch: at 90 deg fingers 1 and 2 face each other across the palm and close on the
 #: object from two sides, its centre on the line between their bases, while the thumb
 #: closes on a third side. Tried where the object is too narrow across for fingers 1 and 2
 #: facing the thumb.
 PINCH_SPREAD_RAD = math.pi / 2.0
-_CENTRES = {**SDH_SPREADS, PINCH_SPREAD_RAD: float(sdh.FINGER_BASES_M[0, 0])}
 #: Why :func:`sdh_candidate` rejects a grasp at spread 0 that the pinch may take instead.
 TOO_NARROW = "too narrow for fingers facing the thumb"
 #: Steps of the pre-shape search: proximal angles tried below the contact angle (rad).
 _OPEN_STEP_RAD = math.radians(3.0)
+
+
+@dataclass(frozen=True, eq=False)
+class SdhHand:
+    """An SDH-2-like hand for :func:`sdh_candidate`: its finger kinematics, its distal
+    pads' layout and its widest opening (m)."""
+
+    kinematics: FingerKinematics
+    pad: PadLayout
+    aperture_m: float
+
+    @classmethod
+    def of(cls, gripper: GripperSpec, planner: str) -> SdhHand:
+        """The hand ``gripper`` as its :attr:`~pipeline.types.GripperSpec.geometry` (its
+        URDF) describes it; the distal pads are the ones that close
+        (:attr:`~pipeline.types.GripperSpec.closing`).
+
+        Raises:
+            ConfigError: ``gripper`` has no turn-and-bend fingers of the SDH-2's kind
+                (named with ``planner``).
+        """
+        try:
+            kinematics = FingerKinematics.of(gripper.geometry, gripper.name)
+        except ConfigError as error:
+            raise ConfigError(f"planner '{planner}': {error}") from None
+        layouts = {pad.name: pad for pad in gripper.pads}
+        return cls(kinematics, layouts[gripper.closing[0].pad], gripper.max_aperture_m)
+
+    def centre_offset_m(self, spread_rad: float) -> float:
+        """Where the object's centre sits on the palm's x axis (m) at the pre-shape
+        ``spread_rad``: on the palm axis for the tripod, midway between the fixed finger's
+        (the thumb's) base and the turning fingers' at spread 0, on the line between the
+        turning fingers' bases for the pinch."""
+        kinematics = self.kinematics
+        turning = [i for i, sign in enumerate(kinematics.spread_signs) if sign != 0]
+        fixed = kinematics.spread_signs.index(0)
+        if spread_rad == 0.0:
+            return (kinematics.bases_m[turning[0], 0] + kinematics.bases_m[fixed, 0]) / 2.0
+        if spread_rad == PINCH_SPREAD_RAD:
+            return float(kinematics.bases_m[turning[0], 0])
+        return 0.0
+
+    def turning_lateral_m(self) -> float:
+        """How far the turning fingers' bases lie either side of the palm's x axis (m)."""
+        turning = self.kinematics.spread_signs.index(1)
+        return float(abs(self.kinematics.bases_m[turning, 1]))
+
+    def parallel_finger_offsets_m(self) -> tuple[float, ...]:
+        """The fingers' bases along the palm's y axis (m), the fixed finger (the thumb)
+        first: where their pads meet the object at spread 0, fingers 1 and 2 facing it."""
+        signs = self.kinematics.spread_signs
+        order = [signs.index(0)] + [i for i, sign in enumerate(signs) if sign != 0]
+        return tuple(float(self.kinematics.bases_m[i, 1]) for i in order)
 
 
 def sdh_candidate(
@@ -51,8 +100,7 @@ def sdh_candidate(
     angle_rad: float,
     height_m: float,
     spread_rad: float,
-    pad: PadLayout,
-    aperture_m: float,
+    sdh: SdhHand,
     settings: CandidateSettings,
 ) -> Candidate:
     # A candidate's pose and hand, and its feasibility checks in order, each using the
@@ -69,18 +117,12 @@ def sdh_candidate(
     the palm height puts the pads' centres at ``height_m`` at those angles. The pre-shape is
     the most closed common proximal angle, at least 3 deg before the earliest contact, at
     which every finger, the knuckles and the palm descend clear of the cloud
-    (:func:`sdh_geometry.finger_profile`); ``opening_m`` is that pre-shape's opening. From
-    there to its contact no finger's knuckle or proximal link may meet the cloud
-    (:func:`sdh_geometry.closing_hits`).
+    (:meth:`FingerKinematics.finger_profile`); ``opening_m`` is that pre-shape's opening.
+    From there to its contact no finger's knuckle or proximal link may meet the cloud
+    (:meth:`FingerKinematics.closing_hits`). The hand's shape is ``sdh``'s.
     """
     return sdh_candidates(
-        cloud,
-        centre_m,
-        [(angle_rad, direction, height_m)],
-        spread_rad,
-        pad,
-        aperture_m,
-        settings,
+        cloud, centre_m, [(angle_rad, direction, height_m)], spread_rad, sdh, settings
     )[0]
 
 
@@ -110,14 +152,15 @@ def sdh_candidates(
     centre_m: np.ndarray,
     poses: list[tuple[float, np.ndarray, float]],
     spread_rad: float,
-    pad: PadLayout,
-    aperture_m: float,
+    sdh: SdhHand,
     settings: CandidateSettings,
 ) -> list[Candidate]:
     """:func:`sdh_candidate` at each of ``poses`` (closing angle, direction, pad height),
     with the fingers' pad contacts of every pose at one height predicted together (one
     pass over the points at the pads' rows, :func:`pad_coverages`)."""
     s = settings
+    kinematics, pad = sdh.kinematics, sdh.pad
+    centre_offset = sdh.centre_offset_m(spread_rad)
     hands = []
     for angle_rad, direction, height_m in poses:
         x_hand = np.array([direction[0], direction[1], 0.0])
@@ -128,18 +171,18 @@ def sdh_candidates(
             height_m,
             x_hand,
             y_hand,
-            centre_m - _CENTRES[spread_rad] * x_hand,
+            centre_m - centre_offset * x_hand,
             rotation,
-            sdh.finger_facings(spread_rad) @ rotation.T,
+            kinematics.finger_facings(spread_rad) @ rotation.T,
             _distal_taxels(pad, height_m),
             cloud.band(height_m, pad.rows * pad.pitch_m / 2.0),
         )
         hands.append(hand)
         if spread_rad == 0.0:
-            # Fingers 1 and 2 facing the thumb meet the back 33 mm either side of the
-            # closing line: the object must be wide enough there for both their pads.
+            # Fingers 1 and 2 facing the thumb meet the back either side of the closing
+            # line: the object must be wide enough there for both their pads.
             across = hand.in_band @ y_hand
-            span = sdh.FINGER_BASES_M[0, 1] + pad.cols * pad.pitch_m / 2.0
+            span = sdh.turning_lateral_m() + pad.cols * pad.pitch_m / 2.0
             if len(across) == 0 or np.ptp(np.percentile(across, [2.0, 98.0])) < 2.0 * span:
                 hand.verdict = Candidate.rejected(angle_rad, height_m, spread_rad, TOO_NARROW)
     # Fingers meet an object off the palm axis inclined, so the palm is moved once, onto
@@ -152,9 +195,10 @@ def sdh_candidates(
         for group in by_height.values():
             taxels = group[0].taxels
             for hand in group:
-                hand.bases = hand.palm_xy[:2] + sdh.FINGER_BASES_M @ hand.rotation.T
+                hand.bases = hand.palm_xy[:2] + kinematics.bases_m @ hand.rotation.T
             # Only the points at the pads' rows can touch them.
             found = _fingers_contacts(
+                kinematics,
                 cloud.slab(*taxels.z_range_m),
                 [hand.bases for hand in group],
                 [hand.facings for hand in group],
@@ -171,11 +215,11 @@ def sdh_candidates(
                 if attempt == 0:
                     hand.palm_xy = _contact_centre(
                         hand.contacts, hand.x_hand, hand.y_hand, spread_rad
-                    ) - (_CENTRES[spread_rad] * hand.x_hand)
+                    ) - (centre_offset * hand.x_hand)
     return [
         hand.verdict
         if hand.verdict is not None
-        else _checked(cloud, centre_m, hand, spread_rad, aperture_m, s)
+        else _checked(cloud, centre_m, hand, spread_rad, sdh, s)
         for hand in hands
     ]
 
@@ -185,7 +229,7 @@ def _checked(
     centre_m: np.ndarray,
     hand: _Hand,
     spread_rad: float,
-    aperture_m: float,
+    sdh: SdhHand,
     s: CandidateSettings,
 ) -> Candidate:
     """The checks of :func:`sdh_candidate` after the fingers' contacts are found, and the
@@ -193,30 +237,34 @@ def _checked(
     angle_rad, height_m, taxels = hand.angle_rad, hand.height_m, hand.taxels
     x_hand, palm_xy, in_band = hand.x_hand, hand.palm_xy, hand.in_band
     bases, facings, contacts, alphas = hand.bases, hand.facings, hand.contacts, hand.alphas
+    k = sdh.kinematics
     if not all(
         contact.stops_before(centre_m, np.append(facing, 0.0))
         for contact, facing in zip(contacts, facings, strict=True)
     ):
         return Candidate.rejected(angle_rad, height_m, spread_rad, BEYOND_CENTRE)
-    palm_z = height_m + float(np.mean(sdh.distal_pad_depth_m(np.array(alphas))))
-    below_palm = cloud.above(palm_z - sdh.BASE_DEPTH_M - s.descent_clearance_m - _MARGIN_M)
+    palm_z = height_m + float(np.mean(k.distal_pad_depth_m(np.array(alphas))))
+    below_palm = cloud.above(palm_z - k.base_depth_m - s.descent_clearance_m - _MARGIN_M)
     radial = np.hypot(*(below_palm[:, :2] - palm_xy[:2]).T)
-    palm_hit = (radial <= sdh.PALM_RADIUS_M + s.descent_clearance_m) & (
-        palm_z - below_palm[:, 2] <= sdh.BASE_DEPTH_M + s.descent_clearance_m
+    palm_hit = (radial <= k.palm_radius_m + s.descent_clearance_m) & (
+        palm_z - below_palm[:, 2] <= k.base_depth_m + s.descent_clearance_m
     )
     if np.count_nonzero(palm_hit) >= MIN_HITS:
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "the palm would hit the object's top"
         )
-    open_alpha = _clear_preshape(cloud, bases, facings, palm_z, min(alphas), s)
+    open_alpha = _clear_preshape(k, cloud, bases, facings, palm_z, min(alphas), s)
     if open_alpha is None:
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "the fingers cannot open around the object"
         )
-    opening = sdh.opening_for_alpha(open_alpha)
-    if opening > aperture_m + 1e-9:
+    opening = k.opening_for_alpha(open_alpha)
+    if opening > sdh.aperture_m + 1e-9:
         return Candidate.rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
-    if _closing_collides(cloud.visible, bases, facings, palm_z, open_alpha, alphas, s):
+    # Points deeper than the proximal link reaches from its joint are never hit closing.
+    reach = _closing_reach_m(k, s.touch_tolerance_m)
+    within = cloud.above(palm_z - k.knuckle_depth_m - reach - _MARGIN_M, visible=True)
+    if _closing_collides(k, within, bases, facings, palm_z, open_alpha, alphas, s):
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "a proximal link would hit the object while closing"
         )
@@ -224,7 +272,7 @@ def _checked(
     # closest to vertical.
     steepest = 0.0 if open_alpha <= 0.0 <= max(alphas) else min(abs(open_alpha), abs(max(alphas)))
     lowest_tip = palm_z - (
-        sdh.KNUCKLE_DEPTH_M + sdh.PROXIMAL_LENGTH_M * math.cos(steepest) + sdh.DISTAL_LENGTH_M
+        k.knuckle_depth_m + k.proximal_length_m * math.cos(steepest) + k.distal_length_m
     )
     if s.below_clearance(lowest_tip):
         return Candidate.rejected(
@@ -235,7 +283,7 @@ def _checked(
     score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
     above_pads = cloud.above(float(taxels.row_z.max()) + taxels.pitch_m / 2.0)
     if any(
-        _top_edge_above_pad(above_pads, np.append(base, 0.0), np.append(facing, 0.0), taxels, c)
+        _top_edge_above_pad(k, above_pads, np.append(base, 0.0), np.append(facing, 0.0), taxels, c)
         for base, facing, c in zip(bases, facings, contacts, strict=True)
     ):
         score *= _EDGE_PENALTY
@@ -261,6 +309,7 @@ def _checked(
 
 
 def _fingers_contacts(
+    kinematics: FingerKinematics,
     points: np.ndarray,
     bases: list[np.ndarray],
     facings: list[np.ndarray],
@@ -277,25 +326,27 @@ def _fingers_contacts(
     hands: list[tuple[list[PadContact], list[float]] | str] = []
     for first in range(0, len(found), 3):
         fingers = zip(
-            sdh.FINGERS,
+            kinematics.fingers,
             origins[first : first + 3],
             directions[first : first + 3],
             found[first : first + 3],
             strict=True,
         )
-        hands.append(_finger_angles(fingers))
+        hands.append(_finger_angles(kinematics, fingers))
     return hands
 
 
-def _finger_angles(fingers) -> tuple[list[PadContact], list[float]] | str:
+def _finger_angles(
+    kinematics: FingerKinematics, fingers
+) -> tuple[list[PadContact], list[float]] | str:
     """The contacts and proximal angles of one hand's fingers (name, pad origin and
     direction, contact or None each), or why a finger finds none."""
     contacts, alphas = [], []
     for finger, origin, direction, contact in fingers:
         if contact is None:
             return f"{finger} meets no surface"
-        alpha = float(sdh.alpha_for_reach(contact.touch_m - origin @ direction))
-        if not abs(alpha) < sdh.JOINT_LIMIT_RAD:
+        alpha = float(kinematics.alpha_for_reach(contact.touch_m - origin @ direction))
+        if not abs(alpha) < kinematics.joint_limit_rad:
             return f"{finger} cannot reach the surface"
         contacts.append(contact)
         alphas.append(alpha)
@@ -328,6 +379,7 @@ def _contact_centre(
 
 
 def _clear_preshape(
+    kinematics: FingerKinematics,
     cloud: CandidateCloud,
     bases: np.ndarray,
     facings: np.ndarray,
@@ -340,16 +392,16 @@ def _clear_preshape(
     palm at height ``palm_z``); None when none does."""
     step = math.floor((contact_alpha - _OPEN_STEP_RAD) / _OPEN_STEP_RAD)
     steps = []
-    while step * _OPEN_STEP_RAD > -sdh.JOINT_LIMIT_RAD:
+    while step * _OPEN_STEP_RAD > -kinematics.joint_limit_rad:
         steps.append(step)
         step -= 1
     # Points deeper below the palm than any profile reaches, or beside every profile's
     # grid, are never hit.
-    deepest, t_low, t_high = _profile_bounds(s.descent_clearance_m)
+    deepest, t_low, t_high = _profile_bounds(kinematics, s.descent_clearance_m)
     points = cloud.above(palm_z - deepest - _MARGIN_M)
     corridors = []
     for t, d in _corridors(
-        points, bases, facings, palm_z, sdh.FINGER_HALF_WIDTH_M + s.descent_clearance_m
+        points, bases, facings, palm_z, kinematics.finger_half_width_m + s.descent_clearance_m
     ):
         within = (t >= t_low) & (t <= t_high)
         corridors.append((t[within], d[within]))
@@ -359,21 +411,17 @@ def _clear_preshape(
     # the first that sweeps fewer than MIN_HITS of all the points is the answer.
     for first in range(0, len(steps), _STEPS_AT_ONCE):
         chunk = tuple(steps[first : first + _STEPS_AT_ONCE])
-        blocked = np.zeros(len(chunk), dtype=bool)
-        for t, d in corridors:
-            shallow = slice(-_SHALLOWEST, None)
-            hits = _profile_hits(chunk, t[shallow], d[shallow], s.descent_clearance_m)
-            blocked |= hits >= MIN_HITS
-        for k in np.flatnonzero(~blocked):
-            if all(
-                _profile_hits(chunk[k : k + 1], t, d, s.descent_clearance_m)[0] < MIN_HITS
-                for t, d in corridors
-            ):
+        shallowest = [(t[-_SHALLOWEST:], d[-_SHALLOWEST:]) for t, d in corridors]
+        hits = _profile_hits(kinematics, chunk, shallowest, s.descent_clearance_m)
+        for k in np.flatnonzero(np.all(hits < MIN_HITS, axis=1)):
+            hits = _profile_hits(kinematics, chunk[k : k + 1], corridors, s.descent_clearance_m)
+            if np.all(hits < MIN_HITS):
                 return chunk[k] * _OPEN_STEP_RAD
     return None
 
 
 def _closing_collides(
+    kinematics: FingerKinematics,
     visible: np.ndarray,
     bases: np.ndarray,
     facings: np.ndarray,
@@ -388,14 +436,28 @@ def _closing_collides(
     count: the mirrored ones are where the plane guesses the back, too uncertain to veto a
     grasp on."""
     corridors = _corridors(
-        visible, bases, facings, palm_z, sdh.FINGER_HALF_WIDTH_M + s.touch_tolerance_m
+        visible, bases, facings, palm_z, kinematics.finger_half_width_m + s.touch_tolerance_m
     )
+    reach = _closing_reach_m(kinematics, s.touch_tolerance_m) + _MARGIN_M
     for (t, d), contact in zip(corridors, contact_alphas, strict=True):
+        near = t * t + (d - kinematics.knuckle_depth_m) ** 2 <= reach * reach
         alphas = [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]
-        hits = sdh.closing_hits(t, d, alphas, s.touch_tolerance_m)
+        hits = kinematics.closing_hits(t[near], d[near], alphas, s.touch_tolerance_m)
         if np.any(np.count_nonzero(hits, axis=1) >= MIN_HITS):
             return True
     return False
+
+
+def _closing_reach_m(kinematics: FingerKinematics, clearance_m: float) -> float:
+    """The farthest from the proximal joint a point inside the knuckle or the proximal
+    link with its pad, grown by ``clearance_m`` (:meth:`FingerKinematics.closing_hits`),
+    can lie (m), at any proximal angle."""
+    k, c = kinematics, clearance_m
+    thickest = max(abs(k.proximal_back_m - c), abs(k.proximal_pad_offset_m + c))
+    link = math.hypot(k.proximal_length_m + c, thickest)
+    depth = max(abs(k.base_depth_m - c - k.knuckle_depth_m), c)
+    knuckle = math.hypot(k.knuckle_radius_m + c, depth)
+    return max(link, knuckle)
 
 
 def _corridors(
@@ -435,10 +497,12 @@ _MARGIN_M = 1e-6
 
 
 @functools.lru_cache(maxsize=256)
-def _swept_profile(step: int, clearance_m: float) -> tuple[np.ndarray, np.ndarray]:
+def _swept_profile(
+    kinematics: FingerKinematics, step: int, clearance_m: float
+) -> tuple[np.ndarray, np.ndarray]:
     """The finger profile at proximal angle ``step`` x 3 deg, grown by ``clearance_m`` in
     both directions."""
-    grid, depth = sdh.finger_profile(step * _OPEN_STEP_RAD, _PROFILE_STEP_M)
+    grid, depth = kinematics.finger_profile(step * _OPEN_STEP_RAD, _PROFILE_STEP_M)
     half = math.ceil(clearance_m / _PROFILE_STEP_M)
     # The greatest depth within ``half`` cells either side, the ends mirrored.
     padded = np.pad(depth, half, mode="symmetric")
@@ -447,12 +511,12 @@ def _swept_profile(step: int, clearance_m: float) -> tuple[np.ndarray, np.ndarra
 
 
 @functools.lru_cache(maxsize=16)
-def _profile_bounds(clearance_m: float) -> tuple[float, float, float]:
+def _profile_bounds(kinematics: FingerKinematics, clearance_m: float) -> tuple[float, float, float]:
     """Over every pre-shape within the joint limits: the deepest any grown profile reaches
     below the palm, and the least and greatest distance along the facing a point may have
     and still fall on a profile's grid (m)."""
-    limit = math.ceil(sdh.JOINT_LIMIT_RAD / _OPEN_STEP_RAD)
-    profiles = [_swept_profile(step, clearance_m) for step in range(-limit, limit + 1)]
+    limit = math.ceil(kinematics.joint_limit_rad / _OPEN_STEP_RAD)
+    profiles = [_swept_profile(kinematics, step, clearance_m) for step in range(-limit, limit + 1)]
     return (
         max(float(reach.max()) for _, reach in profiles),
         min(float(grid[0]) for grid, _ in profiles) - _PROFILE_STEP_M,
@@ -461,12 +525,14 @@ def _profile_bounds(clearance_m: float) -> tuple[float, float, float]:
 
 
 @functools.lru_cache(maxsize=1024)
-def _profile_table(steps: tuple[int, ...], clearance_m: float) -> tuple[np.ndarray, ...]:
+def _profile_table(
+    kinematics: FingerKinematics, steps: tuple[int, ...], clearance_m: float
+) -> tuple[np.ndarray, ...]:
     """The grown profiles of ``steps`` (:func:`_swept_profile`) as arrays: each grid's
     first distance ``(K,)``, the reaches ``(K, longest + 2)``, each grid's cells from
     column 1 on and -inf before and after them (no part of the finger there), and the
     deepest reach of them all (0-d)."""
-    profiles = [_swept_profile(step, clearance_m) for step in steps]
+    profiles = [_swept_profile(kinematics, step, clearance_m) for step in steps]
     longest = max(len(grid) for grid, _ in profiles)
     reaches = np.full((len(steps), longest + 2), -np.inf)
     for row, (_, reach) in enumerate(profiles):
@@ -475,19 +541,29 @@ def _profile_table(steps: tuple[int, ...], clearance_m: float) -> tuple[np.ndarr
 
 
 def _profile_hits(
-    steps: tuple[int, ...], t: np.ndarray, d: np.ndarray, clearance_m: float
+    kinematics: FingerKinematics,
+    steps: tuple[int, ...],
+    corridors: list[tuple[np.ndarray, np.ndarray]],
+    clearance_m: float,
 ) -> np.ndarray:
-    """``(K,)``: how many points at distance ``t`` along a finger's facing and depth ``d``
-    below the palm (both ``(N,)``) each pre-shape of ``steps`` sweeps on its descent."""
-    starts, reaches, deepest = _profile_table(steps, clearance_m)
+    """``(K, F)``: how many points of each finger's corridor (distances ``t`` along its
+    facing and depths ``d`` below the palm, both ``(N_f,)``) each pre-shape of ``steps``
+    sweeps on its descent."""
+    starts, reaches, deepest = _profile_table(kinematics, steps, clearance_m)
+    t = np.concatenate([t for t, _ in corridors])
+    d = np.concatenate([d for _, d in corridors])
     # A point deeper than every profile reaches is hit by none.
     shallow = d <= deepest
+    kept = np.concatenate([[0], np.cumsum(shallow)])
+    ends = kept[np.cumsum([len(t) for t, _ in corridors])]
     t, d = t[shallow], d[shallow]
     index = np.round((t[None, :] - starts[:, None]) / _PROFILE_STEP_M).astype(int)
     # Cells before a grid's start read column 0 and after its end a later one: -inf.
     width = reaches.shape[1]
     cells = np.clip(index + 1, 0, width - 1) + width * np.arange(len(steps))[:, None]
-    return np.count_nonzero(d[None, :] <= reaches.take(cells), axis=1)
+    running = np.zeros((len(steps), len(t) + 1), dtype=np.int64)
+    np.cumsum(d[None, :] <= reaches.take(cells), axis=1, out=running[:, 1:])
+    return np.diff(running[:, np.concatenate([[0], ends])], axis=1)
 
 
 #: How deep behind a pad's touch the surface counts as the side it closes on, looking for
@@ -506,6 +582,7 @@ def _distal_taxels(pad: PadLayout, height_m: float) -> PadTaxels:
 
 
 def _top_edge_above_pad(
+    kinematics: FingerKinematics,
     points: np.ndarray,
     origin_m: np.ndarray,
     direction: np.ndarray,
@@ -519,12 +596,12 @@ def _top_edge_above_pad(
     link with the pad short of the side (a mug's rim, a coffee tin's lid)."""
     half = taxels.pitch_m / 2.0
     pad_top = float(taxels.row_z.max()) + half
-    joint = float(np.median(taxels.row_z)) + sdh.DISTAL_PAD_CENTRE_M  # the middle row
+    joint = float(np.median(taxels.row_z)) + kinematics.distal_pad_centre_m  # the middle row
     lateral = np.array([-direction[1], direction[0], 0.0])
     relative = points - origin_m
     depth = relative @ direction - (contact.touch_m - origin_m @ direction)
     side = (
-        (np.abs(relative @ lateral) <= sdh.FINGER_HALF_WIDTH_M)
+        (np.abs(relative @ lateral) <= kinematics.finger_half_width_m)
         & (depth <= _EDGE_DEPTH_M)
         & (points[:, 2] > pad_top)
     )

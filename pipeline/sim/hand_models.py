@@ -11,16 +11,17 @@ Two hands ship with symfuse, described by ``robots/pg70.urdf`` and ``robots/sdh2
 
 Hand frame (the URDF base link ``palm``): origin at the mounting flange on the palm axis,
 ``z`` along the approach direction toward the fingertips, ``x`` the closing direction. A
-:class:`pipeline.types.GraspPlan`'s ``T_robot_hand`` is this frame's pose. The PG-70's pad
-centres are 125 mm and its fingertips 154 mm down ``z``; the SDH-2's straight fingertips
-246 mm (``GripperSpec.finger_length_m`` holds the fingertip depth).
+:class:`pipeline.types.GraspPlan`'s ``T_robot_hand`` is this frame's pose. Where the pads
+and fingertips sit is read from the URDFs (:mod:`pipeline.io.hand_urdf`; docs/hands.md);
+``GripperSpec.finger_length_m`` holds the fingertip depth.
 
-Opening: for the PG-70 ``opening_m`` is the distance between the pad surfaces. For the
-SDH-2 it is twice the distance from the palm axis of the distal pads' flat surfaces when
-each proximal link is tilted by ``alpha`` and the distal link held parallel to the palm
-axis (distal joint ``-alpha``): ``opening = 2 (r_base - 14.8 mm - 86.5 mm sin(alpha))``
-with ``r_base = 38.1 mm`` (:mod:`pipeline.planning.sdh_geometry`); at spread 60 deg that
-is the diameter of the circle the three distal pads touch. Openings below 46.6 mm flex the
+Opening: for a parallel gripper ``opening_m`` is the distance between the pad surfaces,
+split evenly between the jaws (:func:`parallel_hand_model`, the PG-70's and a user's
+gripper's). For the SDH-2 it is twice the distance from the palm axis of the distal pads'
+flat surfaces when each proximal link is tilted by ``alpha`` and the distal link held
+parallel to the palm axis (distal joint ``-alpha``;
+:class:`pipeline.planning.sdh_geometry.FingerKinematics`); at spread 60 deg that is the
+diameter of the circle the three distal pads touch. The narrowest openings flex the
 proximal links inward (``alpha > 0``), for narrow objects.
 
 :class:`SimHand` is the engine-neutral part of a simulated hand; the PyBullet hand
@@ -30,45 +31,43 @@ derive from it and add the engine's calls. No simulator is imported here.
 
 from __future__ import annotations
 
-import functools
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from pathlib import Path
 
 import numpy as np
 
+from pipeline.errors import ConfigError
 from pipeline.geometry.pad_layout import pad_grid
+from pipeline.io.hand_urdf import (
+    PadGeometry,
+    gripper_spec_from_urdf,
+    hand_geometry,
+    hand_urdf_path,
+)
 from pipeline.planning import sdh_geometry
 from pipeline.sim.taxels import taxels_to_robot
-from pipeline.types import ClosingPad, GraspPlan, GripperSpec, PadLayout, TaxelState
-
-if TYPE_CHECKING:
-    import yourdfpy
+from pipeline.types import GraspPlan, GripperSpec, PadLayout, TaxelState
 
 #: Where an unused hand waits: high above the table, out of the camera's view (m).
 PARK_POSITION_M = (0.0, 0.0, 2.0)
 
+#: The taxels' pitch on every pad of the simulated hands (m): the Weiss DSA 9205's.
 TAXEL_PITCH_M = 0.0034
+#: How far (m) a parallel gripper's jaw targets move past the touch to press.
+JAW_SQUEEZE_M = 0.002
 
-SDH_FINGERS = sdh_geometry.FINGERS
+#: The SDH-2's finger kinematics, read from ``robots/sdh2.urdf``.
+SDH = sdh_geometry.shipped()
+SDH_FINGERS = SDH.fingers
 #: How far (rad, each bending joint) an SDH-2 finger's targets move past the contact to press.
 #: Fingers 1 and 2 together overpower the thumb and push the object toward it until they
 #: reach their targets, so theirs is small (about 4 mm at the distal pad); the thumb's is
 #: large so that it presses with its full force cap.
 SDH_FINGER_SQUEEZE_RAD = 0.03
 SDH_THUMB_SQUEEZE_RAD = 0.1
-
-
-@dataclass(frozen=True)
-class PadGeometry:
-    """A pad's layout plus the shape of its surface (see
-    :func:`pipeline.geometry.pad_layout.pad_grid`)."""
-
-    layout: PadLayout
-    curved_rows: int = 0
-    curve_radius_m: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -121,18 +120,8 @@ class HandModel:
     facings: Callable[[float], np.ndarray]
 
 
-def _pg70_open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
-    half_m = opening_m / 2.0
-    return {"left_jaw": half_m, "right_jaw": half_m}
-
-
-def _pg70_aperture(hand: SimHand) -> float:
-    joints = hand.joint_positions()
-    return joints["left_jaw"] + joints["right_jaw"]
-
-
 def _sdh_open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
-    alpha = sdh_geometry.alpha_for_opening(opening_m)
+    alpha = SDH.alpha_for_opening(opening_m)
     configuration = {"f1_base": spread_rad, "f2_base": spread_rad}
     for finger in SDH_FINGERS:
         configuration[f"{finger}_proximal"] = alpha
@@ -152,61 +141,60 @@ def _sdh_aperture(hand: SimHand) -> float:
     return 2.0 * float(np.mean(radii))
 
 
-def _pg70_model() -> HandModel:
+def parallel_hand_model(name: str, urdf: str | Path) -> HandModel:
+    """The model of a parallel gripper from its URDF (a path, or a file of ``robots/``;
+    the convention of docs/hands.md): each jaw a finger closing its prismatic joint at the
+    joints' velocity limit and pressing :data:`JAW_SQUEEZE_M` past the touch, each pad a
+    grid of as many :data:`TAXEL_PITCH_M` taxels as fit it, the opening split evenly
+    between the jaws.
+
+    Raises:
+        ConfigError: the URDF is not a parallel gripper of the convention.
+    """
+    geometry = hand_geometry(str(urdf))
+    if not geometry.jaws or len(geometry.closing) != len(geometry.jaws):
+        raise ConfigError(
+            f"hand '{name}': {geometry.urdf} is not a parallel gripper (jaws on prismatic "
+            f"joints, each with a pad; docs/hands.md)"
+        )
+    mounts = [geometry.pad(closing.pad) for closing in geometry.closing]
     pads = tuple(
-        PadGeometry(PadLayout(side, f"{side}_pad", 14, 6, TAXEL_PITCH_M))
-        for side in ("left", "right")
+        PadGeometry(
+            PadLayout(
+                mount.pad,
+                mount.link,
+                int(mount.length_m / TAXEL_PITCH_M + 1e-9),
+                int(mount.width_m / TAXEL_PITCH_M + 1e-9),
+                TAXEL_PITCH_M,
+            )
+        )
+        for mount in mounts
     )
     fingers = tuple(
-        FingerDrive(side, (side,), (f"{side}_jaw",), (-1.0,), 0.041, (-0.002,))
-        for side in ("left", "right")
+        FingerDrive(
+            mount.finger, (mount.pad,), (joint,), (-1.0,), geometry.jaw_speed_m_s, (-JAW_SQUEEZE_M,)
+        )
+        for mount, joint in zip(mounts, geometry.jaws, strict=True)
     )
-    closing = ClosingPad.jaws("left", "right")
-    spec = GripperSpec("pg70", 2, 0.065, tuple(p.layout for p in pads), 0.154, closing)
+    closed_m = geometry.jaw_closed_m  # the part of the opening no joint makes
+    facings = np.array([closing.facing for closing in geometry.closing])
+
+    def open_configuration(opening_m: float, spread_rad: float) -> dict[str, float]:
+        share_m = (opening_m - closed_m) / len(geometry.jaws)
+        return {joint: share_m for joint in geometry.jaws}
+
+    def aperture(hand: SimHand) -> float:
+        joints = hand.joint_positions()
+        return sum(joints[joint] for joint in geometry.jaws) + closed_m
+
     return HandModel(
-        spec,
-        "pg70.urdf",
+        gripper_spec_from_urdf(name, urdf, pads),
+        str(hand_urdf_path(urdf)),
         pads,
         fingers,
-        _pg70_open_configuration,
-        _pg70_aperture,
-        lambda spread_rad: np.array([[1.0, 0.0], [-1.0, 0.0]]),  # left jaw at -x, right at +x
-    )
-
-
-@functools.cache
-def hand_urdf(urdf: str) -> yourdfpy.URDF:
-    """A shipped hand's URDF (``robots/<urdf>``), read once: its joints and links, its
-    shapes unloaded until a scene graph is built."""
-    import yourdfpy
-
-    from robots import ROOT
-
-    return yourdfpy.URDF.load(
-        str(ROOT / urdf), build_scene_graph=False, load_meshes=False, load_collision_meshes=False
-    )
-
-
-def _sdh_closing() -> tuple[ClosingPad, ...]:
-    """The distal pads close from their fingers' bases (the base joints' origins in
-    ``robots/sdh2.urdf``) along the fingers' facings: fingers 1 and 2 turn from facing the
-    thumb by the spread, one each way; the thumb faces +x
-    (:func:`pipeline.planning.sdh_geometry.finger_facings`)."""
-    joints = hand_urdf("sdh2.urdf").joint_map
-    facings = sdh_geometry.finger_facings(0.0)
-    return tuple(
-        ClosingPad(
-            f"{finger}_distal",
-            (
-                float(joints[f"{finger}_base"].origin[0, 3]),
-                float(joints[f"{finger}_base"].origin[1, 3]),
-            ),
-            (float(facing[0]), float(facing[1])),
-            sign,
-            sdh_geometry.DISTAL_PAD_CURVED_ROWS,
-            sdh_geometry.DISTAL_PAD_CURVE_RADIUS_M,
-        )
-        for finger, facing, sign in zip(SDH_FINGERS, facings, (1, -1, 0), strict=True)
+        open_configuration,
+        aperture,
+        lambda spread_rad: facings,
     )
 
 
@@ -230,10 +218,8 @@ def _sdh_model() -> HandModel:
                 finger, (proximal, distal), (proximal, distal), (1.0, -1.0), 1.0, (squeeze,) * 2
             )
         )
-    max_aperture_m = sdh_geometry.opening_for_alpha(-sdh_geometry.JOINT_LIMIT_RAD)
-    spec = GripperSpec(
-        "sdh", 3, max_aperture_m, tuple(p.layout for p in pads), 0.246, _sdh_closing()
-    )
+    max_aperture_m = SDH.opening_for_alpha(-SDH.joint_limit_rad)
+    spec = gripper_spec_from_urdf("sdh", "sdh2.urdf", pads, max_aperture_m)
     return HandModel(
         spec,
         "sdh2.urdf",
@@ -241,14 +227,56 @@ def _sdh_model() -> HandModel:
         tuple(fingers),
         _sdh_open_configuration,
         _sdh_aperture,
-        sdh_geometry.finger_facings,
+        SDH.finger_facings,
     )
 
 
-HAND_MODELS: dict[str, HandModel] = {"pg70": _pg70_model(), "sdh": _sdh_model()}
+HAND_MODELS: dict[str, HandModel] = {
+    "pg70": parallel_hand_model("pg70", "pg70.urdf"),
+    "sdh": _sdh_model(),
+}
 
 #: What grasp planners need to know about each shipped hand, by name.
 GRIPPERS: dict[str, GripperSpec] = {name: model.spec for name, model in HAND_MODELS.items()}
+
+
+#: Hands a world added in this process by their URDFs (:func:`add_parallel_hand`), by name.
+ADDED_HANDS: dict[str, HandModel] = {}
+
+
+def hand_model(name: str) -> HandModel:
+    """The model of the shipped or added hand ``name``.
+
+    Raises:
+        ConfigError: no hand has that name.
+    """
+    model = HAND_MODELS.get(name) or ADDED_HANDS.get(name)
+    if model is None:
+        known = ", ".join(sorted({*HAND_MODELS, *ADDED_HANDS}))
+        raise ConfigError(f"unknown gripper '{name}' (known: {known})")
+    return model
+
+
+def add_parallel_hand(name: str, urdf: str | Path) -> GripperSpec:
+    """Make the parallel gripper of ``urdf`` (:func:`parallel_hand_model`) a hand the
+    simulated worlds can load under ``name`` (in this process, :data:`ADDED_HANDS`), and
+    give its spec; again with the same URDF, nothing changes.
+
+    Raises:
+        ConfigError: ``name`` is a shipped hand or an added one with another URDF, or the
+            URDF is no parallel gripper.
+    """
+    path = str(hand_urdf_path(urdf))
+    if name in HAND_MODELS:
+        raise ConfigError(f"hand '{name}' is a shipped hand; name {path} otherwise")
+    known = ADDED_HANDS.get(name)
+    if known is not None:
+        if known.urdf != path:
+            raise ConfigError(f"hand '{name}' is {known.urdf} already, not {path}")
+        return known.spec
+    model = parallel_hand_model(name, path)
+    ADDED_HANDS[name] = model
+    return model.spec
 
 
 class SimHand(ABC):
@@ -442,7 +470,7 @@ def hand_link_meshes(
 
     from robots import ROOT
 
-    model = HAND_MODELS.get(gripper)
+    model = HAND_MODELS.get(gripper) or ADDED_HANDS.get(gripper)
     if model is None:
         return {}
     urdf = yourdfpy.URDF.load(str(ROOT / model.urdf))

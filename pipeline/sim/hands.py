@@ -11,7 +11,6 @@ import numpy as np
 import pybullet as pb
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import ConfigError
 from pipeline.sim.hand_models import (
     GRIPPERS,
     HAND_MODELS,
@@ -19,6 +18,7 @@ from pipeline.sim.hand_models import (
     HandModel,
     SimHand,
     TaxelFrames,
+    hand_model,
 )
 from pipeline.sim.taxels import (
     ray_segments,
@@ -109,10 +109,7 @@ class Hand(SimHand):
         Raises:
             ConfigError: unknown gripper name.
         """
-        if gripper not in HAND_MODELS:
-            known = ", ".join(sorted(HAND_MODELS))
-            raise ConfigError(f"unknown gripper '{gripper}' (known: {known})")
-        model = HAND_MODELS[gripper]
+        model = hand_model(gripper)
         body_id = pb.loadURDF(
             str(ROBOTS_ROOT / model.urdf),
             basePosition=park_position_m,

@@ -1,4 +1,5 @@
-"""Planner ``top-parallel``: a PG-70 top grasp, ranked among candidates or the paper's rule."""
+"""Planner ``top-parallel``: a parallel-jaw top grasp (the PG-70's), ranked among candidates or
+the paper's rule."""
 
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ from pipeline.api import (
     GripperSpec,
     PointCloud,
     SymmetryInit,
-    check_ordered,
     hookimpl,
     param,
 )
@@ -44,8 +44,7 @@ class TopParallel(CandidatePlanner):
     housing descend clear of the cloud, and ranked by its predicted pad contact on both
     sides, its alignment with the plane normal and its tipping lever
     (:mod:`pipeline.planning.candidate`). ``GraspPlan.candidates`` holds the
-    ranking. The housing (``robots/pg70.urdf``: 112 x 80 mm, 78 mm deep) must pass
-    ``descent_clearance_m`` above the object.
+    ranking. The housing must pass ``descent_clearance_m`` above the object.
 
     With ``strategy = "paper"`` (the paper's reproductions) the closing direction is the
     proposed plane's normal rotated about z by ``tactile_angle_deg``; the hand's x axis
@@ -60,8 +59,10 @@ class TopParallel(CandidatePlanner):
     ``cloud_base_above_table_m`` below the cloud's lowest point (the segmentation's height
     cut), and the pads' lower edge stays above the cloud's bottom (``pad_above_cloud``; on
     short objects the pads reach above the top instead of touching unseen surface).
-    Palm-to-pad-centre and pad-centre-to-fingertip distances and the finger's recess behind
-    the pad default to ``robots/pg70.urdf`` (125 mm, 29 mm and 3 mm).
+    The hand's shape - where the pads sit below the palm, how far the fingers reach below
+    them and stay behind their surfaces, the jaws' width, the housing - is the gripper's
+    :attr:`~pipeline.types.GripperSpec.geometry`, read from its URDF (docs/hands.md); any
+    parallel gripper with one is planned for.
     ``predicted_contacts`` are the visible points the front pad meets first, moved onto the
     pad's plane at that touch. The plan is refused when the object's
     width along the closing direction (visible cloud and its mirror image, between the pads'
@@ -80,15 +81,6 @@ class TopParallel(CandidatePlanner):
         )
         pad_above_cloud: bool = param(
             True, "keep the pads' lower edge above the cloud's bottom (short objects)"
-        )
-        palm_to_pad_centre_m: float = param(
-            0.125, "palm origin to pad centre along z (m)", above=0.0
-        )
-        pad_centre_to_fingertip_m: float = param(
-            0.029, "pad centre to fingertip along z (m)", at_least=0.0
-        )
-        finger_recess_m: float = param(
-            0.003, "candidates: the finger's face behind the pad's surface (m)", at_least=0.0
         )
         contact_band_m: float = param(
             0.008,
@@ -114,32 +106,12 @@ class TopParallel(CandidatePlanner):
             "candidates: extra room for the back jaw behind the mirrored back, a guess (m)",
             at_least=0.0,
         )
-        housing_depth_m: float = param(0.078, "palm origin to the housing's bottom (m)", above=0.0)
-        housing_length_m: float = param(
-            0.112, "housing length along the closing direction (m)", above=0.0
-        )
-        housing_width_m: float = param(
-            0.08, "housing width across the closing direction (m)", above=0.0
-        )
-        jaw_width_m: float = param(
-            0.04, "width of the jaws across the closing direction (m)", above=0.0
-        )
 
     grippers = ("pg70",)
 
-    def __init__(self, params: Params | None = None) -> None:
-        super().__init__(params)
-        check_ordered(
-            self.params,
-            f"planner.{self.name}",
-            "housing_depth_m",
-            "palm_to_pad_centre_m",
-            "the pads hang below the housing",
-        )
-
     def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params
-        self._check_hand(gripper)
+        hand = self._check_hand(gripper)
         if p.strategy == "candidates":
             return plan_from_candidates(
                 gripper.name,
@@ -160,7 +132,7 @@ class TopParallel(CandidatePlanner):
             gripper.pads[0],
             table_height_m=float(points[:, 2].min()) - p.cloud_base_above_table_m,
             top_margin_m=p.top_margin_m,
-            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            pad_centre_to_fingertip_m=hand.pad_centre_to_fingertip_m,
             table_clearance_m=p.table_clearance_m,
             keep_above_cloud=p.pad_above_cloud,
         )
@@ -173,7 +145,7 @@ class TopParallel(CandidatePlanner):
             band,
             opening_m=opening,
             jaw_clearance_m=p.jaw_clearance_m,
-            palm_above_pad_centre_m=p.palm_to_pad_centre_m,
+            palm_above_pad_centre_m=hand.palm_to_pad_centre_m,
             contact_band_m=p.contact_band_m,
             flat_radius_m=p.flat_radius_m,
             touch_depth_m=p.touch_depth_m,
@@ -206,12 +178,18 @@ class TopParallel(CandidatePlanner):
             ),
         )
 
-    def _check_hand(self, gripper: GripperSpec) -> None:
+    def _check_hand(self, gripper: GripperSpec) -> ParallelHand:
+        """The jaws' geometry (:meth:`ParallelHand.of`).
+
+        Raises:
+            ConfigError: ``gripper`` is not a two-finger parallel gripper with a URDF.
+        """
         if gripper.fingers != 2:
             raise ConfigError(
                 f"planner 'top-parallel' needs a two-finger gripper, got '{gripper.name}' with "
                 f"{gripper.fingers} fingers (use planner 'top-three-finger')"
             )
+        return ParallelHand.of(gripper, self.name)
 
     def _candidates(
         self,
@@ -221,27 +199,17 @@ class TopParallel(CandidatePlanner):
         p: Params,
     ) -> list[Candidate]:
         points = cloud.points
-        pad = gripper.pads[0]
+        hand = ParallelHand.of(gripper, self.name)
+        pad = hand.pad
         frame = candidate_frame(
             points,
             proposal.plane,
             pad,
             p,
-            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
+            pad_centre_to_fingertip_m=hand.pad_centre_to_fingertip_m,
             keep_above_cloud=p.pad_above_cloud,
             contact_edge_below_centre_m=pad.rows * pad.pitch_m / 2,
             viewpoint_m=cloud.viewpoint_m,
-        )
-        hand = ParallelHand(
-            pad=pad,
-            aperture_m=gripper.max_aperture_m,
-            palm_to_pad_centre_m=p.palm_to_pad_centre_m,
-            pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
-            finger_recess_m=p.finger_recess_m,
-            jaw_half_width_m=p.jaw_width_m / 2,
-            housing_half_length_m=p.housing_length_m / 2,
-            housing_half_width_m=p.housing_width_m / 2,
-            housing_depth_m=p.housing_depth_m,
         )
         centre = frame.completed.mean(axis=0)
         clouds = CandidateCloud(points, frame.completed)

@@ -19,14 +19,13 @@ from pipeline.api.planning import (
     PINCH_SPREAD_RAD,
     SDH_FINGER_ANGLES_RAD,
     SDH_PARALLEL_FINGER_ANGLES_RAD,
-    SDH_PARALLEL_FINGER_LATERAL_M,
-    SDH_PARALLEL_FINGER_OFFSETS_M,
     SDH_SPREADS,
     TOO_NARROW,
     Candidate,
     CandidateCloud,
     CandidateParams,
     CandidatePlanner,
+    SdhHand,
     back_face_is_flat,
     candidate_frame,
     closing_angles,
@@ -69,11 +68,20 @@ class TopThreeFinger(CandidatePlanner):
     below the top), the fingertips stay ``table_clearance_m`` above the table (taken
     ``cloud_base_above_table_m`` below the cloud's lowest point) and, with
     ``keep_above_cloud``, the pads' lower edge above the cloud's bottom.
-    ``palm_to_pad_centre_m`` defaults to the SDH-2 URDF's distal pad centre depth with the
-    distal link vertical and the pads touching a 60-150 mm wide object (74.5 + 16.5 + 86.5
-    cos(alpha) + 42 mm = 0.20-0.22 m). ``predicted_contacts`` are the completed-cloud points
-    each finger meets first (thumb, f1, f2). Refused when the completed cloud is wider along
-    the closing direction than the hand's aperture.
+    ``palm_to_pad_centre_m`` is the paper strategy's fixed palm height above the pads: the
+    SDH-2's distal pad centre depth with the distal link vertical, for the proximal angles
+    that touch a 60-150 mm wide object (0.20-0.22 m,
+    :meth:`~pipeline.planning.sdh_geometry.FingerKinematics.distal_pad_depth_m`).
+    ``predicted_contacts`` are the completed-cloud points each finger meets first (thumb,
+    f1, f2). Refused when the completed cloud is wider along the closing direction than the
+    hand's aperture.
+
+    The hand's shape - finger bases, links, pads, palm - is the gripper's
+    :attr:`~pipeline.types.GripperSpec.geometry`, read from its URDF
+    (:meth:`pipeline.planning.sdh_candidates.SdhHand.of`), but for
+    ``pad_centre_to_fingertip_m``, which places the lowest pad height: 27 mm, where the
+    URDF's distal pad centre lies 26.5 mm from the fingertip (kept at the value the
+    planner's heights were tuned with).
     """
 
     name = "top-three-finger"
@@ -106,10 +114,13 @@ class TopThreeFinger(CandidatePlanner):
             "the segmented cloud touch surface no cloud point represents",
         )
         palm_to_pad_centre_m: float = param(
-            0.21, "palm origin to distal pad centre along z (m)", above=0.0
+            0.21, "paper: palm origin to distal pad centre along z (m)", above=0.0
         )
         pad_centre_to_fingertip_m: float = param(
-            0.027, "distal pad centre to fingertip along z (m)", at_least=0.0
+            0.027,
+            "distal pad centre to fingertip along z, for the lowest pad height (m; the "
+            "URDF's is 26.5 mm)",
+            at_least=0.0,
         )
         contact_band_m: float = param(
             0.008,
@@ -130,7 +141,7 @@ class TopThreeFinger(CandidatePlanner):
 
     def plan(self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec) -> GraspPlan:
         p = self.params
-        self._check_hand(gripper)
+        hand = self._check_hand(gripper)
         if p.strategy == "candidates":
             return plan_from_candidates(
                 gripper.name,
@@ -145,10 +156,9 @@ class TopThreeFinger(CandidatePlanner):
             rotate_z(proposal.plane.normal, np.deg2rad(p.tactile_angle_deg)),
             cloud.viewpoint_m,
         )
-        distal = [pad for pad in gripper.pads if pad.name.endswith("distal")]
         band = pad_band(
             completed,
-            (distal or list(gripper.pads))[0],
+            hand.pad,
             table_height_m=float(points[:, 2].min()) - p.cloud_base_above_table_m,
             top_margin_m=p.top_margin_m,
             pad_centre_to_fingertip_m=p.pad_centre_to_fingertip_m,
@@ -159,7 +169,7 @@ class TopThreeFinger(CandidatePlanner):
             completed,
             direction,
             band,
-            half_span_m=SDH_PARALLEL_FINGER_LATERAL_M + band.width_m / 2,
+            half_span_m=hand.turning_lateral_m() + band.width_m / 2,
             band_m=p.contact_band_m,
             flat_radius_m=p.flat_radius_m,
         )
@@ -170,7 +180,7 @@ class TopThreeFinger(CandidatePlanner):
             palm_above_pad_centre_m=p.palm_to_pad_centre_m,
             contact_band_m=p.contact_band_m,
             finger_angles_rad=SDH_PARALLEL_FINGER_ANGLES_RAD if flat else SDH_FINGER_ANGLES_RAD,
-            finger_offsets_m=SDH_PARALLEL_FINGER_OFFSETS_M if flat else None,
+            finger_offsets_m=hand.parallel_finger_offsets_m() if flat else None,
         )
         refused = grasp.width_m > gripper.max_aperture_m
         return GraspPlan(
@@ -191,12 +201,18 @@ class TopThreeFinger(CandidatePlanner):
             ),
         )
 
-    def _check_hand(self, gripper: GripperSpec) -> None:
+    def _check_hand(self, gripper: GripperSpec) -> SdhHand:
+        """The hand's fingers (:meth:`SdhHand.of`).
+
+        Raises:
+            ConfigError: ``gripper`` is not a three-finger hand of the SDH-2's kind.
+        """
         if gripper.fingers != 3:
             raise ConfigError(
                 f"planner 'top-three-finger' needs a three-finger hand, got '{gripper.name}' "
                 f"with {gripper.fingers} fingers (use planner 'top-parallel')"
             )
+        return SdhHand.of(gripper, self.name)
 
     def _candidates(
         self,
@@ -206,7 +222,8 @@ class TopThreeFinger(CandidatePlanner):
         p: Params,
     ) -> list[Candidate]:
         points = cloud.points
-        pad = next(pad for pad in gripper.pads if pad.name.endswith("distal"))
+        hand = SdhHand.of(gripper, self.name)
+        pad = hand.pad
         frame = candidate_frame(
             points,
             proposal.plane,
@@ -235,9 +252,7 @@ class TopThreeFinger(CandidatePlanner):
         ]
 
         def candidates(spread: float, tried: list) -> list[Candidate]:
-            return sdh_candidates(
-                clouds, centre, tried, spread, pad, gripper.max_aperture_m, frame.settings
-            )
+            return sdh_candidates(clouds, centre, tried, spread, hand, frame.settings)
 
         by_spread = {spread: candidates(spread, poses) for spread in SDH_SPREADS}
         # Where the object is too narrow across for fingers 1 and 2 facing the thumb, they

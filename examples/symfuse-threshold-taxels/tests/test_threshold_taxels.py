@@ -17,7 +17,8 @@ def grasp(world: AnalyticWorld, pad_centre_z_m: float):
     """Close the analytic hand's pads across the tiny box's 40 mm, pads centred at z."""
     T = np.eye(4)
     T[:3, :3] = np.diag([1.0, -1.0, -1.0])  # fingers down, closing along x
-    T[:3, 3] = [0.0, 0.0, pad_centre_z_m + AnalyticWorld.Params().palm_to_pad_centre_m]
+    palm_to_pad_centre_m = world.gripper.geometry.pad("left").centre_m[2]  # from its URDF
+    T[:3, 3] = [0.0, 0.0, pad_centre_z_m + palm_to_pad_centre_m]
     plan = GraspPlan(PARALLEL_HAND, "ok", T, 0.05, 0.06, np.array([1.0, 0.0, 0.0]))
     outcome = world.execute_grasp(plan)
     assert outcome.executed, outcome.reason

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.sim.hand_models import HAND_MODELS, SimHand, TaxelFrames
+from pipeline.sim.hand_models import SimHand, TaxelFrames, hand_model
 from pipeline.sim.mujoco.scene import (
     HAND_PREFIX,
     HAND_TARGET_BODY,
@@ -39,7 +39,7 @@ class MujocoHand(SimHand):
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, gripper: str) -> None:
         self.m = model
         self.d = data
-        hand_model = HAND_MODELS[gripper]
+        simulated = hand_model(gripper)
         self._palm = model.body(HAND_PREFIX + "palm").id
         self._target = model.body_mocapid[model.body(HAND_TARGET_BODY).id]
         self._base_qpos = model.jnt_qposadr[model.joint(HAND_PREFIX + "base").id]
@@ -60,8 +60,8 @@ class MujocoHand(SimHand):
                 float(model.jnt_range[joint, 1]),
             )
             joint_effort[name] = float(model.jnt_actfrcrange[joint, 1])
-        self._setup(hand_model, joint_limits, joint_effort)
-        self._pad_bodies = [model.body(HAND_PREFIX + pad.layout.link).id for pad in hand_model.pads]
+        self._setup(simulated, joint_limits, joint_effort)
+        self._pad_bodies = [model.body(HAND_PREFIX + pad.layout.link).id for pad in simulated.pads]
         hand_bodies = [b for b in range(model.nbody) if model.body_rootid[b] == self._palm]
         self._hand_bodies = np.zeros(model.nbody, dtype=bool)
         self._hand_bodies[hand_bodies] = True
@@ -69,7 +69,7 @@ class MujocoHand(SimHand):
         self._finger_of_body = {
             body: i
             for body in hand_bodies
-            for i, finger in enumerate(hand_model.fingers)
+            for i, finger in enumerate(simulated.fingers)
             if model.body(body).name.removeprefix(HAND_PREFIX).startswith(f"{finger.name}_")
         }
         self._pad_row_of_body = {body: row for row, body in enumerate(self._pad_bodies)}

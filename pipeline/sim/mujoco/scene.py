@@ -36,7 +36,7 @@ import trimesh
 from pipeline.errors import InputError
 from pipeline.sim.bodies import OBJECT_RGBA, TABLE_HALF_EXTENTS_M, TABLE_RGBA, mass_properties
 from pipeline.sim.collision import convex_decomposition, read_convex_parts
-from pipeline.sim.hand_models import HAND_MODELS, PARK_POSITION_M
+from pipeline.sim.hand_models import PARK_POSITION_M, hand_model
 from robots import ROOT as ROBOTS_ROOT
 
 #: MuJoCo's time step (s). The grasp sequence steps at 1/240 s; each of its steps is this
@@ -131,7 +131,7 @@ def _wxyz(quaternion_xyzw: np.ndarray) -> list[float]:
 
 def _hand_spec(gripper: str) -> mujoco.MjSpec:
     """The hand's URDF compiled by MuJoCo's URDF reader, every link kept as a body."""
-    text = (ROBOTS_ROOT / HAND_MODELS[gripper].urdf).read_text()
+    text = (ROBOTS_ROOT / hand_model(gripper).urdf).read_text()
     extension = '<mujoco><compiler fusestatic="false" discardvisual="true"/></mujoco></robot>'
     return mujoco.MjSpec.from_string(text.replace("</robot>", extension))
 
@@ -216,7 +216,7 @@ def build_model(
 
 def _add_hand(spec: mujoco.MjSpec, gripper: str, object_friction: float) -> None:
     """Attach the hand ``gripper`` to ``spec`` (see the module doc)."""
-    model = HAND_MODELS[gripper]
+    model = hand_model(gripper)
     pad_links = {HAND_PREFIX + pad.layout.link for pad in model.pads}
     park = [float(v) for v in PARK_POSITION_M]
     target = spec.worldbody.add_body(name=HAND_TARGET_BODY, mocap=True, pos=park)
