@@ -788,6 +788,8 @@ class Hypothesis:
     Attributes:
         name: ``"conditioned on free space"`` (the fused model with the plane nearest
             it that the camera accepts: :mod:`pipeline.estimation.free_space_conditioning`),
+            ``"from Stage 0"`` (fused again from the initialiser's state after the fusion
+            from the searched start failed: :mod:`pipeline.estimation.paper_start`),
             ``"held-plane"`` (fused again with the initialiser's plane held),
             ``"held-plane, bounded"`` (that step from Stage 0, shortened until it passes) or
             ``"earlier shape"`` (the grasps before the last, located by the last:

@@ -251,6 +251,9 @@ class StageOutcome:
         grasp_g, grasp_covariance: ``g`` and the filter's own covariance after each grasp
             (Stage 2's gates).
         trace: every iteration's record, over the grasps in order.
+        g_start: where Stage 1's iterations on the first grasp began when not at Stage 0
+            (:func:`fuse`: the start search's or the problem's ``g_start``; a Stage 2 that
+            fell back carries Stage 1's); None: at Stage 0.
     """
 
     g: np.ndarray
@@ -263,6 +266,7 @@ class StageOutcome:
     grasp_g: tuple[np.ndarray, ...]
     grasp_covariance: tuple[np.ndarray, ...]
     trace: tuple[IterationRecord, ...] = ()
+    g_start: np.ndarray | None = None
 
     @property
     def filter_covariance(self) -> np.ndarray:
@@ -567,12 +571,14 @@ def fuse(
     if settings.start_search and problem.g_start is None:
         from pipeline.estimation.bias_search import SearchSettings, search_start
 
-        searched = _after_first_view(problem, covariance_model)
+        searched = after_first_view(problem, covariance_model)
         problem = replace(problem, g_start=search_start(searched, SearchSettings()))
     index = PointIndex(problem.points_m)
     build_seconds = time.perf_counter() - started
     stage_one = run_stage(problem, settings, 1, index, covariance_model)
-    stage_one = _with_seconds(stage_one, stage_one.seconds + build_seconds)
+    stage_one = replace(
+        stage_one, seconds=stage_one.seconds + build_seconds, g_start=problem.g_start
+    )
     if last_stage == 1:
         return (stage_one,)
     stage_two = run_stage(problem, settings, 2, index, covariance_model, stage_one)
@@ -588,9 +594,9 @@ def fuse(
     return stage_one, stage_two
 
 
-def _after_first_view(
+def after_first_view(
     problem: FusionProblem,
-    covariance_model: Callable[[np.ndarray, np.ndarray], CovarianceModel],
+    covariance_model: Callable[[np.ndarray, np.ndarray], CovarianceModel] = StructuredCovariance,
 ) -> FusionProblem:
     """``problem`` with its prior conditioned on the first grasp's after-view, where the
     start search looks (the filter conditions its own prior in :func:`run_stage`)."""
@@ -601,7 +607,3 @@ def _after_first_view(
         (covariance,), None, problem.g_init, problem.points_m, problem.grasps[0].after_view, False
     )
     return replace(problem, g_init=g, covariance_init=covariance.bias_plane())
-
-
-def _with_seconds(outcome: StageOutcome, seconds: float) -> StageOutcome:
-    return replace(outcome, seconds=seconds)

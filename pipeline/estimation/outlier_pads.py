@@ -35,7 +35,7 @@ from pipeline.errors import estimate_failed
 from pipeline.estimation.consistency import ConsistencySettings, assess
 from pipeline.estimation.hypotheses import Refuse
 from pipeline.estimation.iekf import FusionProblem, GraspContacts
-from pipeline.estimation.problem import stage_estimate
+from pipeline.estimation.problem import outcome_estimate
 from pipeline.types import Consistency, DepthObservation, Hypothesis, StageEstimate
 
 
@@ -154,19 +154,13 @@ def outlier_pad_stages(
         if not (left.consistent and left.nis < vision.nis):
             revised[index] = replace(stage, seconds=seconds)
             continue
-        estimate = stage_estimate(
+        estimate = outcome_estimate(
             stage.stage,
-            outcome.g,
-            outcome.covariance,
-            outcome.points,
+            outcome,
             fusion.pivot_m,
             stage.iterations + outcome.iterations,
             outcome.status if verdict.consistent else "inconsistent",
             seconds,
-            outcome.active_points,
-            outcome.trace,
-            outcome.grasp_g,
-            outcome.filter_covariance,
         )
         reason = stage.consistency.reason if stage.consistency is not None else ""
         revised[index] = replace(

@@ -114,6 +114,32 @@ def stage_estimate(
     )
 
 
+def outcome_estimate(
+    stage: int,
+    outcome: StageOutcome,
+    pivot_m: np.ndarray,
+    iterations: int,
+    status: EstimateStatus,
+    seconds: float,
+) -> StageEstimate:
+    """:func:`stage_estimate` of a fused ``outcome`` standing as Stage ``stage``, with the
+    iterations, status and time it reports (a re-fusion's add the fused stage's)."""
+    return stage_estimate(
+        stage,
+        outcome.g,
+        outcome.covariance,
+        outcome.points,
+        pivot_m,
+        iterations,
+        status,
+        seconds,
+        outcome.active_points,
+        outcome.trace,
+        outcome.grasp_g,
+        outcome.filter_covariance,
+    )
+
+
 def _plane(g: np.ndarray) -> SymmetryPlane:
     return SymmetryPlane(theta_rad=float(g[5]), offset_m=float(g[4]))
 
@@ -144,7 +170,8 @@ def estimate_result(
     With ``refuse`` (the estimator's fusion, run on another problem) and ``view``, a fused
     stage that only the free-space test flags is first conditioned on free space
     (:mod:`.free_space_conditioning`); an inconsistent fused stage may then be replaced by
-    an alternative that passes every test: with several grasps the earlier grasps' shape
+    an alternative that passes every test: the fusion again from Stage 0 when the searched
+    start's failed (:mod:`.paper_start`), with several grasps the earlier grasps' shape
     located by the last (:mod:`.later_grasps`), then a hypothesis with part of the plane
     held (:func:`.hypotheses.revise`).
     """
@@ -162,20 +189,7 @@ def estimate_result(
         grasp_g=[fusion.g_init] * len(fusion.grasps),
     )
     fused = [
-        stage_estimate(
-            stage,
-            o.g,
-            o.covariance,
-            o.points,
-            fusion.pivot_m,
-            o.iterations,
-            o.status,
-            o.seconds,
-            o.active_points,
-            o.trace,
-            o.grasp_g,
-            o.filter_covariance,
-        )
+        outcome_estimate(stage, o, fusion.pivot_m, o.iterations, o.status, o.seconds)
         for stage, o in enumerate(outcomes, start=1)
     ]
     if consistency is None:
@@ -217,7 +231,9 @@ def estimate_result(
         from pipeline.estimation.hypotheses import revise
         from pipeline.estimation.later_grasps import earlier_shape_stages
         from pipeline.estimation.outlier_pads import outlier_pad_stages
+        from pipeline.estimation.paper_start import paper_start_stages
 
+        diagnosed = paper_start_stages(fusion, diagnosed, outcomes, refuse, view, consistency, tree)
         diagnosed = earlier_shape_stages(fusion, diagnosed, refuse, view, consistency, tree)
         diagnosed = revise(fusion, diagnosed, refuse, view, consistency, tree)
         diagnosed = outlier_pad_stages(fusion, diagnosed, refuse, view, consistency, tree)
