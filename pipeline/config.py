@@ -402,18 +402,21 @@ def load_config(
     overrides: Iterable[str] = (),
     settings: Mapping[str, Any] | None = None,
     options: Iterable[tuple[str, str]] = (),
+    command_defaults: tuple[str, Mapping[str, Any]] | None = None,
 ) -> Config:
-    """Merge the defaults, ``files`` (in order), ``settings`` (a nested dict, e.g. what
-    :meth:`Config.differing` returned), ``--set`` ``overrides`` and the ``options`` of a
-    command (``(override, option)`` pairs, the option's name for :attr:`Config.changed`);
-    validate.
+    """Merge the defaults, a command's own defaults (``command_defaults``: the command, as
+    :attr:`Config.changed` names it, and a nested dict), ``files`` (in order), ``settings``
+    (a nested dict, e.g. what :meth:`Config.differing` returned), ``--set`` ``overrides``
+    and the ``options`` of a command (``(override, option)`` pairs, the option's name for
+    :attr:`Config.changed`); validate.
 
     Raises:
         ConfigError: naming the file or dotted key at fault.
     """
     shipped = tomllib.loads(default_config_text())
     raw, named, where = shipped, [], {}
-    layers = [(read_toml(path), str(path)) for path in files]
+    layers = [(command_defaults[1], command_defaults[0])] if command_defaults else []
+    layers += [(read_toml(path), str(path)) for path in files]
     layers.append((settings or {}, "settings"))
     for text in overrides:
         layers.append((parse_override(text), "--set"))

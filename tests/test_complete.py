@@ -4,6 +4,7 @@ recordings, and one-line errors for bad captures."""
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -123,6 +124,26 @@ def test_kinect_box_completes_to_its_true_rectangle(kinect_run):
     assert min(halves) == pytest.approx(visible, rel=0.10)
     footprint = MultiPoint(completed[:, :2])
     assert footprint.convex_hull.area / footprint.minimum_rotated_rectangle.area > 0.9
+
+
+def test_the_leaning_laptop_is_flagged_and_the_box_is_not(kinect_run):
+    """The laptop's lid, seen from behind, is mirrored into a tent the camera cannot refute
+    but nothing of the view supports: flagged. The box's top meets its own mirror image."""
+    document = json.loads((kinect_run / "objects.json").read_text())
+    laptop, box = document["objects"][:2]
+    assert laptop["status"] == "completed"
+    assert [flag.split(":")[0] for flag in laptop["flags"]] == ["unsupported mirror plane"]
+    assert "flags" not in box
+    # complete's own default: VC chooses the kind of symmetry by evidence.
+    config = tomllib.loads((kinect_run / "config.toml").read_text())
+    assert config["initialiser"]["vc"]["kind"] == "evidence"
+    # Every cluster set aside is listed with its pixels, inside the image.
+    width, height = document["intrinsics"]["width"], document["intrinsics"]["height"]
+    aside = document["set_aside_at_view_edge"]
+    assert aside and all(
+        0 <= c["pixels"]["rows"][0] <= c["pixels"]["rows"][1] < height for c in aside
+    )
+    assert all(0 <= c["pixels"]["cols"][0] <= c["pixels"]["cols"][1] < width for c in aside)
 
 
 @pytest.mark.slow

@@ -230,3 +230,20 @@ def test_stages_are_checked_without_being_built(registry, monkeypatch):
     assert built == []
     load_config(registry).check_stages(registry, ["world"])  # its own __init__: built
     assert [args[:2] for args in built] == [("world", "pybullet")]
+
+
+def test_a_commands_defaults_lie_under_files_and_overrides(registry, tmp_path):
+    defaults = ("symfuse complete", {"initialiser": {"vc": {"kind": "evidence"}}})
+    config = load_config(registry, command_defaults=defaults)
+    assert config.stage_params("initialiser").kind == "evidence"
+    assert config.changed == {"initialiser.vc.kind": "symfuse complete"}
+    # A file (a trial's own config.toml, say) and --set both say otherwise.
+    path = tmp_path / "c.toml"
+    path.write_text('[initialiser.vc]\nkind = "vertical-plane"\n')
+    assert (
+        load_config(registry, [path], command_defaults=defaults).stage_params("initialiser").kind
+        == "vertical-plane"
+    )
+    override = ['initialiser.vc.kind="vertical-plane"']
+    config = load_config(registry, overrides=override, command_defaults=defaults)
+    assert config.stage_params("initialiser").kind == "vertical-plane"

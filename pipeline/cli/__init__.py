@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -95,13 +95,20 @@ def counting_number(least: int) -> Callable[[str], int]:
     return parse
 
 
-def _load(args: argparse.Namespace, reads: Sequence[str] | None = None, registry=None):
+def _load(
+    args: argparse.Namespace,
+    reads: Sequence[str] | None = None,
+    registry=None,
+    defaults: Mapping[str, Any] | None = None,
+):
     """The registry and the config of ``--config``, ``--set`` and the verb's own options
     that stand for config keys (:mod:`pipeline.cli.options`, applied last).
 
     Args:
         reads: the config sections the verb reads (None: all); see :func:`check_overrides`.
         registry: the installed plugins, when the caller has loaded them already.
+        defaults: the verb's own defaults (a nested dict), merged over the shipped ones
+            before ``--config``.
     """
     from pipeline.cli.options import option_overrides
     from pipeline.config import load_config
@@ -109,7 +116,13 @@ def _load(args: argparse.Namespace, reads: Sequence[str] | None = None, registry
 
     registry = registry or load_registry()
     options = option_overrides(args)
-    config = load_config(registry, args.config, args.overrides, options=options)
+    config = load_config(
+        registry,
+        args.config,
+        args.overrides,
+        options=options,
+        command_defaults=(f"symfuse {args.verb}", defaults) if defaults else None,
+    )
     check_overrides(args.verb, args.overrides, [text for text, _ in options], reads)
     if args.verb != "config":  # `symfuse config` writes a config to use later: any key goes
         check_selected(args.overrides, config, registry)

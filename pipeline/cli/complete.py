@@ -12,7 +12,14 @@ from typing import TYPE_CHECKING, Any
 
 from pipeline import __version__
 from pipeline.cli.view import add_rerun_option, check_rerun, record_if_asked
-from pipeline.run.completion import OBJECT_CHOICES, SceneCompletion, failed, object_summary
+from pipeline.run.completion import (
+    OBJECT_CHOICES,
+    SET_ASIDE_REASON,
+    SceneCompletion,
+    failed,
+    object_summary,
+    pixel_box,
+)
 
 if TYPE_CHECKING:
     from pipeline.types import Contacts
@@ -65,6 +72,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 #: The config sections ``complete`` reads.
 READS = ("world", "sensor", "segmenter", "initialiser", "estimator", "model")
+#: ``complete``'s own defaults, under ``--config`` and ``--set``: VC chooses between a
+#: vertical plane and a vertical axis by the view's evidence (a mug seen from the side gets
+#: its handle in the plane, docs/symmetry.md), where a trial keeps the paper's plane.
+DEFAULTS = {"initialiser": {"vc": {"kind": "evidence"}}}
 
 
 def after_view_reader(config, registry, recorded):
@@ -91,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.run.completion import complete_scene
 
     check_rerun(args)
-    registry, config = _load(args, reads=READS)
+    registry, config = _load(args, reads=READS, defaults=DEFAULTS)
     inputs = [p for p in (args.scan, args.camera, args.contacts, *args.config) if p is not None]
     with staged_output(args.out, overwrite=args.overwrite, inputs=inputs) as staging:
         recorded = read_contacts(args.contacts) if args.contacts else None
@@ -118,6 +129,9 @@ def run(args: argparse.Namespace) -> int:
             recorded.contacts if recorded else (),
         )
     print(scene_table(scene))
+    for completion in scene.objects:
+        for flag in completion.flags:
+            print(f"object {completion.index}: {flag}")
     if recorded and (note := one_sided_line(one_sided_grasps(recorded.contacts))):
         print(note)
     print(f"wrote {args.out}/ (objects.json, object_K/, scene.png, config.toml)")
@@ -148,15 +162,21 @@ def scene_table(scene: SceneCompletion) -> str:
                 f"{entry['height_m'] * 1e3:.0f}",
                 "-" if plane is None else f"{np.degrees(plane.theta_rad):.1f}",
                 "-" if plane is None else f"{plane.offset_m * 1e3:.1f}",
-                completion.status,
+                shown_status(completion),
             ]
         )
     rows += [
-        ["-", points, "-", "-", "-", "-", "set aside: at the edge of the view"]
-        for points in scene.set_aside
+        ["-", len(cloud), "-", "-", "-", "-", f"set aside: {SET_ASIDE_REASON}"]
+        for cloud in scene.set_aside
     ]
     header = ["object", "points", "footprint mm", "height mm", "plane θ°", "offset mm", "status"]
     return format_table(header, rows)
+
+
+def shown_status(completion) -> str:
+    """The status as the table and scene.png show it: ``flagged`` after it when the
+    capture says something against the completion (objects.json says what)."""
+    return f"{completion.status}, flagged" if completion.flags else completion.status
 
 
 def write_outputs(
@@ -219,6 +239,7 @@ def write_outputs(
                 completion.cloud.points,
                 None if final is None else final.completed,
                 None if final is None else final.plane,
+                shown_status(completion),
             )
         )
     write_json(
@@ -230,8 +251,17 @@ def write_outputs(
             "T_robot_camera": np.asarray(observation.T_robot_camera).tolist(),
             "intrinsics": vars(observation.intrinsics),
             "objects": [object_summary(c) for c in scene.objects],
-            "set_aside_at_view_edge": [{"points": n} for n in scene.set_aside],
+            "set_aside_at_view_edge": [
+                {"points": len(cloud), "pixels": pixel_box(cloud.pixels)}
+                for cloud in scene.set_aside
+            ],
             "seconds": seconds,
         },
     )
-    plot_scene(observation.rgb, views, out / "scene.png", title=str(inputs["scan"]))
+    plot_scene(
+        observation.rgb,
+        views,
+        out / "scene.png",
+        title=str(inputs["scan"]),
+        set_aside=[(cloud.pixels, SET_ASIDE_REASON) for cloud in scene.set_aside],
+    )

@@ -197,7 +197,8 @@ def box_plot_figure(
 @dataclass(frozen=True)
 class SceneObjectView:
     """What the scene picture shows of one object: its number, its pixels (rows, cols),
-    its visible points and, once completed, the completed model and symmetry plane (frame R).
+    its visible points, its status and, once completed, the completed model and symmetry
+    plane (frame R).
     """
 
     index: int
@@ -205,6 +206,11 @@ class SceneObjectView:
     points_robot: np.ndarray
     completed_robot: np.ndarray | None = None
     plane: SymmetryPlane | None = None
+    status: str = ""
+
+
+#: Colour of the clusters set aside in the scene picture.
+SET_ASIDE_COLOUR = "0.6"
 
 
 def plot_scene(
@@ -213,10 +219,12 @@ def plot_scene(
     path: Path,
     *,
     title: str = "",
+    set_aside: Sequence[tuple[np.ndarray, str]] = (),
 ) -> Path:
-    """Left: the ``(H, W, 3)`` image with each object outlined and numbered. Right: the
-    robot frame from above (mm) with each object's visible points, its completed footprint
-    and the trace of its symmetry plane."""
+    """Left: the ``(H, W, 3)`` image with each object outlined, numbered and labelled with
+    its status, and each cluster set aside (``set_aside``: its pixels and why) outlined in
+    grey, dashed, with the reason. Right: the robot frame from above (mm) with each
+    object's visible points, its completed footprint and the trace of its symmetry plane."""
     import matplotlib
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -228,23 +236,30 @@ def plot_scene(
     left, right = figure.subplots(1, 2)
     left.imshow(image, interpolation="nearest")
     colours = matplotlib.colormaps["tab10"]
-    for view in objects:
-        colour = colours(view.index % 10)
+
+    def outline(pixels: np.ndarray, label: str, colour, style: str, size: int) -> None:
         mask = np.zeros((height, width), dtype=float)
-        mask[view.pixels[:, 0], view.pixels[:, 1]] = 1.0
-        left.contour(mask, levels=[0.5], colors=[colour], linewidths=1.5)
-        row, col = view.pixels.mean(axis=0)
+        mask[pixels[:, 0], pixels[:, 1]] = 1.0
+        left.contour(mask, levels=[0.5], colors=[colour], linewidths=1.5, linestyles=style)
+        row, col = pixels.mean(axis=0)
         left.text(
             col,
             row,
-            str(view.index),
+            label,
             color="white",
-            fontsize=14,
+            fontsize=size,
             weight="bold",
             ha="center",
             va="center",
             bbox={"facecolor": colour, "alpha": 0.8},
         )
+
+    for pixels, reason in set_aside:
+        outline(pixels, f"set aside:\n{reason}", SET_ASIDE_COLOUR, "dashed", 7)
+    for view in objects:
+        colour = colours(view.index % 10)
+        label = f"{view.index}\n{view.status}" if view.status else str(view.index)
+        outline(view.pixels, label, colour, "solid", 10 if view.status else 14)
         shown = view.completed_robot if view.completed_robot is not None else view.points_robot
         right.scatter(shown[:, 0] * mm, shown[:, 1] * mm, s=0.5, color=colour, alpha=0.25)
         right.scatter(
@@ -266,7 +281,7 @@ def plot_scene(
             half = 0.6 * float(np.ptp(shown[:, :2], axis=0).max())
             ends = foot + np.outer([-half, half], [-normal[1], normal[0]])
             right.plot(ends[:, 0] * mm, ends[:, 1] * mm, "-", color="red", linewidth=1.5)
-    left.set_title("segmented objects")
+    left.set_title("segmented objects and their status; set aside (grey, dashed) and why")
     left.set_axis_off()
     right.set_aspect("equal")
     right.set_xlabel("x (mm)")

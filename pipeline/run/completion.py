@@ -43,6 +43,8 @@ AfterViews = Callable[[PointCloud], tuple[AfterView | None, ...]]
 VIEW_EDGE_MARGIN_PX = 2
 #: What ``--object`` accepts besides an object number.
 OBJECT_CHOICES = ("all", "largest", "nearest")
+#: Why a cluster at the edge of the view is set aside, as the table and scene.png say it.
+SET_ASIDE_REASON = "at the edge of the view"
 
 
 @dataclass(frozen=True)
@@ -59,6 +61,8 @@ class ObjectCompletion:
         init: the initialiser's output, when it ran.
         result: Stage 0 (and 1, 2 when fused), when there is one.
         reason: why it was rejected, else empty.
+        flags: what the capture says against a completion it did not refute (see
+            :func:`support_flags`), else empty.
     """
 
     index: int
@@ -67,6 +71,7 @@ class ObjectCompletion:
     init: SymmetryInit | None = None
     result: EstimateResult | None = None
     reason: str = ""
+    flags: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -76,19 +81,19 @@ class SceneCompletion:
     Attributes:
         observation: the view, with ``T_robot_camera`` in the frame the objects are in.
         objects: every object, largest first.
-        set_aside: point counts of the clusters that touch the edge of the view.
+        set_aside: the clusters that touch the edge of the view (frame R, with pixels).
     """
 
     observation: DepthObservation
     objects: tuple[ObjectCompletion, ...]
-    set_aside: tuple[int, ...]
+    set_aside: tuple[PointCloud, ...]
 
 
 def segment_scene(
     segmenter, observation: DepthObservation
-) -> tuple[DepthObservation, list[PointCloud], list[int]]:
-    """The objects in view (largest first), the sizes of those set aside at the edge of
-    the view, and the observation, its frame recentred below the largest object when the
+) -> tuple[DepthObservation, list[PointCloud], list[PointCloud]]:
+    """The objects in view (largest first), the clusters set aside at the edge of the view,
+    and the observation, its frame recentred below the largest object when the
     frame was built on the support plane.
 
     Raises:
@@ -98,7 +103,7 @@ def segment_scene(
     objects, set_aside = [], []
     for cloud in segmenter.segment_objects(observation):
         if touches_view_edge(cloud.pixels, outside, VIEW_EDGE_MARGIN_PX):
-            set_aside.append(len(cloud))
+            set_aside.append(cloud)
         else:
             objects.append(cloud)
     if not objects:
@@ -113,6 +118,7 @@ def segment_scene(
         )
         shift = np.array([centroid[0], centroid[1], 0.0])
         objects = [dataclasses.replace(c, points=c.points - shift) for c in objects]
+        set_aside = [dataclasses.replace(c, points=c.points - shift) for c in set_aside]
     return observation, objects, set_aside
 
 
@@ -174,12 +180,42 @@ def complete_object(
     if init.status != "ok":
         return ObjectCompletion(index, cloud, "rejected", init, reason=init.reason)
     if not grasps:
-        return ObjectCompletion(index, cloud, "completed", init, initial_estimate(cloud, init))
+        result = initial_estimate(cloud, init)
+        return ObjectCompletion(
+            index, cloud, "completed", init, result, flags=support_flags(cloud, init)
+        )
     # With the depth image, as in a trial: the camera's free space catches contacts of
     # another scene, which the taxels alone explain by any plane they pull the model to.
     views = after_views(cloud) if after_views is not None else ()
     result = estimate(config, registry, cloud, init, grasps, observation, views)
     return ObjectCompletion(index, cloud, result.final.status, init, result)
+
+
+def support_flags(cloud: PointCloud, init: SymmetryInit) -> tuple[str, ...]:
+    """A flag when the mirror plane has no evidence in the view: fewer than
+    :data:`~pipeline.symmetry.support.MIN_MIRROR_SUPPORT` of the visible points meet their
+    own mirror image (:func:`~pipeline.symmetry.support.mirror_support`), so the mirrored
+    half is nowhere checked against the data (a laptop's lid mirrored into a tent), and
+    the view is no body of revolution whose axis the plane contains
+    (:func:`~pipeline.symmetry.support.axis_supports`). An axis carries its own evidence
+    (its slices are circles) and is not flagged."""
+    from pipeline.symmetry.support import (
+        COUNTERPART_M,
+        MIN_MIRROR_SUPPORT,
+        axis_supports,
+        mirror_support,
+    )
+
+    if not init.proposed.is_plane:
+        return ()
+    support = mirror_support(cloud.points, init.proposed)
+    if support >= MIN_MIRROR_SUPPORT or axis_supports(cloud.points, init.proposed):
+        return ()
+    return (
+        f"unsupported mirror plane: {support:.0%} of the visible points meet their mirror "
+        f"image within {COUNTERPART_M * 1e3:.0f} mm (< {MIN_MIRROR_SUPPORT:.0%}); the "
+        "mirrored half lies where the camera could not check it",
+    )
 
 
 def complete_scene(
@@ -217,17 +253,13 @@ def object_summary(completion: ObjectCompletion) -> dict[str, Any]:
     from pipeline.io.formats import plane_to_json
 
     points = completion.cloud.points
-    rows, cols = completion.cloud.pixels[:, 0], completion.cloud.pixels[:, 1]
     entry: dict[str, Any] = {
         "index": completion.index,
         "points": len(points),
         "centroid": points.mean(axis=0).tolist(),
         "footprint_extents_m": footprint_extents(points),
         "height_m": float(points[:, 2].max()),
-        "pixels": {
-            "rows": [int(rows.min()), int(rows.max())],
-            "cols": [int(cols.min()), int(cols.max())],
-        },
+        "pixels": pixel_box(completion.cloud.pixels),
         "status": completion.status,
     }
     if completion.result is not None:
@@ -236,7 +268,15 @@ def object_summary(completion: ObjectCompletion) -> dict[str, Any]:
         entry["completed_extents_m"] = plane_extents(final.completed, final.plane.normal)
     if completion.reason:
         entry["reason"] = completion.reason
+    if completion.flags:
+        entry["flags"] = list(completion.flags)
     return entry
+
+
+def pixel_box(pixels: np.ndarray) -> dict[str, list[int]]:
+    """The first and last image row and column of ``(N, 2)`` pixels (rows, cols)."""
+    rows, cols = pixels[:, 0], pixels[:, 1]
+    return {"rows": [int(rows.min()), int(rows.max())], "cols": [int(cols.min()), int(cols.max())]}
 
 
 def plane_extents(points: np.ndarray, normal: np.ndarray) -> dict[str, float]:
