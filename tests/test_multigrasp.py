@@ -573,6 +573,22 @@ def test_information_chooses_among_the_grasps_the_planner_rates_near_its_best():
         assert choice.chosen == chosen
 
 
+def test_information_takes_the_best_delivered_when_no_grasp_teaches():
+    # Without a covariance nothing ranks the gains: the best delivered grasp is taken,
+    # wherever the planner lists it.
+    stage = replace(_box_stage(), covariance=np.full((6, 6), np.inf))
+    ratings = ((0.0, 0.3), (0.02, 0.9), (-0.02, 0.6))
+    plans = [replace(_plan(y), score=rating) for y, rating in ratings]
+    for order in itertools.permutations(range(3)):
+        planner = _Planner([plans[k] for k in order])
+        choice = choose_next_grasp(
+            "information", [NextHand(planner, GRIPPERS["pg70"])], stage, MODEL,
+            np.random.default_rng(0),
+        )  # fmt: skip
+        assert choice.scores == (0.0, 0.0, 0.0)
+        assert order[choice.chosen] == 1
+
+
 def test_a_grasp_already_made_is_made_again_only_when_nothing_else_teaches():
     stage = _box_stage()
     gripper = GRIPPERS["pg70"]

@@ -21,7 +21,8 @@ hands) is asked for every feasible grasp on that model
   from tipping the object), among the grasps weighted at least half the best
   (:data:`PLANNER_FLOOR`) and not predicted to turn the object further than the
   estimator follows (:func:`predicted_turn_rad`, :data:`TURN_SIGMAS`), and never a grasp
-  already made (:func:`repeats`) while another of those teaches anything. The planners
+  already made (:func:`repeats`) while another of those teaches anything; the best
+  delivered of them when none teaches anything. The planners
   score on one scale, as when the first grasp's hand is chosen
   (:mod:`pipeline.planning.hand_choice`).
 
@@ -530,7 +531,11 @@ def choose_next_grasp(
     if np.any(followed & ~repeated & (np.asarray(scores) > 0.0)):
         followed &= ~repeated
     rated = np.array([delivery(plan) for plan in alternatives]) * followed
-    expected = np.where(rated >= PLANNER_FLOOR * rated.max(), np.multiply(scores, rated), -1.0)
+    eligible = rated >= PLANNER_FLOOR * rated.max()
+    expected = np.where(eligible, np.multiply(scores, rated), -1.0)
+    if expected.max() <= 0.0:  # none teaches: the best delivered, else the planner's best
+        planned = np.array([_planner_score(plan) for plan in alternatives])
+        expected = np.where(eligible, rated, -1.0) if rated.max() > 0.0 else planned
     chosen = int(np.argmax(expected))
     return NextGraspChoice(
         alternatives[chosen],
