@@ -202,9 +202,7 @@ def test_the_view_sees_the_table_around_the_cylinder():
 
     def violations(plane: SymmetryPlane) -> int:
         g = np.array([0.0, 0.0, 0.0, 0.0, plane.offset_m, plane.theta_rad])
-        return model_free_space_count(
-            points, g, view, settings.free_space_tolerance_m, settings.surface_std_m
-        )
+        return model_free_space_count(points, g, view, settings.free_space_tolerance_m)
 
     assert violations(case.true_plane) <= limit
     # The normal turned by 60 deg and the plane 40 mm off the axis: the mirrored front

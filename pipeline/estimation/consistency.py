@@ -18,10 +18,7 @@ from the measurement model, never from a particular object:
   (front points ``p`` and mirrored points ``f_m(p)``, before the bias), and a point counts as
   a violation when it is further in front than the one-sided ``1 - alpha`` quantile of the
   difference of two noisy depths (the measurement and the model point, each with the cloud's
-  std): ``z_(1-alpha) sqrt(2) s``, on every pixel within ``s`` of its own sideways (a
-  point is uncertain across its ray too: where the image steps from the object
-  to the table behind it, a right model's point a millimetre outside the silhouette does
-  not hang in front of the table). The model contradicts the view when more than
+  std): ``z_(1-alpha) sqrt(2) s``. The model contradicts the view when more than
   ``free_space_fraction`` of its points do so (an allowance for the completion near the
   silhouette, where a mirror image of a slightly asymmetric object grazes the visible
   outline).
@@ -216,49 +213,13 @@ def free_space_count(depths_m: np.ndarray, tolerance_m: float) -> int:
 
 
 def model_free_space_count(
-    points_m: np.ndarray,
-    g: np.ndarray,
-    view: DepthObservation,
-    tolerance_m: float,
-    sideways_m: float,
+    points_m: np.ndarray, g: np.ndarray, view: DepthObservation, tolerance_m: float
 ) -> int:
     """How many points of the model as the camera saw it (``p`` and ``f_m(p)``, frame R
-    before the bias) lie further than ``tolerance_m`` in front of the measurement on every
-    pixel within ``sideways_m`` of their own (:func:`edge_tolerant_depth`)."""
+    before the bias) lie further than ``tolerance_m`` in front of the measurement."""
     seen = np.vstack([points_m, mirror(points_m, g)])
-    depth = edge_tolerant_depth(view, sideways_m, _median_depth_m(seen, view))
-    depths = free_space_depths(seen, depth, view.intrinsics, view.T_robot_camera)
+    depths = free_space_depths(seen, view.depth_m, view.intrinsics, view.T_robot_camera)
     return free_space_count(depths, tolerance_m)
-
-
-def edge_tolerant_depth(view: DepthObservation, sideways_m: float, at_depth_m: float) -> np.ndarray:
-    """``view``'s depth image with each measured pixel the nearest measurement within
-    ``sideways_m`` of it sideways at ``at_depth_m`` (a square of pixels); a pixel without a
-    return stays unknown (NaN), and its neighbours without one are left out of the minimum.
-
-    A model point is uncertain by the surface's std across the ray as much as along it. Where
-    the image steps from the object to the table behind it, a point of a right model that
-    noise or the mirror put a millimetre outside the silhouette falls on a pixel of the
-    table and lies far in front of it; compared with the nearest surface around its pixel,
-    it is where the camera saw the object. The window is one surface std, the point's own
-    uncertainty across its ray, not the depth test's tolerance: that one is a far quantile of
-    two noisy depths, and a window that wide lets a model turned well off the object hide its
-    points behind the object's edge."""
-    from scipy.ndimage import minimum_filter
-
-    radius = int(np.ceil(view.intrinsics.fx * sideways_m / at_depth_m)) if at_depth_m > 0 else 0
-    depth = np.asarray(view.depth_m, dtype=np.float32)
-    if radius < 1:
-        return depth
-    known = np.isfinite(depth)
-    nearest = minimum_filter(np.where(known, depth, np.inf), size=2 * radius + 1)
-    return np.where(known, nearest, np.nan)
-
-
-def _median_depth_m(points_m: np.ndarray, view: DepthObservation) -> float:
-    """The median depth of ``points_m`` along the camera's optical axis (m)."""
-    T = np.asarray(view.T_robot_camera, dtype=float)
-    return float(np.median((np.asarray(points_m) - T[:3, 3]) @ T[:3, 2]))
 
 
 def assess(
@@ -306,9 +267,7 @@ def assess(
     violations = limit = None
     if view is not None:
         checks.append("free_space")
-        violations = model_free_space_count(
-            points_m, g, view, settings.free_space_tolerance_m, settings.surface_std_m
-        )
+        violations = model_free_space_count(points_m, g, view, settings.free_space_tolerance_m)
         limit = int(np.floor(settings.free_space_fraction * 2 * len(points_m)))
         if violations > limit:
             failures.append(

@@ -177,10 +177,7 @@ def condition(
 
     def passes(plane_step: np.ndarray) -> bool:
         tolerance_m = settings.free_space_tolerance_m
-        count = model_free_space_count(
-            points, with_plane(plane_step), view, tolerance_m, settings.surface_std_m
-        )
-        return count <= limit
+        return model_free_space_count(points, with_plane(plane_step), view, tolerance_m) <= limit
 
     def within_noise(plane_step: np.ndarray) -> bool:
         motion = np.linalg.norm(mirror(points, with_plane(plane_step)) - mirrored, axis=1)
