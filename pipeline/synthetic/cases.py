@@ -44,7 +44,6 @@ from pipeline.synthetic.cylinder import (
     Viewpoint,
     camera_direction,
     render_cylinder,
-    scene_depth,
 )
 from pipeline.types import (
     Bias,
@@ -248,12 +247,10 @@ class SyntheticCase:
     @property
     def view(self) -> DepthObservation:
         """The depth image the cloud came from: each cloud pixel holds its point's depth
-        along the optical axis; every other pixel the noiseless scene around it, the top
-        cap and the table the cylinder stands on (:func:`~.cylinder.scene_depth`). Without
-        the table a model that mirrors the hidden side out beside the cylinder contradicted
-        nothing the camera saw, and passed the self-diagnosis 100 mm and more off."""
+        along the optical axis; every other pixel is unknown (NaN: the scene has no table
+        or background, so rays that miss the cylinder return nothing)."""
         intrinsics = self.viewpoint.intrinsics
-        depth = scene_depth(self.cylinder, self.T_robot_camera, intrinsics).astype(np.float32)
+        depth = np.full((intrinsics.height, intrinsics.width), np.nan, dtype=np.float32)
         camera = (self.cloud.points - self.T_robot_camera[:3, 3]) @ self.T_robot_camera[:3, :3]
         rows, cols = self.cloud.pixels.T
         depth[rows, cols] = camera[:, 2]
