@@ -413,13 +413,12 @@ def _clear_preshape(
     # points are the shallowest below the palm, the first any pre-shape sweeps. A pre-shape
     # that sweeps MIN_HITS of those is blocked whatever the rest; of the others, in order,
     # the first that sweeps fewer than MIN_HITS of all the points is the answer.
-    shallowest = _stacked([(t[-_SHALLOWEST:], d[-_SHALLOWEST:]) for t, d in corridors])
-    every = _stacked(corridors)
     for first in range(0, len(steps), _STEPS_AT_ONCE):
         chunk = tuple(steps[first : first + _STEPS_AT_ONCE])
+        shallowest = [(t[-_SHALLOWEST:], d[-_SHALLOWEST:]) for t, d in corridors]
         hits = _profile_hits(kinematics, chunk, shallowest, s.descent_clearance_m)
         for k in np.flatnonzero(np.all(hits < MIN_HITS, axis=1)):
-            hits = _profile_hits(kinematics, chunk[k : k + 1], every, s.descent_clearance_m)
+            hits = _profile_hits(kinematics, chunk[k : k + 1], corridors, s.descent_clearance_m)
             if np.all(hits < MIN_HITS):
                 return chunk[k] * _OPEN_STEP_RAD
     return None
@@ -545,32 +544,22 @@ def _profile_table(
     return np.array([grid[0] for grid, _ in profiles]), reaches, np.max(reaches)
 
 
-def _stacked(
-    corridors: list[tuple[np.ndarray, np.ndarray]],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The fingers' corridors (distances ``t`` and depths ``d``, :func:`_corridors`) one
-    after another: all the ``t``, all the ``d`` and where each finger's points end, as
-    :func:`_profile_hits` compares them with one pre-shape after another."""
-    t = np.concatenate([t for t, _ in corridors])
-    d = np.concatenate([d for _, d in corridors])
-    return t, d, np.cumsum([len(t) for t, _ in corridors])
-
-
 def _profile_hits(
     kinematics: FingerKinematics,
     steps: tuple[int, ...],
-    corridors: tuple[np.ndarray, np.ndarray, np.ndarray],
+    corridors: list[tuple[np.ndarray, np.ndarray]],
     clearance_m: float,
 ) -> np.ndarray:
     """``(K, F)``: how many points of each finger's corridor (distances ``t`` along its
-    facing and depths ``d`` below the palm, stacked by :func:`_stacked`) each pre-shape of
-    ``steps`` sweeps on its descent."""
+    facing and depths ``d`` below the palm, both ``(N_f,)``) each pre-shape of ``steps``
+    sweeps on its descent."""
     starts, reaches, deepest = _profile_table(kinematics, steps, clearance_m)
-    t, d, ends = corridors
+    t = np.concatenate([t for t, _ in corridors])
+    d = np.concatenate([d for _, d in corridors])
     # A point deeper than every profile reaches is hit by none.
     shallow = d <= deepest
     kept = np.concatenate([[0], np.cumsum(shallow)])
-    ends = kept[ends]
+    ends = kept[np.cumsum([len(t) for t, _ in corridors])]
     t, d = t[shallow], d[shallow]
     index = np.round((t[None, :] - starts[:, None]) / _PROFILE_STEP_M).astype(int)
     # Cells before a grid's start read column 0 and after its end a later one: -inf.
