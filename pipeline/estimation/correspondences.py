@@ -72,11 +72,12 @@ class PointIndex:
     Args:
         reference_points: ``(N, 3)`` positions the tree is built on (kept by reference;
             the caller must not modify the array).
+        tree: a KD-tree already built over ``reference_points`` (None builds one).
     """
 
-    def __init__(self, reference_points: np.ndarray) -> None:
+    def __init__(self, reference_points: np.ndarray, tree: cKDTree | None = None) -> None:
         self.reference = reference_points
-        self.tree = cKDTree(reference_points, balanced_tree=False)
+        self.tree = cKDTree(reference_points, balanced_tree=False) if tree is None else tree
         self.diagonal_m = float(np.linalg.norm(self.tree.maxes - self.tree.mins))
         self._moved = np.empty(0, dtype=np.int64)
         self._moments: dict[tuple[tuple[int, ...], bool | None], VoxelMoments] = {}
