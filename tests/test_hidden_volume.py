@@ -1,7 +1,8 @@
 """The volume a view leaves hidden under the seen cloud (:func:`hidden_below`), checked
 against the true objects a pinhole camera rendered here (trimesh's ray casting): every
 hidden point lies inside the object, a box seen end-on is filled out to its full length,
-and the space the camera saw under an overhang stays empty."""
+and the space the camera saw under an overhang stays empty; with it, a hand grasps a box
+seen end-on by its long sides (:func:`choose_grasp`), which no hand finds without it."""
 
 from __future__ import annotations
 
@@ -9,7 +10,14 @@ import numpy as np
 import pytest
 import trimesh
 
+from pipeline.config import load_config
+from pipeline.planning.hand_choice import choose_grasp
 from pipeline.planning.hidden_volume import hidden_below
+from pipeline.registry import load_registry
+from pipeline.sim.hands import GRIPPERS
+from pipeline.synthetic import box_object, synthetic_observation
+from pipeline.types import Bias, SymmetryInit, SymmetryPlane
+from plugins.segmenters.table_cluster import TableCluster
 
 # Ray casting takes about a second: the default suite has no room for it.
 pytestmark = pytest.mark.slow
@@ -79,3 +87,28 @@ def test_the_space_seen_under_an_overhang_stays_empty():
     in_front = (hidden[:, 0] < -0.015 - 0.004) & (hidden[:, 2] < 0.05)
     assert not np.any(in_front)  # seen free space
     assert np.any((hidden[:, 0] > 0.015) & (hidden[:, 2] < 0.05))  # behind the stem: kept
+
+
+def test_a_box_seen_end_on_is_grasped_by_its_sides_only_with_the_hidden_volume(monkeypatch):
+    import pipeline.planning.hand_choice as hand_choice
+
+    # 130 mm long away from the camera, 65 mm thick across, mirror plane across its
+    # thickness: the plane's mirror image of the seen end face is that face again.
+    registry = load_registry()
+    config = load_config(registry)
+    box = box_object(0.13, 0.065, 0.17)
+    observation = synthetic_observation(box, (0.6, 0.0, 0.0), rng=np.random.default_rng(8))
+    cloud = TableCluster().segment(observation)
+    proposal = SymmetryInit(SymmetryPlane(np.pi / 2.0, 0.0), Bias())
+    choice = choose_grasp(config, registry, cloud, proposal, GRIPPERS, 0.0)
+    assert choice.plan.status == "ok" and choice.reason.endswith("hidden under the cloud")
+    # The pads meet the two long faces (y = +-32.5 mm), within the box's length, where the
+    # hidden points stand on a 4 mm grid.
+    contacts = choice.plan.predicted_contacts
+    assert np.all(np.abs(np.abs(contacts[:, 1]) - 0.0325) < 0.008)  # two grid steps
+    assert contacts[:, 1].min() < 0.0 < contacts[:, 1].max()
+    assert np.all(np.abs(contacts[:, 0] - 0.6) < 0.065)
+    # Without it no hand finds a side to close on.
+    monkeypatch.setattr(hand_choice, "_with_hidden_volume", lambda cloud: None)
+    refused = choose_grasp(config, registry, cloud, proposal, GRIPPERS, 0.0)
+    assert refused.plan.status == "refused"

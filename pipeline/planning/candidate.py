@@ -247,13 +247,6 @@ class CandidateParams:
         "taxels (m)",
         at_least=0.0,
     )
-    hidden_step_m: float = param(
-        0.004,
-        "candidates: where no grasp is feasible on the completed cloud, the volume the "
-        "view leaves hidden under the seen points is added, sampled this far apart (m); "
-        "0 turns it off",
-        at_least=0.0,
-    )
     cloud_base_above_table_m: float = param(
         0.02, "the table lies this far below the cloud's lowest point (m)", at_least=0.0
     )

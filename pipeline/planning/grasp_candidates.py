@@ -20,7 +20,6 @@ from dataclasses import replace
 import numpy as np
 
 from pipeline.planning.candidate import Candidate, CandidateParams
-from pipeline.planning.hidden_volume import hidden_below
 from pipeline.stages import GraspPlanner
 from pipeline.types import GraspPlan, GripperSpec, PointCloud, SymmetryInit
 
@@ -133,35 +132,15 @@ class CandidatePlanner(GraspPlanner):
         it instead. The clearance keeps a fingertip off a table that is not quite where the
         cloud says, and costs nothing on an object taller than the pads; on a low object it
         leaves the pads' lowest taxels above the object's sides, and the lower reach is the
-        only grasp there is (docs/method.md §5).
-
-        When neither is feasible and the camera's position is known, both are tried again
-        on the cloud with the volume the view leaves hidden under it
-        (:func:`~pipeline.planning.hidden_volume.hidden_below`, every ``hidden_step_m``):
-        where the camera saw the object along its plane, the mirror image adds no side for
-        the pads to close on, but the seen top says how far the object reaches."""
+        only grasp there is (docs/method.md §5)."""
         p = self.params
-        clearances = [p]
-        if p.low_table_clearance_m < p.table_clearance_m:
-            clearances.append(replace(p, table_clearance_m=p.low_table_clearance_m))
-        candidates: list[Candidate] = []
-        for params in clearances:
-            candidates = self._candidates(cloud, proposal, gripper, params)
-            if any(c.summary.feasible for c in candidates):
-                return candidates
-        if cloud.viewpoint_m is None or p.hidden_step_m <= 0.0:
+        candidates = self._candidates(cloud, proposal, gripper, p)
+        if p.low_table_clearance_m >= p.table_clearance_m or any(
+            c.summary.feasible for c in candidates
+        ):
             return candidates
-        hidden = hidden_below(cloud.points, cloud.viewpoint_m, p.hidden_step_m)
-        if not len(hidden):
-            return candidates
-        filled = PointCloud(
-            np.concatenate([cloud.points, hidden]), cloud.frame, viewpoint_m=cloud.viewpoint_m
-        )
-        for params in clearances:
-            with_hidden = self._candidates(filled, proposal, gripper, params)
-            if any(c.summary.feasible for c in with_hidden):
-                return with_hidden
-        return candidates
+        low = replace(p, table_clearance_m=p.low_table_clearance_m)
+        return self._candidates(cloud, proposal, gripper, low)
 
     def alternatives(
         self, cloud: PointCloud, proposal: SymmetryInit, gripper: GripperSpec
