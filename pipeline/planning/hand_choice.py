@@ -8,8 +8,9 @@ available hand plans on the cloud (before any hand is in the scene), and the fea
 with the highest score wins; planners score on one scale
 (:attr:`pipeline.types.GraspPlan.score`), so a hand wins by the quality of the grasp it can
 make on this object, not by its name (nor a planner by its name, or by when it was
-installed). When no planner finds a feasible grasp, the refusal names the object's measured
-size and every hand's aperture.
+installed). When no planner finds a feasible grasp, every one plans again on the cloud with
+the volume the view leaves hidden under it (:func:`_with_hidden_volume`); when none finds
+one then either, the refusal names the object's measured size and every hand's aperture.
 """
 
 from __future__ import annotations
