@@ -110,28 +110,35 @@ TRIAL_FILES = (
 
 @dataclass
 class PhaseTimer:
-    """Wall time per named phase, in seconds, in the order the phases ran."""
+    """Wall time per named phase, in seconds, in the order the phases ran, and the
+    process's processor time (user + system) in each (what a phase costs on a loaded
+    machine, where its wall time mostly says how long it waited)."""
 
     seconds: dict[str, float] = field(default_factory=dict)
+    cpu_seconds: dict[str, float] = field(default_factory=dict)
 
     @contextmanager
     def phase(self, name: str) -> Iterator[None]:
-        started = time.perf_counter()
+        started, started_cpu = time.perf_counter(), time.process_time()
         try:
             yield
         finally:
             self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - started
+            cpu = time.process_time() - started_cpu
+            self.cpu_seconds[name] = self.cpu_seconds.get(name, 0.0) + cpu
 
 
 @dataclass(frozen=True)
 class TrialRecord:
-    """What :func:`run_trial` returns: the estimate, its evaluation and the output folder."""
+    """What :func:`run_trial` returns: the estimate, its evaluation, the output folder and
+    the phases' wall and processor times (s, :class:`PhaseTimer`)."""
 
     out_dir: Path
     result: EstimateResult
     metrics: list[dict[str, Any]]
     timings: dict[str, float]
     document: dict[str, Any]
+    cpu_timings: dict[str, float] = field(default_factory=dict)
 
 
 def ground_truth(
@@ -437,7 +444,10 @@ def _write_results(trial: Trial, look: Look, fused: Fused) -> TrialRecord:
                 out_dir / "grasps.png", trial.settings.object, result, truth, fused, record.data
             )
     record.finish(out_dir, result, metrics, trial.timer.seconds)
-    return TrialRecord(out_dir, result, metrics, dict(trial.timer.seconds), record.data)
+    timer = trial.timer
+    return TrialRecord(
+        out_dir, result, metrics, dict(timer.seconds), record.data, dict(timer.cpu_seconds)
+    )
 
 
 class MissedGrasp(StageFailure):
