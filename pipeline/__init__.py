@@ -10,12 +10,12 @@ first.
 
 from __future__ import annotations
 
-from typing import Any
-
 __all__ = ["__version__", "hookimpl"]
 
 
-def __getattr__(name: str) -> Any:
+# Unannotated return (type checkers take it as Any): importing typing for the annotation
+# would cost the console script a few milliseconds before its Ctrl-C handler is in place.
+def __getattr__(name: str):
     if name == "hookimpl":
         from pipeline.hookspecs import hookimpl
 

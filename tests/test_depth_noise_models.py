@@ -11,6 +11,7 @@ from pipeline.sim.depth_noise import (
     StereoNoise,
     discontinuity_mask,
     incidence_angle_rad,
+    kinect_v1_dropouts,
     move_edges_laterally,
     shadow_mask,
     simulate_kinect_v1,
@@ -224,3 +225,17 @@ def test_grazing_surfaces_are_noisier():
         + 0.0001 / np.sqrt(z_m) * tilt**2 / (np.pi / 2 - tilt) ** 2
     )
     assert np.nanstd(residual) == pytest.approx(published, rel=0.25)
+
+
+@pytest.mark.parametrize("tilt_deg", [70.0, 84.0])
+def test_kinect_dropouts_are_the_pixels_the_simulated_kinect_leaves_out(tilt_deg):
+    """Without noise or edge jitter, the simulated sensor returns nothing exactly where the
+    dropouts say: the step's two sides, the projector's shadow, the steep plane."""
+    scene = np.minimum(step_scene(slice(200, 300), 0.6, 1.1), tilted_plane(tilt_deg))
+    quiet = KinectV1Noise(axial_noise=False, lateral_noise=False)
+    measured = simulate_kinect_v1(scene, KINECT, np.random.default_rng(0), quiet)
+    dropped = kinect_v1_dropouts(scene, KINECT, quiet)
+    # Away from the range limits, where the simulation tests its rounded depth.
+    inside = (scene > quiet.min_range_m + 0.01) & (scene < quiet.max_range_m - 0.1)
+    np.testing.assert_array_equal(dropped[inside], np.isnan(measured.depth_m)[inside])
+    assert dropped[:, 199:201].all() and dropped[:, 299:301].all()

@@ -21,7 +21,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 README_LIMIT = 15_000
-INSTALL_AND_TRIAL = "python3 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/symfuse trial"
+INSTALL_AND_TRIAL = (
+    "python3 -m venv .venv && .venv/bin/pip install -e . --config-settings editable_mode=compat"
+    " && .venv/bin/symfuse trial"
+)
 
 
 def _hooks():

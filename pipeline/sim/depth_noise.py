@@ -311,6 +311,30 @@ def quantised_disparity_depth(
     return np.where(disparity > 0, depth, np.nan)
 
 
+def kinect_v1_dropouts(
+    depth_m: np.ndarray, intrinsics: CameraIntrinsics, noise: KinectV1Noise | None = None
+) -> np.ndarray:
+    """``(H, W)`` bool: the pixels of a scene with true depth ``depth_m`` for which a Kinect
+    v1 returns nothing, the edges taken where they are (no lateral jitter): projector
+    shadows, pixels within ``edge_margin_px`` of a depth discontinuity (the object's outline
+    against what lies behind it, on both sides), surfaces beyond ``max_incidence_deg`` and
+    depths outside the range. :func:`simulate_kinect_v1` drops the same pixels after it has
+    jittered the edges."""
+    noise = noise or KinectV1Noise()
+    depth = np.asarray(depth_m, dtype=np.float64)
+    focal = intrinsics.fx
+    incidence = np.nan_to_num(incidence_angle_rad(depth, intrinsics), nan=0.0)
+    missing = discontinuity_mask(
+        depth, focal, noise.baseline_m, noise.edge_jump_px, noise.edge_margin_px
+    )
+    if noise.shadows:
+        missing |= shadow_mask(depth, focal, noise.baseline_m)
+    missing |= incidence > np.deg2rad(noise.max_incidence_deg)
+    with np.errstate(invalid="ignore"):
+        missing |= ~((depth >= noise.min_range_m) & (depth <= noise.max_range_m))
+    return missing
+
+
 def simulate_kinect_v1(
     depth_m: np.ndarray,
     intrinsics: CameraIntrinsics,

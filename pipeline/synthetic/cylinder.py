@@ -195,6 +195,32 @@ def render_cylinder(
     )
 
 
+def scene_depth(
+    cylinder: Cylinder, T_robot_camera: np.ndarray, intrinsics: CameraIntrinsics
+) -> np.ndarray:
+    """Noiseless depth image (m along the optical axis, ``(height, width)``) of the scene the
+    cylinder stands in: the cylinder's side and top cap where a pixel's ray meets them, else
+    the table (the plane ``z = base_z_m``), NaN where the ray never reaches the table (it
+    points at or above the horizon). A camera over a tabletop sees the table around the
+    object, so a model that puts matter beside the object contradicts the view."""
+    rows, cols = np.indices((intrinsics.height, intrinsics.width)).reshape(2, -1)
+    rays_cam = np.column_stack(
+        [
+            (cols - intrinsics.cx) / intrinsics.fx,
+            (rows - intrinsics.cy) / intrinsics.fy,
+            np.ones(len(rows)),
+        ]
+    )
+    rays = rays_cam @ T_robot_camera[:3, :3].T  # unnormalised: range 1 is depth 1
+    origin = T_robot_camera[:3, 3]
+    depth, _ = _first_hit(np.broadcast_to(origin, rays.shape), rays, cylinder)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        table = (cylinder.base_z_m - origin[2]) / rays[:, 2]
+    table = np.where(table > 0.0, table, np.nan)
+    depth = np.where(np.isfinite(depth), depth, table)
+    return depth.reshape(intrinsics.height, intrinsics.width)
+
+
 def cylinder_mesh(cylinder: Cylinder, segments: int = 128) -> tuple[np.ndarray, np.ndarray]:
     """Closed triangle mesh of the cylinder (side, top and bottom caps): vertices, faces.
 
