@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -71,9 +71,8 @@ SAME_PLACE_M = 0.005
 
 #: A plan repeats an earlier one of the same hand when its closing direction is within this
 #: angle of the earlier one's (half the planners' 15 deg step between directions; either
-#: way for a parallel gripper, whose jaws swap) and its hand within :data:`SAME_PLACE_M`
-#: (half their 10 mm step between pad heights, and more than the object moves between
-#: grasps): the planner's same grid cell on the object, found again.
+#: way for a parallel gripper, whose jaws swap) and its pads overlap most of the earlier
+#: pads' footprint (:func:`same_place`).
 SAME_DIRECTION_RAD = math.radians(7.5)
 
 #: ``information`` chooses among the alternatives whose :func:`delivery` is at least this
@@ -162,13 +161,18 @@ def uncertainty(stage: StageEstimate) -> Uncertainty:
 
 
 def stop_reason(
-    known: Uncertainty, grasps_done: int, grasps_allowed: int, until_std_m: float | None
+    known: Uncertainty,
+    grasps_done: int,
+    grasps_allowed: int,
+    until_std_m: float | None,
+    unfused: int = 0,
 ) -> str:
-    """Why the trial stops after ``grasps_done`` grasps, or ``""`` to grasp again.
+    """Why the trial stops after ``grasps_done`` grasps (``unfused`` of them not fused), or
+    ``""`` to grasp again.
 
     It stops when the plane's offset std and the hidden shape std of ``known`` are both at
     most ``until_std_m`` (when given), else when ``grasps_allowed`` grasps were made (and
-    then says which std stayed above ``until_std_m``).
+    then says how many were not fused and which std stayed above ``until_std_m``).
     """
     reached = until_std_m is not None and (
         known.plane_offset_std_m <= until_std_m and known.hidden_shape_std_m <= until_std_m
@@ -180,12 +184,12 @@ def stop_reason(
         )
     if grasps_done < grasps_allowed:
         return ""
+    made = f"grasps done: {grasps_done} of {grasps_allowed}"
+    if unfused:
+        made += f" ({unfused} not fused)"
     if until_std_m is None:
-        return f"grasps done: {grasps_done} of {grasps_allowed}"
-    return (
-        f"grasps done: {grasps_done} of {grasps_allowed}, before the uncertainty reached "
-        f"{1e3 * until_std_m:g} mm: {known.stop_stds()}"
-    )
+        return made
+    return f"{made}, before the uncertainty reached {1e3 * until_std_m:g} mm: {known.stop_stds()}"
 
 
 def model_for_planning(
@@ -395,23 +399,44 @@ def information_scores(
     return scores
 
 
+def same_place(offset_m: np.ndarray, T_hand: np.ndarray, gripper: GripperSpec) -> bool:
+    """Whether a hand moved by ``offset_m`` (m, frame R) from the palm pose ``T_hand``
+    (closing along its x, approaching along its z) presses its pads on the surface they
+    pressed before: the move along the fingers within half the closing pads' length and
+    across them within half their width (inside the ellipse of those half-axes), so more
+    than half of each pad's taxel rows and columns land where they were. A move along the
+    closing direction only changes where the pads meet the same faces. The scale is the
+    hand's own: the planners' 10 mm step between pad heights moves the PG-70's and the
+    SDH's 45 mm pads by less than half their length, onto the taxel rows they pressed."""
+    names = {closing.pad for closing in gripper.closing}
+    pads = [pad for pad in gripper.pads if pad.name in names] or list(gripper.pads)
+    half_length = min(pad.rows * pad.pitch_m for pad in pads) / 2.0
+    half_width = min(pad.cols * pad.pitch_m for pad in pads) / 2.0
+    axes = np.asarray(T_hand, dtype=float)[:3, :3]
+    across, along = np.asarray(offset_m, dtype=float) @ axes[:, 1:3]
+    return (along / half_length) ** 2 + (across / half_width) ** 2 <= 1.0
+
+
 def repeats(
     plan: GraspPlan, earlier: Sequence[GraspPlan], grippers: Mapping[str, GripperSpec]
 ) -> bool:
-    """Whether ``plan`` is a grasp already made, one of ``earlier`` again
-    (:data:`SAME_DIRECTION_RAD`, :data:`SAME_PLACE_M`): its taxels would press where that
-    grasp's pressed, whose error they repeat rather than average out (:func:`new_places`).
+    """Whether ``plan`` is a grasp already made, one of ``earlier`` again: its closing
+    direction within :data:`SAME_DIRECTION_RAD` of that grasp's and its pads in the
+    :func:`same_place`. Its taxels would press where that grasp's pressed, whose error they
+    repeat rather than average out (:func:`new_places`).
     """
     direction = np.asarray(plan.closing_direction, dtype=float)
     position = np.asarray(plan.T_robot_hand, dtype=float)[:3, 3]
+    gripper = grippers[plan.gripper]
     for before in earlier:
         if before.gripper != plan.gripper:
             continue
         cosine = float(direction @ np.asarray(before.closing_direction, dtype=float))
-        if grippers[plan.gripper].fingers == 2:
+        if gripper.fingers == 2:
             cosine = abs(cosine)
-        moved = np.linalg.norm(position - np.asarray(before.T_robot_hand, dtype=float)[:3, 3])
-        if cosine >= math.cos(SAME_DIRECTION_RAD) and moved <= SAME_PLACE_M:
+        T_before = np.asarray(before.T_robot_hand, dtype=float)
+        moved = position - T_before[:3, 3]
+        if cosine >= math.cos(SAME_DIRECTION_RAD) and same_place(moved, T_before, gripper):
             return True
     return False
 
@@ -498,26 +523,39 @@ def choose_next_grasp(
     rng: np.random.Generator,
     viewpoint_m: np.ndarray | None = None,
     earlier: tuple[GraspPlan, ...] = (),
+    unfused: tuple[GraspPlan, ...] = (),
 ) -> NextGraspChoice:
     """Plan the next grasp on ``stage``'s model with each of ``hands`` and pick it by
     ``strategy``; ``viewpoint_m`` is the camera's position when the object was seen (m,
     frame R), ``earlier`` the plans of the grasps fused so far (each names its hand, which
-    is one of ``hands``)."""
+    is one of ``hands``), ``unfused`` those of the later grasps that were not fused: no
+    strategy chooses one of these again (:func:`repeats`)."""
     cloud, proposal = model_for_planning(stage, viewpoint_m)
+    grippers = {hand.gripper.name: hand.gripper for hand in hands}
     if strategy == "paper":
         plans = [hand.planner.plan(cloud, proposal, hand.gripper) for hand in hands]
         feasible = [plan for plan in plans if plan.status == "ok"]
-        return NextGraspChoice(max(feasible, key=_planner_score, default=plans[0]), strategy)
+        best = max(feasible, key=_planner_score, default=plans[0])
+        if best.status != "ok" or not repeats(best, unfused, grippers):
+            return NextGraspChoice(best, strategy)
     alternatives = tuple(
-        plan for hand in hands for plan in hand.planner.alternatives(cloud, proposal, hand.gripper)
+        plan
+        for hand in hands
+        for plan in hand.planner.alternatives(cloud, proposal, hand.gripper)
+        if not repeats(plan, unfused, grippers)
     )
     if not alternatives:
         first = hands[0]
-        return NextGraspChoice(first.planner.plan(cloud, proposal, first.gripper), strategy)
+        plan = first.planner.plan(cloud, proposal, first.gripper)
+        if plan.status == "ok" and repeats(plan, unfused, grippers):
+            plan = replace(plan, status="refused", reason="every feasible grasp was not fused")
+        return NextGraspChoice(plan, strategy)
+    if strategy == "paper":  # its own plan was not fused: the best-scored other
+        chosen = int(np.argmax([_planner_score(plan) for plan in alternatives]))
+        return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
     if strategy == "random":
         chosen = int(rng.integers(len(alternatives)))
         return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
-    grippers = {hand.gripper.name: hand.gripper for hand in hands}
     touches = [pad_contacts(plan, grippers[plan.gripper], stage.completed) for plan in alternatives]
     scores = tuple(information_scores(stage, alternatives, grippers, model, earlier, touches))
     # A grasp that would turn the object further than the re-grasp noise lets the estimator
