@@ -134,12 +134,11 @@ def test_a_trial_that_stops_early_says_so_with_the_grasp_it_stopped_on(
     (unfused,) = document["unfused_grasps"]
     assert unfused["grasp"] == 2 and unfused["reason"].endswith("not fused")
     assert "unfused_grasp" not in document
-    grippers = {"pg70": GRIPPERS["pg70"]}
     third, slipped = (
         plan_from_json(entry["plan"], "plan", out / "result.json")
         for entry in (document["grasps"][1], unfused)
     )
-    assert not repeats(third, [slipped], grippers)
+    assert not repeats(third, [slipped], GRIPPERS)
     printed = capsys.readouterr().out
     rows = printed[printed.index("grasp  chosen by") :].splitlines()
     assert rows[2].split()[:2] == ["1", "first"]
