@@ -620,12 +620,8 @@ def test_a_grasp_already_made_is_made_again_only_when_nothing_else_teaches():
     grippers = {"pg70": gripper}
     assert repeats(again, [made], grippers)
     again = replace(_plan(0.003), score=1.0)
-    # The planner's next pad height (10 mm lower, and the object moved 3 mm) presses most
-    # of the PG-70's 48 mm pads where they pressed: the same place; 25 mm lower, not.
-    assert repeats(_plan(0.003, height_m=0.03), [made], grippers)
-    assert not repeats(_plan(0.0, height_m=0.015), [made], grippers)
-    assert not repeats(_plan(-0.03), [made], grippers)  # past its 20 mm width
-    assert repeats(_plan(-0.009), [made], grippers)
+    assert not repeats(_plan(0.0, height_m=0.03), [made], grippers)  # 10 mm lower
+    assert not repeats(_plan(-0.03), [made], grippers)
     # The repeat, which the planner rates best, loses to any new grasp that teaches,
     # however the planner rates it (the floor compares the new grasps among themselves) ...
     planner = _Planner([again, replace(_plan(-0.03), score=0.2)])

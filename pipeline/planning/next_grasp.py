@@ -71,8 +71,9 @@ SAME_PLACE_M = 0.005
 
 #: A plan repeats an earlier one of the same hand when its closing direction is within this
 #: angle of the earlier one's (half the planners' 15 deg step between directions; either
-#: way for a parallel gripper, whose jaws swap) and its pads overlap most of the earlier
-#: pads' footprint (:func:`same_place`).
+#: way for a parallel gripper, whose jaws swap) and its hand within :data:`SAME_PLACE_M`
+#: (half their 10 mm step between pad heights, and more than the object moves between
+#: grasps): the planner's same grid cell on the object, found again.
 SAME_DIRECTION_RAD = math.radians(7.5)
 
 #: ``information`` chooses among the alternatives whose :func:`delivery` is at least this
@@ -399,44 +400,23 @@ def information_scores(
     return scores
 
 
-def same_place(offset_m: np.ndarray, T_hand: np.ndarray, gripper: GripperSpec) -> bool:
-    """Whether a hand moved by ``offset_m`` (m, frame R) from the palm pose ``T_hand``
-    (closing along its x, approaching along its z) presses its pads on the surface they
-    pressed before: the move along the fingers within half the closing pads' length and
-    across them within half their width (inside the ellipse of those half-axes), so more
-    than half of each pad's taxel rows and columns land where they were. A move along the
-    closing direction only changes where the pads meet the same faces. The scale is the
-    hand's own: the planners' 10 mm step between pad heights moves the PG-70's and the
-    SDH's 45 mm pads by less than half their length, onto the taxel rows they pressed."""
-    names = {closing.pad for closing in gripper.closing}
-    pads = [pad for pad in gripper.pads if pad.name in names] or list(gripper.pads)
-    half_length = min(pad.rows * pad.pitch_m for pad in pads) / 2.0
-    half_width = min(pad.cols * pad.pitch_m for pad in pads) / 2.0
-    axes = np.asarray(T_hand, dtype=float)[:3, :3]
-    across, along = np.asarray(offset_m, dtype=float) @ axes[:, 1:3]
-    return (along / half_length) ** 2 + (across / half_width) ** 2 <= 1.0
-
-
 def repeats(
     plan: GraspPlan, earlier: Sequence[GraspPlan], grippers: Mapping[str, GripperSpec]
 ) -> bool:
-    """Whether ``plan`` is a grasp already made, one of ``earlier`` again: its closing
-    direction within :data:`SAME_DIRECTION_RAD` of that grasp's and its pads in the
-    :func:`same_place`. Its taxels would press where that grasp's pressed, whose error they
-    repeat rather than average out (:func:`new_places`).
+    """Whether ``plan`` is a grasp already made, one of ``earlier`` again
+    (:data:`SAME_DIRECTION_RAD`, :data:`SAME_PLACE_M`): its taxels would press where that
+    grasp's pressed, whose error they repeat rather than average out (:func:`new_places`).
     """
     direction = np.asarray(plan.closing_direction, dtype=float)
     position = np.asarray(plan.T_robot_hand, dtype=float)[:3, 3]
-    gripper = grippers[plan.gripper]
     for before in earlier:
         if before.gripper != plan.gripper:
             continue
         cosine = float(direction @ np.asarray(before.closing_direction, dtype=float))
-        if gripper.fingers == 2:
+        if grippers[plan.gripper].fingers == 2:
             cosine = abs(cosine)
-        T_before = np.asarray(before.T_robot_hand, dtype=float)
-        moved = position - T_before[:3, 3]
-        if cosine >= math.cos(SAME_DIRECTION_RAD) and same_place(moved, T_before, gripper):
+        moved = np.linalg.norm(position - np.asarray(before.T_robot_hand, dtype=float)[:3, 3])
+        if cosine >= math.cos(SAME_DIRECTION_RAD) and moved <= SAME_PLACE_M:
             return True
     return False
 
