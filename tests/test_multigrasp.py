@@ -227,6 +227,38 @@ def test_a_first_grasp_that_misses_is_made_again_unlike_it(tmp_path, monkeypatch
     assert document["grasps"][0]["taxels_in_contact"] > 0
 
 
+@pytest.mark.slow
+def test_a_first_grasp_not_executed_is_made_again_unlike_it(tmp_path, monkeypatch):
+    from pipeline.planning.hand_choice import MISSED_LINE_DEG
+    from pipeline.shipped_hands import ShippedHandsWorld
+
+    # The first grasp is reported not executed (as when the palm lands on the object):
+    # nothing touched, so the trial looks again and grasps unlike it.
+    execute = ShippedHandsWorld.execute_grasp
+    made = []
+
+    def first_lands(world, plan):
+        outcome = execute(world, plan)
+        made.append(plan)
+        if len(made) == 1:
+            return replace(outcome, executed=False, reason="the palm landed on the object")
+        return outcome
+
+    monkeypatch.setattr(ShippedHandsWorld, "execute_grasp", first_lands)
+    out = tmp_path / "landed"
+    assert main(["trial", "--set", "trial.pictures=false", "--out", str(out)]) == 0
+    document = json.loads((out / "result.json").read_text())
+    (missed,) = document["missed_grasps"]
+    assert missed["grasp"] == 1 and not missed["executed"]
+    assert missed["reason"] == "the palm landed on the object"
+    first = np.array(missed["plan"]["closing_direction"])[:2]
+    second = np.array(document["plan"]["closing_direction"])[:2]
+    assert missed["plan"]["gripper"] != document["plan"]["gripper"] or abs(
+        first @ second
+    ) < math.cos(math.radians(MISSED_LINE_DEG))
+    assert document["grasp"]["executed"] and document["grasps"][0]["taxels_in_contact"] > 0
+
+
 def test_a_grasp_on_one_side_only_is_not_fused():
     def contacts(*pads):
         normals = {"left": [1.0, 0.0, 0.0], "right": [-1.0, 0.0, 0.0], "top": [0.0, 0.0, -1.0]}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import time
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ from pipeline.cli import main
 from pipeline.cli.trial import grasp_line, grasps_summary, run_name
 from pipeline.io.formats import read_cloud
 from pipeline.reports.tables import TERMINAL_WIDTH
-from pipeline.run.trial import PICTURE_FILES, TRIAL_FILES
+from pipeline.run.trial import PICTURE_FILES, TRIAL_FILES, PhaseTimer
 
 
 @pytest.fixture(scope="module")
@@ -257,3 +258,20 @@ def test_the_grasp_line_counts_the_taxels_in_contact_within_the_terminal():
     assert "; 176 taxels in contact (left, right); the object moved 1.2 mm" in line
     assert max(len(row) for row in wrapped(line).splitlines()) <= TERMINAL_WIDTH
     assert "taxels" not in grasp_line({**document, "grasps": []})
+
+
+def test_the_phase_timer_adds_up_wall_and_processor_time_per_phase():
+    """A phase that computes costs processor time, one that sleeps only wall time; a
+    phase entered twice adds up."""
+    timer = PhaseTimer()
+    with timer.phase("compute"):
+        deadline = time.process_time() + 0.02
+        while time.process_time() < deadline:
+            pass
+    for _ in range(2):
+        with timer.phase("sleep"):
+            time.sleep(0.02)
+    assert list(timer.seconds) == list(timer.cpu_seconds) == ["compute", "sleep"]
+    assert timer.cpu_seconds["compute"] >= 0.02
+    assert timer.seconds["sleep"] >= 0.04
+    assert timer.cpu_seconds["sleep"] < timer.seconds["sleep"] / 2

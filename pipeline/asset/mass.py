@@ -54,9 +54,12 @@ def is_closed(mesh: trimesh.Trimesh) -> bool:
     start = faces.ravel()
     end = faces[:, [1, 2, 0]].ravel()
     count = int(faces.max()) + 1
-    edges, repeats = np.unique(start * count + end, return_counts=True)
-    reverse = np.unique(end * count + start)
-    return bool(np.all(repeats == 1) and np.array_equal(edges, reverse))
+    # Sorted, the directed edges must hold no value twice and equal their reverses, sorted
+    # (a sort each: ``np.unique`` costs several times as much on a model's mesh).
+    edges = np.sort(start * count + end)
+    if np.any(edges[1:] == edges[:-1]):
+        return False
+    return bool(np.array_equal(edges, np.sort(end * count + start)))
 
 
 def mass_properties(

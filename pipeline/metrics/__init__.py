@@ -4,7 +4,8 @@
   (robust orthogonal line), :func:`box_thickness` (thickness and side angle of a box-like
   object), :func:`diameter_error`;
 * :mod:`.deviation` - :func:`point_to_mesh_distances` / :class:`DeviationSummary`: the
-  geometric deviation of every completed point from the ground-truth mesh surface;
+  geometric deviation of every completed point from the ground-truth mesh surface
+  (:class:`MeshSurface`: one mesh asked about several point sets);
 * :mod:`.shape_scores` - :func:`surface_scores` (Chamfer distance, F-score at
   :data:`FSCORE_THRESHOLDS_M`) and :func:`hull_iou` (volumetric IoU on a grid).
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 from pipeline.metrics.deviation import (
     DeviationSummary,
+    MeshSurface,
     mesh_deviation,
     mesh_occupancy,
     point_to_mesh_distances,
@@ -53,6 +55,7 @@ __all__ = [
     "CircleFit",
     "DeviationSummary",
     "LineFit",
+    "MeshSurface",
     "SolidGrid",
     "ThicknessFit",
     "box_thickness",

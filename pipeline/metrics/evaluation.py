@@ -21,15 +21,14 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from pipeline.metrics import (
+    DeviationSummary,
+    MeshSurface,
     SolidGrid,
     box_thickness,
     fit_circle_taubin,
     hull_iou,
-    mesh_deviation,
-    mesh_occupancy,
     nearest_distances,
     plane_after_bias,
-    point_to_mesh_distances,
     sample_surface,
     side_wall,
     solid_grid,
@@ -64,8 +63,8 @@ class GroundTruth:
             (:mod:`pipeline.symmetry`), frame R; the estimated plane is scored against the
             nearest (``symmetry_angle_error_deg``, ``symmetry_offset_error_mm``).
 
-    The surface samples and the solid every stage is scored against are computed once, on
-    first use.
+    The surface samples, the solid and the mesh's distance structure every stage is scored
+    against are computed once, on first use.
     """
 
     vertices: np.ndarray
@@ -83,6 +82,11 @@ class GroundTruth:
         """``(SURFACE_SAMPLES, 3)`` points on the true surface but the face the object stands
         on (fixed seed: the same points for every stage and every run)."""
         return sample_surface(self.vertices, self.faces, SURFACE_SAMPLES, seed=0)
+
+    @functools.cached_property
+    def surface(self) -> MeshSurface:
+        """The true mesh, for the distances of every stage's points and samples."""
+        return MeshSurface(self.vertices, self.faces)
 
     @functools.cached_property
     def solid(self) -> SolidGrid:
@@ -131,10 +135,10 @@ def evaluate_stage(
     diameter by a circle fit to the side wall.
     """
     plane = plane_after_bias(stage.plane, stage.bias)
-    distances, deviation = mesh_deviation(stage.completed, truth.vertices, truth.faces)
+    distances = truth.surface.distances(stage.completed)
     centre = truth.vertices.min(axis=0) / 2.0 + truth.vertices.max(axis=0) / 2.0
     metrics: dict[str, Any] = {
-        "deviation_m": deviation.as_dict(),
+        "deviation_m": DeviationSummary.from_distances(distances).as_dict(),
         **plane_errors(plane, truth),
         **symmetry_errors(Symmetry.from_plane(plane), truth.symmetries, centre),
         **shape_scores(stage.completed, distances, truth),
@@ -224,16 +228,16 @@ def mesh_scores(mesh: trimesh.Trimesh, truth: GroundTruth) -> dict[str, float]:
     """
     vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     samples = sample_surface(vertices, faces, SURFACE_SAMPLES, seed=0, skip_support=False)
+    surface = MeshSurface(vertices, faces)
     scores = surface_scores(
-        point_to_mesh_distances(samples, truth.vertices, truth.faces),
-        point_to_mesh_distances(truth.surface_samples, vertices, faces),
+        truth.surface.distances(samples), surface.distances(truth.surface_samples)
     )
     solid = truth.solid
     cells = solid.cells
     # An evenly spaced subset of the true solid's cells: the share inside the mesh to well
     # under a percentage point, at a fraction of the cost.
     stride = max(1, len(cells) // IOU_CELLS)
-    inside_share = float(np.mean(mesh_occupancy(cells[::stride], vertices, faces)))
+    inside_share = float(np.mean(surface.occupancy(cells[::stride])))
     volume = abs(float(mesh.volume))
     shared = min(inside_share * solid.volume_m3, volume)
     union = volume + solid.volume_m3 - shared

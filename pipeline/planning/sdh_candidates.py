@@ -339,12 +339,17 @@ def _finger_angles(
     kinematics: FingerKinematics, fingers
 ) -> tuple[list[PadContact], list[float]] | str:
     """The contacts and proximal angles of one hand's fingers (name, pad origin and
-    direction, contact or None each), or why a finger finds none."""
+    direction, contact or None each), or why a finger finds none (the first such finger's
+    reason)."""
+    fingers = list(fingers)
+    reaches = [c.touch_m - o @ d for _, o, d, c in fingers if c is not None]
+    # Every finger's angle in one call: the arcsine is taken element by element alike.
+    angles = iter(kinematics.alpha_for_reach(np.array(reaches)).tolist())
     contacts, alphas = [], []
-    for finger, origin, direction, contact in fingers:
+    for finger, _, _, contact in fingers:
         if contact is None:
             return f"{finger} meets no surface"
-        alpha = float(kinematics.alpha_for_reach(contact.touch_m - origin @ direction))
+        alpha = next(angles)
         if not abs(alpha) < kinematics.joint_limit_rad:
             return f"{finger} cannot reach the surface"
         contacts.append(contact)

@@ -110,28 +110,35 @@ TRIAL_FILES = (
 
 @dataclass
 class PhaseTimer:
-    """Wall time per named phase, in seconds, in the order the phases ran."""
+    """Wall time per named phase, in seconds, in the order the phases ran, and the
+    process's processor time (user + system) in each (what a phase costs on a loaded
+    machine, where its wall time mostly says how long it waited)."""
 
     seconds: dict[str, float] = field(default_factory=dict)
+    cpu_seconds: dict[str, float] = field(default_factory=dict)
 
     @contextmanager
     def phase(self, name: str) -> Iterator[None]:
-        started = time.perf_counter()
+        started, started_cpu = time.perf_counter(), time.process_time()
         try:
             yield
         finally:
             self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - started
+            cpu = time.process_time() - started_cpu
+            self.cpu_seconds[name] = self.cpu_seconds.get(name, 0.0) + cpu
 
 
 @dataclass(frozen=True)
 class TrialRecord:
-    """What :func:`run_trial` returns: the estimate, its evaluation and the output folder."""
+    """What :func:`run_trial` returns: the estimate, its evaluation, the output folder and
+    the phases' wall and processor times (s, :class:`PhaseTimer`)."""
 
     out_dir: Path
     result: EstimateResult
     metrics: list[dict[str, Any]]
     timings: dict[str, float]
     document: dict[str, Any]
+    cpu_timings: dict[str, float] = field(default_factory=dict)
 
 
 def ground_truth(
@@ -437,13 +444,16 @@ def _write_results(trial: Trial, look: Look, fused: Fused) -> TrialRecord:
                 out_dir / "grasps.png", trial.settings.object, result, truth, fused, record.data
             )
     record.finish(out_dir, result, metrics, trial.timer.seconds)
-    return TrialRecord(out_dir, result, metrics, dict(trial.timer.seconds), record.data)
+    timer = trial.timer
+    return TrialRecord(
+        out_dir, result, metrics, dict(timer.seconds), record.data, dict(timer.cpu_seconds)
+    )
 
 
 class MissedGrasp(StageFailure):
-    """The first grasp's pads did not touch opposing sides (:func:`unfused_reason`): there
-    is nothing to fuse. ``plan`` is the grasp that missed; the trial looks again and grasps
-    unlike it while ``trial.retries`` allows."""
+    """The first grasp's pads did not touch opposing sides (:func:`unfused_reason`), or the
+    hand could not execute it: there is nothing to fuse. ``plan`` is the grasp that missed;
+    the trial looks again and grasps unlike it while ``trial.retries`` allows."""
 
     def __init__(self, message: str, plan: GraspPlan) -> None:
         super().__init__(message)
@@ -565,8 +575,8 @@ def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
     ``contacts.json`` and the record's ``grasps`` grow by one grasp each time.
 
     Raises:
-        StageFailure: the first grasp was not executed, touched nothing or one side only,
-            or the initialiser rejected it.
+        MissedGrasp: the first grasp was not executed, or touched nothing or one side only.
+        StageFailure: the initialiser rejected it.
     """
     settings, record = trial.settings, trial.record
     until_m = 1e-3 * settings.until_std_mm if settings.until_std_mm > 0 else None
@@ -634,7 +644,8 @@ def _execute(trial: Trial, k: int, plan: GraspPlan, chosen_by: dict[str, Any]) -
     changes the hand when the plan's is another; the record's ``grasp`` is the first.
 
     Raises:
-        StageFailure: the first grasp was not executed.
+        MissedGrasp: the first grasp was not executed (the palm landed on the object, the
+            hand was blocked on its way down or overlapped the object where it started).
     """
     world = trial.world
     trial.report(f"grasp {k + 1} with {plan.gripper}")
@@ -661,13 +672,14 @@ def _execute(trial: Trial, k: int, plan: GraspPlan, chosen_by: dict[str, Any]) -
             np.degrees(object_turn(outcome.object_before, outcome.object_after))
         ),
     }
+    attempt = Attempt(k, plan, chosen_by, outcome, executed, shift_m, tilt_rad)
     if k == 0:
         trial.record.first_grasp(executed, outcome.object_after)
         if not outcome.executed:
-            raise StageFailure(
-                f"grasp not executed: {outcome.reason}{next_try(world.hands, plan.gripper)}"
-            )
-    return Attempt(k, plan, chosen_by, outcome, executed, shift_m, tilt_rad)
+            # Touching nothing as surely as a grasp that closed on air: look and grasp again.
+            trial.record.unfused(attempt.to_json())
+            raise MissedGrasp(f"grasp not executed: {outcome.reason}", plan)
+    return attempt
 
 
 def _read_taxels(trial: Trial, attempt: Attempt) -> tuple[Contacts | None, str]:

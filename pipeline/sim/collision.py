@@ -20,7 +20,7 @@ import pybullet
 import trimesh
 
 from pipeline.errors import ConfigError, InputError
-from pipeline.metrics import mesh_occupancy, point_to_mesh_distances
+from pipeline.metrics import MeshSurface, point_to_mesh_distances
 from pipeline.sim import native_output_silenced
 
 #: How far (m) a convex part of a non-convex object's collision geometry may stick out of
@@ -153,8 +153,8 @@ def _shrink_wrap(vertices: np.ndarray, mesh: trimesh.Trimesh) -> trimesh.Trimesh
 
 def _outside_distances(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
     """``(N,)`` how far (m) each point lies outside the watertight ``mesh`` (0 inside)."""
-    distances = point_to_mesh_distances(points, mesh.vertices, mesh.faces)
-    return np.where(mesh_occupancy(points, mesh.vertices, mesh.faces), 0.0, distances)
+    surface = MeshSurface(mesh.vertices, mesh.faces)
+    return np.where(surface.occupancy(points), 0.0, surface.distances(points))
 
 
 def _faithful_hulls(hulls: list[trimesh.Trimesh], mesh: trimesh.Trimesh) -> list[trimesh.Trimesh]:
