@@ -677,8 +677,9 @@ def _execute(trial: Trial, k: int, plan: GraspPlan, chosen_by: dict[str, Any]) -
         trial.record.first_grasp(executed, outcome.object_after)
         if not outcome.executed:
             # Touching nothing as surely as a grasp that closed on air: look and grasp again.
-            trial.record.unfused(attempt.to_json())
-            raise MissedGrasp(f"grasp not executed: {outcome.reason}", plan)
+            why = f"grasp not executed: {outcome.reason}"
+            trial.record.unfused(attempt.to_json(), why)
+            raise MissedGrasp(why, plan)
     return attempt
 
 
@@ -779,8 +780,8 @@ def attempt_to_json(
     contacts: Contacts | None = None,
 ) -> dict[str, Any]:
     """A grasp as planned, chosen and executed (and what it touched, when read): the part
-    of a ``grasps`` entry before the estimate, and ``result.json``'s ``unfused_grasp``, the
-    grasp a trial stopped on (not executed, or touching too little to fuse)."""
+    of a ``grasps`` entry before the estimate, and of ``result.json``'s ``unfused_grasp``
+    and ``unfused_grasps`` (not executed, or touching too little to fuse)."""
     touched = {}
     if contacts is not None:
         touched = {
