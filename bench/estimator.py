@@ -22,7 +22,8 @@ by 6 x 14 taxel pads (the taxels within 0.6 mm of the surface touch); ``iekf`` p
 defaults. Starts: ``easy``, two opposed pads, a 3 mm / 1.7 deg bias and an 8 mm / 4.6 deg
 plane error; ``plane 45 deg / 30 mm``, the corner of the paper's Fig. 8 claim region;
 ``bias 25 mm``, two pads, the plane 20 deg / 10 mm off; ``three pads, bias 35 mm``, pads
-120 deg apart with one on the camera's side, the plane 30 deg / 12 mm off.
+120 deg apart with one on the camera's side, the plane 30 deg / 12 mm off; ``two pads, bias
+35 mm``, two jaws beyond their reach (30 deg to the jaws' line), the plane 20 deg / 10 mm off.
 """
 
 from __future__ import annotations
@@ -99,6 +100,8 @@ STARTS = {
         Start("bias 25 mm", _PARALLEL, (0.0, 0.0177, 0.0177, 0.0), (0.35, 0.01)),
         # Three pads, one on the camera's side, 35 mm bias, plane 30 deg / 12 mm off.
         Start("three pads, bias 35 mm", _THREE, (0.0, -0.0175, 0.0303, 0.0), (0.52, -0.012)),
+        # Two jaws beyond their reach, 35 mm at 30 deg to the jaws' line; plane 20 deg / 10 mm off.
+        Start("two pads, bias 35 mm", _PARALLEL, (0.0, -0.0303, 0.0175, 0.0), (0.35, -0.01)),
     )
 }
 

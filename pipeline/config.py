@@ -89,7 +89,8 @@ class TrialSettings:
     )
     retries: int = param(
         2,
-        "after a first grasp whose pads do not touch opposing sides (nothing to fuse): "
+        "after a first grasp whose pads do not touch opposing sides, or that the hand could "
+        "not execute (nothing to fuse): "
         "release, look again and grasp unlike every grasp that missed, up to this many times",
         at_least=0,
     )

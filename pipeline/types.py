@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Protocol
+from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
 
@@ -805,6 +805,16 @@ class Hypothesis:
     name: str
     step: float = 1.0
     replaced: str = ""
+
+    #: What a hypothesis' name ends with when its step from Stage 0 was shortened until
+    #: the model passed (:func:`pipeline.estimation.hypotheses.bounded`).
+    BOUNDED_SUFFIX: ClassVar[str] = ", bounded"
+
+    @property
+    def bounded(self) -> bool:
+        """The model is a shortened step from Stage 0 of a hypothesis whose full step the
+        evidence contradicted (a §9 ``"<name>, bounded"``)."""
+        return self.name.endswith(self.BOUNDED_SUFFIX)
 
 
 @dataclass(frozen=True)

@@ -50,7 +50,7 @@ def test_the_estimator_benchmark_times_both_covariance_models():
         print(seconds > 0, len(iterations))
         """
     )
-    assert out.split() == ["converged/converged", "True"] * 4 + ["True", "2"]
+    assert out.split() == ["converged/converged", "True"] * 5 + ["True", "2"]
 
 
 @pytest.mark.slow

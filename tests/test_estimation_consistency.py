@@ -30,6 +30,7 @@ from pipeline.types import (
     CameraIntrinsics,
     Consistency,
     DepthObservation,
+    Hypothesis,
     StageEstimate,
     SymmetryPlane,
 )
@@ -201,6 +202,18 @@ def test_with_no_consistent_stage_the_camera_ranks_first():
     # When the camera accepts none, the smallest excess over both tests.
     stages = [stage(0, 16.7, violations=150), stage(1, 3.0, 400), stage(2, 2.0, 120)]
     assert select_stage(stages)[0] == 2
+
+
+def test_a_bounded_hypothesis_does_not_replace_a_consistent_stage_0():
+    bounded = Hypothesis("held-angle, bounded", step=0.12, replaced="failed")
+    last = dataclasses.replace(stage(2, 0.3), hypothesis=bounded)
+    index, reason = select_stage([stage(0, 0.5), stage(1, 0.4), last])
+    assert index == 0 and "12% of a 'held-angle, bounded' step" in reason
+    # Stage 0 inconsistent: the bounded model is the one the evidence supports.
+    assert select_stage([stage(0, 9.0), stage(1, 0.4), last])[0] == 2
+    # A hypothesis taken in full (its own step passes) stands as any consistent stage.
+    full = dataclasses.replace(last, hypothesis=Hypothesis("held-angle", replaced="failed"))
+    assert select_stage([stage(0, 0.5), stage(1, 0.4), full])[0] == 2
 
 
 def test_a_last_stage_that_kept_its_prior_gives_way_to_the_last_that_did_not_fail():

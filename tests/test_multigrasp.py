@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
+from pipeline.io.formats import plan_from_json
 from pipeline.planning.candidate import candidate_score
 from pipeline.planning.grasp_geometry import hand_pose
 from pipeline.planning.next_grasp import (
@@ -128,12 +129,22 @@ def test_a_trial_that_stops_early_says_so_with_the_grasp_it_stopped_on(
     code = main(["trial", "--grasps", "3", "--set", "trial.pictures=false", "--out", str(out)])
     assert code == 0
     document = json.loads((out / "result.json").read_text())
-    assert len(document["grasps"]) == 1 and document["unfused_grasp"]["grasp"] == 2
+    # Released, and the third grasp planned unlike it.
+    assert [g["grasp"] for g in document["grasps"]] == [1, 3]
+    (unfused,) = document["unfused_grasps"]
+    assert unfused["grasp"] == 2 and unfused["reason"].endswith("not fused")
+    assert "unfused_grasp" not in document
+    third, slipped = (
+        plan_from_json(entry["plan"], "plan", out / "result.json")
+        for entry in (document["grasps"][1], unfused)
+    )
+    assert not repeats(third, [slipped], GRIPPERS)
     printed = capsys.readouterr().out
     rows = printed[printed.index("grasp  chosen by") :].splitlines()
     assert rows[2].split()[:2] == ["1", "first"]
     assert rows[3].split()[0] == "2" and "not fused" in rows[3]
-    assert rows[4] == "stopped: grasp 2 touched one side only (test); not fused"
+    assert rows[4].split()[0] == "3"
+    assert rows[5] == "stopped: grasps done: 3 of 3 (1 not fused)"
 
 
 @pytest.mark.parametrize(
@@ -216,6 +227,38 @@ def test_a_first_grasp_that_misses_is_made_again_unlike_it(tmp_path, monkeypatch
     assert document["grasps"][0]["taxels_in_contact"] > 0
 
 
+@pytest.mark.slow
+def test_a_first_grasp_not_executed_is_made_again_unlike_it(tmp_path, monkeypatch):
+    from pipeline.planning.hand_choice import MISSED_LINE_DEG
+    from pipeline.shipped_hands import ShippedHandsWorld
+
+    # The first grasp is reported not executed (as when the palm lands on the object):
+    # nothing touched, so the trial looks again and grasps unlike it.
+    execute = ShippedHandsWorld.execute_grasp
+    made = []
+
+    def first_lands(world, plan):
+        outcome = execute(world, plan)
+        made.append(plan)
+        if len(made) == 1:
+            return replace(outcome, executed=False, reason="the palm landed on the object")
+        return outcome
+
+    monkeypatch.setattr(ShippedHandsWorld, "execute_grasp", first_lands)
+    out = tmp_path / "landed"
+    assert main(["trial", "--set", "trial.pictures=false", "--out", str(out)]) == 0
+    document = json.loads((out / "result.json").read_text())
+    (missed,) = document["missed_grasps"]
+    assert missed["grasp"] == 1 and not missed["executed"]
+    assert missed["reason"] == "the palm landed on the object"
+    first = np.array(missed["plan"]["closing_direction"])[:2]
+    second = np.array(document["plan"]["closing_direction"])[:2]
+    assert missed["plan"]["gripper"] != document["plan"]["gripper"] or abs(
+        first @ second
+    ) < math.cos(math.radians(MISSED_LINE_DEG))
+    assert document["grasp"]["executed"] and document["grasps"][0]["taxels_in_contact"] > 0
+
+
 def test_a_grasp_on_one_side_only_is_not_fused():
     def contacts(*pads):
         normals = {"left": [1.0, 0.0, 0.0], "right": [-1.0, 0.0, 0.0], "top": [0.0, 0.0, -1.0]}
@@ -261,6 +304,12 @@ def test_stop_rule():
     )
     unknown = Uncertainty(math.inf, math.inf, math.inf)
     assert stop_reason(unknown, 2, 3, 0.05) == ""
+    # Grasps released unfused count against the budget, and the summary says so.
+    assert stop_reason(known, 2, 3, None, unfused=1) == ""
+    assert stop_reason(known, 3, 3, 0.001, unfused=1) == (
+        "grasps done: 3 of 3 (1 not fused), before the uncertainty reached 1 mm: plane "
+        "offset std 0.80 mm and hidden shape std 1.50 mm"
+    )
 
 
 def _box_stage(thickness=0.04, length=0.12, height=0.08, centre=(0.5, 0.0)):
@@ -622,6 +671,27 @@ def test_a_grasp_already_made_is_made_again_only_when_nothing_else_teaches():
     assert choice.chosen == 0 and choice.scores[1] == 0.0
 
 
+def test_no_strategy_chooses_a_grasp_that_was_not_fused_again():
+    stage = _box_stage()
+    gripper = GRIPPERS["pg70"]
+    slipped = _plan(0.0)
+    # The planner finds it again on the moved object (3 mm aside) and rates it best.
+    plans = [replace(_plan(0.003), score=1.0), replace(_plan(0.04), score=0.3)]
+    hands = [NextHand(_Planner(plans), gripper)]
+    for strategy in ("paper", "random", "information"):
+        for seed in range(5):
+            choice = choose_next_grasp(
+                strategy, hands, stage, MODEL, np.random.default_rng(seed), unfused=(slipped,)
+            )
+            assert choice.plan is plans[1]
+    # When every grasp repeats one not fused, none is chosen.
+    alone = [NextHand(_Planner(plans[:1]), gripper)]
+    choice = choose_next_grasp(
+        "information", alone, stage, MODEL, np.random.default_rng(0), unfused=(slipped,)
+    )
+    assert choice.plan.status == "refused" and "not fused" in choice.plan.reason
+
+
 def test_a_grasp_not_fused_is_drawn_where_it_was_planned(monkeypatch):
     import pipeline.reports.trial_pictures
     from pipeline.run.trial import draw_grasps
@@ -653,7 +723,7 @@ def test_a_grasp_not_fused_is_drawn_where_it_was_planned(monkeypatch):
         SimpleNamespace(selected=SimpleNamespace(completed=np.zeros((1, 3)))),
         SimpleNamespace(vertices=np.zeros((1, 3))),
         SimpleNamespace(contacts=(contacts,)),
-        {"grasps": [first], "unfused_grasp": unfused},
+        {"grasps": [first], "unfused_grasps": [unfused]},
     )
     marks = drawn["marks"]
     assert [m.fused for m in marks] == [True, False]

@@ -77,5 +77,11 @@ def test_a_plane_moved_15_7_mm_ends_within_3_mm_or_flagged(recording, tmp_path, 
     plane = plane_after_bias(_plane(stage), _bias(stage))
     error_m = abs(plane.normal[:2] @ anchor_xy - plane.offset_m)
     assert error_m < WITHIN_M or stage["status"] in FLAGGED, (error_m, stage["status"])
+    # Not true by itself: the start, the estimate without the fusion's correction, is as far
+    # off as the plane was moved.
+    start = fused["stages"][0]
+    start_plane = plane_after_bias(_plane(start), _bias(start))
+    start_error_m = abs(start_plane.normal[:2] @ anchor_xy - start_plane.offset_m)
+    assert start_error_m > MOVED_M - WITHIN_M, start_error_m
     # Stage 0 itself, 15.7 mm off, is contradicted by the evidence.
     assert fused["stages"][0]["consistency"]["consistent"] is False

@@ -163,8 +163,8 @@ def grasps_summary(document: dict, wide: bool = False) -> str:
     """One row per grasp of a multi-grasp trial: how it was chosen, where it touched, the
     selected stage after fusing it with its deviation and consistency, and the two
     uncertainties of the stop rule (``stds mm``: the plane offset's, then the hidden
-    shape's; ``--wide`` adds the hidden side's with the object's place); the grasp it
-    stopped on unfused, if any; then why the trial stopped. ``dev mm`` is the median
+    shape's; ``--wide`` adds the hidden side's with the object's place); each later grasp
+    released unfused in its place; then why the trial stopped. ``dev mm`` is the median
     deviation, ``plane °`` and ``offset err`` (mm) the plane's errors. Without ``wide``
     less :data:`WIDE_GRASP_COLUMNS`."""
     rows = []
@@ -192,7 +192,7 @@ def grasps_summary(document: dict, wide: bool = False) -> str:
                 f"{known['plane_offset_std_mm']:.1f} / {known['hidden_shape_std_mm']:.1f}",
             ]
         )
-    if unfused := document.get("unfused_grasp"):
+    for unfused in document.get("unfused_grasps", []):
         rows.append(
             [
                 unfused["grasp"],
@@ -205,6 +205,7 @@ def grasps_summary(document: dict, wide: bool = False) -> str:
                 *["-"] * 8,
             ]
         )
+    rows.sort(key=lambda row: row[0])
     header = [
         "grasp",
         "chosen by",

@@ -38,6 +38,9 @@ from pipeline.estimation.indexsets import unique_inverse
 GATE_CHI2_3DOF_95 = 7.815
 #: Largest voxel extent in whitened gate units (see the module docstring).
 VOXEL_RATIO = 0.5
+#: The entries of a lower-triangular 3 x 3 matrix and the off-diagonal ones of a symmetric one.
+_LOWER = ((0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2))
+_OFF = ((0, 1), (0, 2), (1, 2))
 
 
 @dataclass(frozen=True)
@@ -74,33 +77,37 @@ def voxel_moments(
     """Bin ``points_m`` (N, 3) into voxels of edges ``size_m`` (grid anchored at the origin);
     with ``labels`` ((N,) small non-negative or -1 ints) points of different labels never
     share a voxel."""
-    cells = np.floor(points_m / size_m).astype(np.int64)
-    cells -= cells.min(axis=0)
-    if labels is None:
-        labels = np.zeros(len(points_m), dtype=np.int64)
-    label_shift = labels - labels.min(initial=0)
-    extent = np.append(cells.max(axis=0, initial=0), label_shift.max(initial=0)) + 1
-    keys = np.ravel_multi_index((*cells.T, label_shift), tuple(int(e) for e in extent))
-    unique_keys, voxel_of_point, count = unique_inverse(keys)
-    label = np.unravel_index(unique_keys, tuple(int(e) for e in extent))[3] + labels.min(initial=0)
+    # Column by column (one contiguous copy): numpy reduces, divides and gathers an (N, 3)
+    # array along its first axis several times slower.
+    coordinates = np.ascontiguousarray(np.asarray(points_m, dtype=float).T)
+    columns = [np.floor(coordinates[k] / size_m[k]).astype(np.int64) for k in range(3)]
+    columns = [column - column.min() for column in columns]
+    extent = tuple(int(column.max(initial=0)) + 1 for column in columns)
+    _, voxel_of_point, count = unique_inverse(np.ravel_multi_index(columns, extent))
+    label = np.zeros(len(count), dtype=np.int64)
+    if labels is not None:
+        # Split each cell by label: (cell, label) pairs, ordered by cell, then label, and
+        # keyed by their ranks (a range of cells x labels present, not of the whole grid).
+        lowest = labels.min(initial=0)
+        values, label_rank, _ = unique_inverse(labels - lowest)
+        pairs, voxel_of_point, count = unique_inverse(voxel_of_point * len(values) + label_rank)
+        label = values[pairs % len(values)] + lowest
     voxels = len(count)
     centroid = (
         np.stack(
             [
-                np.bincount(voxel_of_point, weights=points_m[:, k], minlength=voxels)
-                for k in range(3)
+                np.bincount(voxel_of_point, weights=column, minlength=voxels)
+                for column in coordinates
             ],
             axis=1,
         )
         / count[:, None]
     )
-    offsets = points_m - centroid[voxel_of_point]
+    offsets = [coordinates[k] - centroid[:, k].take(voxel_of_point) for k in range(3)]
     scatter = np.empty((voxels, 3, 3))
     for i in range(3):
         for j in range(i, 3):
-            column = np.bincount(
-                voxel_of_point, weights=offsets[:, i] * offsets[:, j], minlength=voxels
-            )
+            column = np.bincount(voxel_of_point, weights=offsets[i] * offsets[j], minlength=voxels)
             scatter[:, i, j] = scatter[:, j, i] = column
     return VoxelMoments(count.astype(float), centroid, scatter, voxel_of_point, size_m, label)
 
@@ -130,6 +137,12 @@ def gaussian_sums(
     whose radius is the longest semi-axis of any gate there; every candidate is then tested
     exactly on its centroid.
 
+    Each pair's arithmetic is written out on the six distinct entries of the centre's
+    ``L^-1`` (``C = L L^T``) and of the voxel's scatter, gathered one column at a time from
+    their small per-centre / per-voxel arrays: with hundreds of thousands of candidate pairs
+    under the wide gates of a hard start, gathering whole ``3 x 3`` matrices per pair and
+    contracting them with ``einsum`` cost several times the arithmetic itself.
+
     Args:
         moments: the voxel moments of the points.
         centres: ``(T, 3)`` Gaussian centres, same frame as the points.
@@ -150,25 +163,56 @@ def gaussian_sums(
         moments.tree(), radius, output_type="ndarray"
     )
     taxel, voxel = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
-    inverse = np.linalg.inv(covariances)
-    offsets = moments.centroid[voxel] - centres[taxel]
-    a = np.einsum("kij,kj->ki", inverse[taxel], offsets)
-    d2 = np.einsum("ki,ki->k", offsets, a)
+    # Whitened offsets y = L^-1 (c - t): D2 = |y|^2 and C^-1 (c - t) = L^-T y.
+    lower = np.linalg.inv(np.linalg.cholesky(covariances))
+    l00, l10, l11, l20, l21, l22 = (lower[:, i, j] for i, j in _LOWER)
+    u = [moments.centroid[:, k].take(voxel) - centres[:, k].take(taxel) for k in range(3)]
+    y0 = l00.take(taxel) * u[0]
+    y1 = l10.take(taxel) * u[0] + l11.take(taxel) * u[1]
+    y2 = l20.take(taxel) * u[0] + l21.take(taxel) * u[1] + l22.take(taxel) * u[2]
+    d2 = y0 * y0 + y1 * y1 + y2 * y2
     inside = d2 < GATE_CHI2_3DOF_95
+    taxel, voxel, d2, y0, y1, y2 = (v[inside] for v in (taxel, voxel, d2, y0, y1, y2))
     if allowed is not None:
-        inside &= allowed(taxel, voxel)
-    taxel, voxel, a, d2 = taxel[inside], voxel[inside], a[inside], d2[inside]
-    scatter = moments.scatter[voxel]
-    scattered = np.einsum("kij,kj->ki", scatter, a)
-    curvature = np.einsum("ki,ki->k", a, scattered) - np.einsum(
-        "kij,kij->k", inverse[taxel], scatter
+        keep = allowed(taxel, voxel)
+        taxel, voxel, d2, y0, y1, y2 = (v[keep] for v in (taxel, voxel, d2, y0, y1, y2))
+    a0 = l00.take(taxel) * y0 + l10.take(taxel) * y1 + l20.take(taxel) * y2
+    a1 = l11.take(taxel) * y1 + l21.take(taxel) * y2
+    a2 = l22.take(taxel) * y2
+    s00, s11, s22, s01, s02, s12 = (
+        moments.scatter[:, i, j].take(voxel) for i, j in ((0, 0), (1, 1), (2, 2), *_OFF)
     )
-    density = normaliser[taxel] * np.exp(-0.5 * d2)
-    voxel_mass = density * (moments.count[voxel] + 0.5 * curvature)
+    # S a, a^T S a and tr(C^-1 S) of the second-order term.
+    scattered = (
+        s00 * a0 + s01 * a1 + s02 * a2,
+        s01 * a0 + s11 * a1 + s12 * a2,
+        s02 * a0 + s12 * a1 + s22 * a2,
+    )
+    inverse = np.einsum("tki,tkj->tij", lower, lower)
+    trace = (
+        inverse[:, 0, 0].take(taxel) * s00
+        + inverse[:, 1, 1].take(taxel) * s11
+        + inverse[:, 2, 2].take(taxel) * s22
+        + 2.0
+        * (
+            inverse[:, 0, 1].take(taxel) * s01
+            + inverse[:, 0, 2].take(taxel) * s02
+            + inverse[:, 1, 2].take(taxel) * s12
+        )
+    )
+    curvature = a0 * scattered[0] + a1 * scattered[1] + a2 * scattered[2] - trace
+    density = normaliser.take(taxel) * np.exp(-0.5 * d2)
+    voxel_mass = density * (moments.count.take(voxel) + 0.5 * curvature)
     mass = np.bincount(taxel, weights=voxel_mass, minlength=count).astype(float)
-    contribution = voxel_mass[:, None] * moments.centroid[voxel] - density[:, None] * scattered
     weighted_sum = np.stack(
-        [np.bincount(taxel, weights=contribution[:, k], minlength=count) for k in range(3)],
+        [
+            np.bincount(
+                taxel,
+                weights=voxel_mass * moments.centroid[:, k].take(voxel) - density * scattered[k],
+                minlength=count,
+            )
+            for k in range(3)
+        ],
         axis=1,
     ).astype(float)
     inside_any = np.zeros(len(moments.count), dtype=bool)

@@ -289,7 +289,10 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
     """The stage the evidence supports best, and why (docs/method.md §9).
 
     The last stage stands while its model is consistent with the evidence: between two
-    models that both pass, the tests cannot say which is closer to the truth. When it is
+    models that both pass, the tests cannot say which is closer to the truth. Unless it is
+    a bounded hypothesis (:attr:`~pipeline.types.Hypothesis.bounded`) while Stage 0 is
+    consistent: its step passes only because it was shortened until it did, so the
+    evidence supports no part of it over Stage 0, which is selected. When it is
     inconsistent, the camera ranks first: a model that puts matter where the camera saw
     none is wrong in its shape whatever the taxels say, while taxels off a model the camera
     accepts may be the object's motion between seeing and touching, or the camera's pose
@@ -317,6 +320,20 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
     if final is None:
         return last, "not assessed: the last stage"
     if final.consistent:
+        initial, hypothesis = stages[0].consistency, stages[last].hypothesis
+        if (
+            hypothesis is not None
+            and hypothesis.bounded
+            and initial is not None
+            and initial.consistent
+        ):
+            # The shortened step passes only because it was shortened until it did: the
+            # evidence contradicted the hypothesis' own step, and a fraction of it is no
+            # measurement, so the consistent Stage 0 is not given up for it.
+            return 0, (
+                f"Stage {last} keeps {hypothesis.step:.0%} of a '{hypothesis.name}' step "
+                f"the evidence contradicts in full; Stage 0 is consistent with it"
+            )
         return last, f"Stage {last} is consistent with the evidence"
     assessed = [s for s in stages if s.consistency is not None]
     seen_right = [s for s in assessed if s.consistency.passes_free_space]

@@ -231,7 +231,7 @@ def interpolated(
     g0 = fusion.g_init
     return diagnose(
         fusion,
-        f"{full.name}, bounded",
+        f"{full.name}{Hypothesis.BOUNDED_SUFFIX}",
         t,
         g0 + t * (full.g - g0),
         [g0 + t * (g_k - g0) for g_k in full.grasp_g],

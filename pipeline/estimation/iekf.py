@@ -71,11 +71,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Literal, Protocol
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from pipeline.errors import FELL_BACK_STATUSES
 from pipeline.estimation.after_view_term import (
@@ -222,6 +223,15 @@ class FusionProblem:
     grasps: tuple[GraspContacts, ...]
     regrasp_noise: np.ndarray
     g_start: np.ndarray | None = None
+    _tree: list = field(default_factory=list, repr=False, compare=False)
+
+    def tree(self) -> cKDTree:
+        """KD-tree over ``points_m``, built on first use and shared by the filter's point
+        index and the self-diagnosis (copies made with ``replace`` share it while their
+        points are the same array; at a million points a tree costs half a second)."""
+        if not self._tree or self._tree[0][0] is not self.points_m:
+            self._tree[:] = [(self.points_m, cKDTree(self.points_m, balanced_tree=False))]
+        return self._tree[0][1]
 
 
 @dataclass(frozen=True)
@@ -573,7 +583,7 @@ def fuse(
 
         searched = after_first_view(problem, covariance_model)
         problem = replace(problem, g_start=search_start(searched, SearchSettings()))
-    index = PointIndex(problem.points_m)
+    index = PointIndex(problem.points_m, problem.tree())
     build_seconds = time.perf_counter() - started
     stage_one = run_stage(problem, settings, 1, index, covariance_model)
     stage_one = replace(

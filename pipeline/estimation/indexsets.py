@@ -46,3 +46,14 @@ def unique_inverse(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     position = np.zeros(len(all_counts), dtype=np.int64)
     position[distinct] = np.arange(len(distinct))
     return distinct.astype(keys.dtype, copy=False), position[keys], all_counts[distinct]
+
+
+def positions(members: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Index of each of ``values`` in ``members`` (sorted distinct non-negative integers that
+    hold every value): ``np.searchsorted(members, values)``, through a table over the range
+    instead of a binary search per value."""
+    if len(values) == 0:
+        return np.zeros(0, dtype=np.int64)
+    table = np.empty(int(members[-1]) + 1, dtype=np.int64)
+    table[members] = np.arange(len(members))
+    return table[values]

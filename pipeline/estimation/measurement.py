@@ -29,7 +29,7 @@ import scipy.sparse
 
 from pipeline.estimation.correspondences import Correspondences
 from pipeline.estimation.geometry import BIAS_PLANE_DIM, apply_side, side_jacobian, side_linear_part
-from pipeline.estimation.indexsets import union
+from pipeline.estimation.indexsets import positions, union
 
 
 @dataclass(frozen=True)
@@ -195,7 +195,7 @@ class PointJacobian:
             local_points: sorted indices of the points with a column block.
             variance: ``(U,)`` isotropic variance of each of those points (m^2).
         """
-        local = np.searchsorted(local_points, self.pair_point)
+        local = positions(local_points, self.pair_point)
         shape = (self.n_blocks, len(local_points))
         coefficients = scipy.sparse.csr_matrix((self.coefficient, (self.pair_block, local)), shape)
         gram = (coefficients.multiply(variance[None, :]) @ coefficients.T).toarray()
@@ -205,7 +205,7 @@ class PointJacobian:
 
     def transpose_times(self, local_points: np.ndarray, vector: np.ndarray) -> np.ndarray:
         """``H_p^T v`` over ``local_points`` (sorted), for ``v`` of shape (3B,); (U, 3)."""
-        local = np.searchsorted(local_points, self.pair_point)
+        local = positions(local_points, self.pair_point)
         per_block = np.einsum("bji,bj->bi", self.block_matrix, vector.reshape(-1, 3))
         per_pair = self.coefficient[:, None] * per_block[self.pair_block]
         return np.stack(
@@ -214,7 +214,7 @@ class PointJacobian:
 
     def sparse(self, local_points: np.ndarray) -> scipy.sparse.csr_matrix:
         """``H_p`` restricted to the columns of ``local_points`` (sorted), (3B, 3U)."""
-        local = np.searchsorted(local_points, self.pair_point)
+        local = positions(local_points, self.pair_point)
         values = self.coefficient[:, None, None] * self.block_matrix[self.pair_block]
         rows = 3 * self.pair_block[:, None, None] + np.arange(3)[None, :, None]
         cols = 3 * local[:, None, None] + np.arange(3)[None, None, :]

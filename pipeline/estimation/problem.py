@@ -196,14 +196,12 @@ def estimate_result(
         return EstimateResult(stages=(initial, *fused))
     # One tree over the unfused points serves every stage: Stage 1 holds them fixed and
     # Stage 2 moves them by millimetres, so their nearest neighbours by index barely change
-    # (the patches take the stage's own coordinates).
-    from scipy.spatial import cKDTree
-
+    # (the patches take the stage's own coordinates). It is the filter's own tree.
     from pipeline.estimation.consistency import assess, select_stage
     from pipeline.estimation.free_space_conditioning import condition
     from pipeline.estimation.hypotheses import holdable
 
-    tree = cKDTree(fusion.points_m, balanced_tree=False)
+    tree = fusion.tree()
     diagnosed = []
     states = [fusion.g_init, *(o.g for o in outcomes)]
     for stage, g in zip((initial, *fused), states, strict=True):

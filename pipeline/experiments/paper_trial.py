@@ -128,7 +128,7 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
         row["grasps_made"] = len(document["grasps"])
         for entry in document["grasps"]:
             row.update(grasp_fields(entry))
-        if unfused := document.get("unfused_grasp"):
+        for unfused in document.get("unfused_grasps", []):
             row.update(attempt_fields(unfused, fused=False))
     return row
 
@@ -181,7 +181,7 @@ def failure_fields(document: Mapping[str, Any]) -> dict[str, Any]:
 
 def attempt_fields(entry: Mapping[str, Any], fused: bool) -> dict[str, Any]:
     """The row fields of any grasp a multi-grasp trial made (``grasp{k}_...``), fused or
-    not (the later grasp it stopped on): its hand, the planner's score of its plan (in
+    not (a later grasp released unfused): its hand, the planner's score of its plan (in
     [0, 1]; None when the planner gives none), and how far it moved the object (mm, deg)."""
     prefix = f"grasp{entry['grasp']}"
     return {

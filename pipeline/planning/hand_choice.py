@@ -8,8 +8,9 @@ available hand plans on the cloud (before any hand is in the scene), and the fea
 with the highest score wins; planners score on one scale
 (:attr:`pipeline.types.GraspPlan.score`), so a hand wins by the quality of the grasp it can
 make on this object, not by its name (nor a planner by its name, or by when it was
-installed). When no planner finds a feasible grasp, the refusal names the object's measured
-size and every hand's aperture.
+installed). When no planner finds a feasible grasp, every one plans again on the cloud with
+the volume the view leaves hidden under it (:func:`_with_hidden_volume`); when none finds
+one then either, the refusal names the object's measured size and every hand's aperture.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from pipeline.config import Config
 from pipeline.errors import ConfigError
 from pipeline.params import to_toml
 from pipeline.planning.grasp_geometry import narrowest_width
+from pipeline.planning.hidden_volume import hidden_below
 from pipeline.registry import StageRegistry
 from pipeline.stages import GraspPlanner
 from pipeline.types import GraspCandidate, GraspPlan, GripperSpec, PointCloud, SymmetryInit
@@ -190,14 +192,24 @@ def choose_grasp(
         answer = PlannerAnswer(wanted, config.choices["planner"], plan)
         return HandChoice(answer, f"trial.gripper = '{wanted}'", (answer,))
 
-    answers = []
-    for name in registry.names("planner"):
-        for gripper in registry.get("planner", name).cls.grippers:
-            if gripper in grippers and wanted in (AUTO, gripper):
-                planner = planners(name)
-                plan = _plan(planner, cloud, proposal, grippers[gripper], missed)
-                answers.append(PlannerAnswer(gripper, name, plan))
+    def ask(planned: PointCloud) -> list[PlannerAnswer]:
+        answers = []
+        for name in registry.names("planner"):
+            for gripper in registry.get("planner", name).cls.grippers:
+                if gripper in grippers and wanted in (AUTO, gripper):
+                    plan = _plan(planners(name), planned, proposal, grippers[gripper], missed)
+                    answers.append(PlannerAnswer(gripper, name, plan))
+        return answers
+
+    answers = ask(cloud)
     feasible = [a for a in answers if a.plan.status == "ok"]
+    hidden = ""
+    filled = None if feasible else _with_hidden_volume(cloud)
+    if filled is not None:
+        again = ask(filled)
+        if any(a.plan.status == "ok" for a in again):
+            answers, feasible = again, [a for a in again if a.plan.status == "ok"]
+            hidden = "; planned with the volume the view leaves hidden under the cloud"
     if not feasible:
         return HandChoice(
             _refusal(answers, cloud, proposal, grippers, table_height_m), "", tuple(answers)
@@ -213,7 +225,30 @@ def choose_grasp(
         f"{best.gripper} ({best.planner}) has the best feasible grasp, "
         f"score {_score(best.plan):.2f}"
     )
-    return HandChoice(best, reason + (f"; {others}" if others else ""), tuple(answers))
+    return HandChoice(best, reason + (f"; {others}" if others else "") + hidden, tuple(answers))
+
+
+#: Grid step of the volume :func:`_with_hidden_volume` adds (m): a few taxel pitches.
+HIDDEN_STEP_M = 0.004
+
+
+def _with_hidden_volume(cloud: PointCloud) -> PointCloud | None:
+    """``cloud`` with the volume the view leaves hidden under it
+    (:func:`~pipeline.planning.hidden_volume.hidden_below`, every :data:`HIDDEN_STEP_M`),
+    for planning where no hand has a feasible grasp on the cloud alone; None when the
+    camera's position is unknown or nothing is hidden.
+
+    Where the camera looks at the object along its mirror plane (a box seen end-on), the
+    plane's mirror image is the seen face again, and no hand finds the sides to close on;
+    the seen top says how far the object reaches there. Only the planners see the added
+    points: the estimator fuses the cloud as seen."""
+    if cloud.viewpoint_m is None:
+        return None
+    hidden = hidden_below(cloud.points, cloud.viewpoint_m, HIDDEN_STEP_M)
+    if not len(hidden):
+        return None
+    points = np.concatenate([cloud.points, hidden])
+    return PointCloud(points, cloud.frame, viewpoint_m=cloud.viewpoint_m)
 
 
 def create_planner(config: Config, registry: StageRegistry, name: str) -> GraspPlanner:

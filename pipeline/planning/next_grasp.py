@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -162,13 +162,18 @@ def uncertainty(stage: StageEstimate) -> Uncertainty:
 
 
 def stop_reason(
-    known: Uncertainty, grasps_done: int, grasps_allowed: int, until_std_m: float | None
+    known: Uncertainty,
+    grasps_done: int,
+    grasps_allowed: int,
+    until_std_m: float | None,
+    unfused: int = 0,
 ) -> str:
-    """Why the trial stops after ``grasps_done`` grasps, or ``""`` to grasp again.
+    """Why the trial stops after ``grasps_done`` grasps (``unfused`` of them not fused), or
+    ``""`` to grasp again.
 
     It stops when the plane's offset std and the hidden shape std of ``known`` are both at
     most ``until_std_m`` (when given), else when ``grasps_allowed`` grasps were made (and
-    then says which std stayed above ``until_std_m``).
+    then says how many were not fused and which std stayed above ``until_std_m``).
     """
     reached = until_std_m is not None and (
         known.plane_offset_std_m <= until_std_m and known.hidden_shape_std_m <= until_std_m
@@ -180,12 +185,12 @@ def stop_reason(
         )
     if grasps_done < grasps_allowed:
         return ""
+    made = f"grasps done: {grasps_done} of {grasps_allowed}"
+    if unfused:
+        made += f" ({unfused} not fused)"
     if until_std_m is None:
-        return f"grasps done: {grasps_done} of {grasps_allowed}"
-    return (
-        f"grasps done: {grasps_done} of {grasps_allowed}, before the uncertainty reached "
-        f"{1e3 * until_std_m:g} mm: {known.stop_stds()}"
-    )
+        return made
+    return f"{made}, before the uncertainty reached {1e3 * until_std_m:g} mm: {known.stop_stds()}"
 
 
 def model_for_planning(
@@ -498,26 +503,39 @@ def choose_next_grasp(
     rng: np.random.Generator,
     viewpoint_m: np.ndarray | None = None,
     earlier: tuple[GraspPlan, ...] = (),
+    unfused: tuple[GraspPlan, ...] = (),
 ) -> NextGraspChoice:
     """Plan the next grasp on ``stage``'s model with each of ``hands`` and pick it by
     ``strategy``; ``viewpoint_m`` is the camera's position when the object was seen (m,
     frame R), ``earlier`` the plans of the grasps fused so far (each names its hand, which
-    is one of ``hands``)."""
+    is one of ``hands``), ``unfused`` those of the later grasps that were not fused: no
+    strategy chooses one of these again (:func:`repeats`)."""
     cloud, proposal = model_for_planning(stage, viewpoint_m)
+    grippers = {hand.gripper.name: hand.gripper for hand in hands}
     if strategy == "paper":
         plans = [hand.planner.plan(cloud, proposal, hand.gripper) for hand in hands]
         feasible = [plan for plan in plans if plan.status == "ok"]
-        return NextGraspChoice(max(feasible, key=_planner_score, default=plans[0]), strategy)
+        best = max(feasible, key=_planner_score, default=plans[0])
+        if best.status != "ok" or not repeats(best, unfused, grippers):
+            return NextGraspChoice(best, strategy)
     alternatives = tuple(
-        plan for hand in hands for plan in hand.planner.alternatives(cloud, proposal, hand.gripper)
+        plan
+        for hand in hands
+        for plan in hand.planner.alternatives(cloud, proposal, hand.gripper)
+        if not repeats(plan, unfused, grippers)
     )
     if not alternatives:
         first = hands[0]
-        return NextGraspChoice(first.planner.plan(cloud, proposal, first.gripper), strategy)
+        plan = first.planner.plan(cloud, proposal, first.gripper)
+        if plan.status == "ok" and repeats(plan, unfused, grippers):
+            plan = replace(plan, status="refused", reason="every feasible grasp was not fused")
+        return NextGraspChoice(plan, strategy)
+    if strategy == "paper":  # its own plan was not fused: the best-scored other
+        chosen = int(np.argmax([_planner_score(plan) for plan in alternatives]))
+        return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
     if strategy == "random":
         chosen = int(rng.integers(len(alternatives)))
         return NextGraspChoice(alternatives[chosen], strategy, alternatives, (), chosen)
-    grippers = {hand.gripper.name: hand.gripper for hand in hands}
     touches = [pad_contacts(plan, grippers[plan.gripper], stage.completed) for plan in alternatives]
     scores = tuple(information_scores(stage, alternatives, grippers, model, earlier, touches))
     # A grasp that would turn the object further than the re-grasp noise lets the estimator

@@ -231,7 +231,7 @@ def draw_grasps(
 ) -> None:
     """``grasps.png``: the object from above with every grasp's pads numbered, how it was
     chosen and by which hand, and the selected stage's median deviation after it; the grasp
-    the trial stopped on without fusing it, where it was planned to touch."""
+    the trial released without fusing it, where it was planned to touch."""
     from pipeline.reports.trial_pictures import GraspMarks, grasps_picture
 
     marks = []
@@ -241,7 +241,7 @@ def draw_grasps(
         chosen = f"{entry['chosen_by']['strategy']} ({entry['gripper']})"
         label = f"{chosen}, then {median_mm:.1f} mm (Stage {stage})"
         marks.append(GraspMarks(label, contacts.positions, contacts.pads))
-    if unfused := document.get("unfused_grasp"):
+    for unfused in document.get("unfused_grasps", []):
         planned = np.asarray(unfused["plan"]["predicted_contacts"]).reshape(-1, 3)
         touched = ", ".join(unfused.get("pads_in_contact", [])) or "nothing"
         what = f"touched {touched}" if unfused["executed"] else "not executed"
@@ -451,9 +451,9 @@ def _write_results(trial: Trial, look: Look, fused: Fused) -> TrialRecord:
 
 
 class MissedGrasp(StageFailure):
-    """The first grasp's pads did not touch opposing sides (:func:`unfused_reason`): there
-    is nothing to fuse. ``plan`` is the grasp that missed; the trial looks again and grasps
-    unlike it while ``trial.retries`` allows."""
+    """The first grasp's pads did not touch opposing sides (:func:`unfused_reason`), or the
+    hand could not execute it: there is nothing to fuse. ``plan`` is the grasp that missed;
+    the trial looks again and grasps unlike it while ``trial.retries`` allows."""
 
     def __init__(self, message: str, plan: GraspPlan) -> None:
         super().__init__(message)
@@ -575,8 +575,8 @@ def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
     ``contacts.json`` and the record's ``grasps`` grow by one grasp each time.
 
     Raises:
-        StageFailure: the first grasp was not executed, touched nothing or one side only,
-            or the initialiser rejected it.
+        MissedGrasp: the first grasp was not executed, or touched nothing or one side only.
+        StageFailure: the initialiser rejected it.
     """
     settings, record = trial.settings, trial.record
     until_m = 1e-3 * settings.until_std_mm if settings.until_std_mm > 0 else None
@@ -589,6 +589,7 @@ def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
     views: list[AfterView | None] = []
     entries: list[dict[str, Any]] = []
     record.start_grasping(settings.next_grasp if settings.grasps > 1 else None)
+    unfused: list[GraspPlan] = []
     plan, chosen_by, fused, stop = look.choice.plan, {"strategy": "first"}, None, ""
     for k in range(settings.grasps):
         if k > 0:
@@ -602,15 +603,24 @@ def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
                     rng,
                     look.cloud.viewpoint_m,
                     tuple(plans),
+                    tuple(unfused),
                 )
             plan, chosen_by = following.plan, following.to_json()
             if plan.status != "ok":
                 stop = f"no feasible grasp {k + 1}: {plan.reason}"
                 break
         attempt = _execute(trial, k, plan, chosen_by)
-        contacts, stop = _read_taxels(trial, attempt, grasps, plans)
-        if stop:
-            break
+        contacts, why = _read_taxels(trial, attempt)
+        if why:
+            # A later grasp that held nothing leaves the estimate as it was; the hand
+            # releases the object before the next, planned unlike this one.
+            unfused.append(plan)
+            known = uncertainty(fused.result.selected)
+            stop = stop_reason(known, k + 1, settings.grasps, until_m, len(unfused))
+            if stop:
+                break
+            trial.report(f"{why}; released, planning another")
+            continue
         grasps.append(contacts)
         plans.append(plan)
         views.append(_look_after(trial, look, attempt))
@@ -622,7 +632,7 @@ def _grasp_and_fuse(trial: Trial, look: Look) -> Fused:
         known = uncertainty(fused.result.selected)
         planner = hands[plan.gripper].planner.name
         record.fused(grasp_to_json(attempt, planner, contacts, fused, known), fused.object_after)
-        stop = stop_reason(known, k + 1, settings.grasps, until_m)
+        stop = stop_reason(known, k + 1, settings.grasps, until_m, len(unfused))
         if stop:
             break
     record.stopped(sum(len(c) for c in grasps), stop)
@@ -634,7 +644,8 @@ def _execute(trial: Trial, k: int, plan: GraspPlan, chosen_by: dict[str, Any]) -
     changes the hand when the plan's is another; the record's ``grasp`` is the first.
 
     Raises:
-        StageFailure: the first grasp was not executed.
+        MissedGrasp: the first grasp was not executed (the palm landed on the object, the
+            hand was blocked on its way down or overlapped the object where it started).
     """
     world = trial.world
     trial.report(f"grasp {k + 1} with {plan.gripper}")
@@ -661,20 +672,21 @@ def _execute(trial: Trial, k: int, plan: GraspPlan, chosen_by: dict[str, Any]) -
             np.degrees(object_turn(outcome.object_before, outcome.object_after))
         ),
     }
+    attempt = Attempt(k, plan, chosen_by, outcome, executed, shift_m, tilt_rad)
     if k == 0:
         trial.record.first_grasp(executed, outcome.object_after)
         if not outcome.executed:
-            raise StageFailure(
-                f"grasp not executed: {outcome.reason}{next_try(world.hands, plan.gripper)}"
-            )
-    return Attempt(k, plan, chosen_by, outcome, executed, shift_m, tilt_rad)
+            # Touching nothing as surely as a grasp that closed on air: look and grasp again.
+            why = f"grasp not executed: {outcome.reason}"
+            trial.record.unfused(attempt.to_json(), why)
+            raise MissedGrasp(why, plan)
+    return attempt
 
 
-def _read_taxels(
-    trial: Trial, attempt: Attempt, grasps: list[Contacts], plans: list[GraspPlan]
-) -> tuple[Contacts | None, str]:
-    """The taxels ``attempt`` touched, and why it is not fused (``""``: it is); a grasp
-    not fused is the record's ``unfused_grasp``.
+def _read_taxels(trial: Trial, attempt: Attempt) -> tuple[Contacts | None, str]:
+    """The taxels ``attempt`` touched, and why it is not fused (``""``: it is); a first
+    grasp not fused is the record's ``unfused_grasp``, a later one joins its
+    ``unfused_grasps``.
 
     Raises:
         MissedGrasp: the first grasp touched nothing or one side only (its taxels, when
@@ -682,13 +694,14 @@ def _read_taxels(
     """
     k, plan = attempt.k, attempt.plan
     if not attempt.outcome.executed:
-        trial.record.unfused(attempt.to_json())
-        return None, f"grasp {k + 1} not executed: {attempt.outcome.reason}"
+        why = f"grasp {k + 1} not executed: {attempt.outcome.reason}"
+        trial.record.unfused(attempt.to_json(), why)
+        return None, why
     with trial.phase("tactile"):
         contacts = trial.stages.tactile.read(trial.world, attempt.outcome)
     stop = unfused_reason(k, contacts, attempt.shift_m, attempt.tilt_rad)
     if stop:
-        trial.record.unfused(attempt.to_json(contacts))
+        trial.record.unfused(attempt.to_json(contacts), stop)
         if k == 0:
             if len(contacts):
                 with trial.phase("write"):
@@ -767,8 +780,8 @@ def attempt_to_json(
     contacts: Contacts | None = None,
 ) -> dict[str, Any]:
     """A grasp as planned, chosen and executed (and what it touched, when read): the part
-    of a ``grasps`` entry before the estimate, and ``result.json``'s ``unfused_grasp``, the
-    grasp a trial stopped on (not executed, or touching too little to fuse)."""
+    of a ``grasps`` entry before the estimate, and of ``result.json``'s ``unfused_grasp``
+    and ``unfused_grasps`` (not executed, or touching too little to fuse)."""
     touched = {}
     if contacts is not None:
         touched = {

@@ -78,10 +78,14 @@ class TrialDocument:
         self.data["grasp"] = executed
         self.data["object_pose_after"] = pose_to_json(pose_after)
 
-    def unfused(self, attempt: Mapping[str, Any]) -> None:
-        """The grasp the trial stopped on without fusing it (:func:`~pipeline.run.trial.
-        attempt_to_json`)."""
-        self.data["unfused_grasp"] = attempt
+    def unfused(self, attempt: Mapping[str, Any], reason: str) -> None:
+        """A grasp not fused (:func:`~pipeline.run.trial.attempt_to_json`) and why: the
+        first is ``unfused_grasp`` (the trial stops on it or grasps again, :meth:`missed`),
+        a later one joins ``unfused_grasps`` (released, and another grasp planned)."""
+        if attempt["grasp"] == 1:
+            self.data["unfused_grasp"] = attempt
+        else:
+            self.data.setdefault("unfused_grasps", []).append({**attempt, "reason": reason})
 
     def missed(self) -> None:
         """The first grasp missed and will be made again: it moves to ``missed_grasps``."""
