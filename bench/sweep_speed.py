@@ -4,7 +4,9 @@ an earlier revision, in one run.
 Run: ``python bench/sweep_speed.py [--baseline REV] [--rounds N] [--experiment NAME]``.
 The baseline revision (default: where this branch left ``main``) is unpacked with
 ``git archive`` into a temporary folder and run with this environment's interpreter and
-libraries, its own ``pipeline`` and ``plugins`` first on the import path. The two sweeps
+libraries, its own ``pipeline`` and ``plugins`` first on the import path, and its own
+plugin entry points (a revision whose plugins lived in other modules finds them: the
+unpacked tree gets the distribution metadata its ``pyproject.toml`` declares). The two sweeps
 run in turn, ``rounds`` times each (baseline first), each as a new ``symfuse sweep``
 process into a fresh folder; the table gives every run's trials per minute (wall) and
 processor seconds per trial (the sweep and its workers, user + system), and the ratios of
@@ -21,6 +23,7 @@ Target (issue 41): this tree's trials per minute at least twice the baseline's.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import os
 import resource
@@ -30,6 +33,7 @@ import sys
 import tarfile
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 from summary import record
@@ -38,6 +42,8 @@ from pipeline.experiments import LOCATION_PARAMS
 
 ROOT = Path(__file__).resolve().parent.parent
 THROUGHPUT_TARGET = 2.0
+#: ``prctl`` option: orphaned descendants are re-parented to the caller (Linux).
+PR_SET_CHILD_SUBREAPER = 36
 #: Row fields that hold times: they differ between any two runs.
 TIME_FIELDS = frozenset({"timings", "seconds"})
 
@@ -60,12 +66,47 @@ def unpack(revision: str, folder: Path) -> Path:
     tree = folder / "baseline"
     with tarfile.open(archive) as tar:
         tar.extractall(tree, filter="data")
+    declare_entry_points(tree)
     return tree
 
 
+def declare_entry_points(tree: Path) -> None:
+    """Give the unpacked ``tree`` the distribution metadata (name, version, entry points)
+    of its ``pyproject.toml``: first on the import path, it is the ``symfuse`` distribution
+    whose plugins the baseline's sweep loads, not this environment's editable install."""
+    project = tomllib.loads((tree / "pyproject.toml").read_text())["project"]
+    info = tree / f"{project['name']}-{project['version']}.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(
+        f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n"
+    )
+    lines = []
+    for group, points in project.get("entry-points", {}).items():
+        lines += [f"[{group}]", *(f"{name} = {target}" for name, target in points.items()), ""]
+    (info / "entry_points.txt").write_text("\n".join(lines))
+
+
+def adopt_orphans() -> None:
+    """Make this process the reaper of its orphaned descendants (Linux): a sweep's fork
+    server outlives the sweep by a moment and is no child of it, so its processor time and
+    its workers' reach ``RUSAGE_CHILDREN`` only when this process waits for it."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) != 0:
+        sys.exit(f"sweep_speed: cannot become a subreaper (errno {ctypes.get_errno()})")
+
+
+def reap_descendants() -> None:
+    """Wait for every descendant left over (see :func:`adopt_orphans`)."""
+    while True:
+        try:
+            os.waitpid(-1, 0)
+        except ChildProcessError:
+            return
+
+
 def run_sweep(tree: Path, experiment: str, workers: int, out: Path) -> tuple[float, float]:
-    """Wall and processor seconds (the sweep process and its workers) of one sweep of the
-    code in ``tree``."""
+    """Wall and processor seconds (the sweep process and every process it started, its
+    workers and a fork server included) of one sweep of the code in ``tree``."""
     env = {
         **os.environ,
         "PYTHONPATH": os.pathsep.join([str(tree), os.environ.get("PYTHONPATH", "")]),
@@ -76,6 +117,7 @@ def run_sweep(tree: Path, experiment: str, workers: int, out: Path) -> tuple[flo
     started = time.perf_counter()
     subprocess.run(command, env=env, cwd=tree, check=True, capture_output=True)
     wall = time.perf_counter() - started
+    reap_descendants()
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
@@ -117,6 +159,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     revision = args.baseline or default_baseline()
+    adopt_orphans()
     load_start = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="symfuse-sweep-speed-") as folder:
         trees = {"baseline": unpack(revision, Path(folder)), "this tree": ROOT}

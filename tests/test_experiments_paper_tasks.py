@@ -146,6 +146,18 @@ def test_overrides_select_another_estimator(registry):
     assert config.stage_params("planner").strategy == "paper"
 
 
+def test_a_sweeps_trials_draw_pictures_only_when_the_user_names_them(registry):
+    """The trials leave pictures out (the report draws its own) unless the user's config
+    names ``trial.pictures``; ``--set trial.pictures=true`` names it at the default's value."""
+    from pipeline.cli.sweep import user_settings
+
+    for named, pictures in (([], False), (["trial.pictures=true"], True)):
+        user = user_settings(load_config(registry, overrides=named))
+        task = _module("table3").tasks(ExperimentOptions(config=user, quick=True))[0]
+        config = load_config(registry, overrides=trial_overrides(task.params))
+        assert config.trial.pictures is pictures
+
+
 def test_narrowest_width_of_a_rotated_rectangle():
     angle = math.radians(30.0)
     rotation = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])

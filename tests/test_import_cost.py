@@ -51,6 +51,16 @@ def test_the_completion_plugins_modules_load_no_scipy():
     assert loaded_after(code, ("scipy", *HEAVY)) == []
 
 
+def test_planning_a_sweeps_trials_loads_no_mesh_library():
+    """A sweep lists its trials from the catalogue's specification: the process that
+    plans them (and draws the report) never pays for trimesh, shapely or open3d."""
+    code = (
+        "from pipeline.experiments import EXPERIMENTS, ExperimentOptions\n"
+        "assert EXPERIMENTS['table3'].tasks(ExperimentOptions())"
+    )
+    assert loaded_after(code, ("trimesh", "shapely", "open3d", "scipy")) == []
+
+
 @pytest.mark.slow
 def test_a_trial_without_pictures_loads_no_plotting_or_statistics(tmp_path):
     """A sweep's trials draw no pictures: they never pay for matplotlib or scipy.stats."""

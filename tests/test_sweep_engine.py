@@ -191,11 +191,14 @@ def test_invalid_arguments_raise_value_error(tmp_path):
     assert not results.exists() or results.read_text() == ""
 
 
-def test_process_pool_gives_the_same_rows_as_in_process(tmp_path):
+@pytest.mark.parametrize("preload", [(), ("sweep_toy",)], ids=["spawned", "forked"])
+def test_process_pool_gives_the_same_rows_as_in_process(tmp_path, preload):
+    """Workers spawned, or forked from a fork server that loaded ``preload`` once."""
     tasks = make_tasks(6, x4={"fail": True})
     in_process = run_sweep(tasks, sweep_toy.run_one, tmp_path / "a.jsonl", workers=1,
                            progress=False)  # fmt: skip
-    pooled = run_sweep(tasks, sweep_toy.run_one, tmp_path / "b.jsonl", workers=2, progress=False)
+    pooled = run_sweep(tasks, sweep_toy.run_one, tmp_path / "b.jsonl", workers=2,
+                       progress=False, preload=preload)  # fmt: skip
     assert pooled == in_process
     assert sorted(file_lines(tmp_path / "b.jsonl")) == sorted(file_lines(tmp_path / "a.jsonl"))
 

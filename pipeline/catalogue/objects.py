@@ -25,10 +25,9 @@ import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-import trimesh
 
 from objects import ROOT as OBJECTS_ROOT
 from pipeline.catalogue.shapes import GENERATORS
@@ -36,6 +35,9 @@ from pipeline.errors import ConfigError, InputError
 from pipeline.io.units import MILLIMETRES_HINT, check_extent, check_not_metres, scale_of
 from pipeline.symmetry import truth_file
 from pipeline.types import Symmetry, SymmetryPlane
+
+if TYPE_CHECKING:
+    import trimesh
 
 _log = logging.getLogger(__name__)
 
@@ -247,6 +249,8 @@ def _checked_mesh(
     mesh: Any, path: Path, what: str, hint: str = MILLIMETRES_HINT
 ) -> trimesh.Trimesh:
     """``mesh`` if it has triangles, finite vertices, a volume and a graspable size."""
+    import trimesh
+
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(f"{path}: {what}")
     if not np.isfinite(mesh.vertices).all():
@@ -290,6 +294,8 @@ def _load_mesh_file(
         raise InputError(f"{path}: {what}")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputError(f"{path}: unsupported mesh format (use {', '.join(MESH_SUFFIXES)})")
+    import trimesh
+
     try:
         with warnings.catch_warnings():
             # A scan's OBJ may carry NaN normals (the YCB mug's do): trimesh's vertex merge

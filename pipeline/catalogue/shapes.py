@@ -26,23 +26,28 @@ boolean engine (the ``manifold3d`` package).
 
 Every generator takes the ``dimensions_m`` of a catalogue entry and returns a watertight mesh
 in metres, z up, not yet placed on the table (:func:`pipeline.catalogue.objects.place_on_table`).
+trimesh and shapely are imported by the generators that use them: listing the catalogue (a
+sweep planning its trials) needs the kinds, not the libraries.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
-import shapely.affinity
-import shapely.geometry
-import shapely.ops
-import trimesh
+
+if TYPE_CHECKING:
+    import shapely.geometry
+    import trimesh
 
 #: Polygon segments of a full circle in generated round shapes.
 CIRCLE_SECTIONS = 128
 
 
 def _union(parts: list[trimesh.Trimesh]) -> trimesh.Trimesh:
+    import trimesh
+
     try:
         import manifold3d  # noqa: F401  (trimesh's boolean engine; checked for a clear error)
     except ImportError as exc:
@@ -56,6 +61,8 @@ def _union(parts: list[trimesh.Trimesh]) -> trimesh.Trimesh:
 def _revolve(profile_rz: list[tuple[float, float]]) -> trimesh.Trimesh:
     """Solid of revolution about z of a closed profile ``(radius, z)`` that starts and ends on
     the axis; consecutive duplicate points are dropped."""
+    import trimesh
+
     points = [profile_rz[0]]
     for point in profile_rz[1:]:
         if point != points[-1]:
@@ -65,6 +72,8 @@ def _revolve(profile_rz: list[tuple[float, float]]) -> trimesh.Trimesh:
 
 def _extrude_xz(polygon_xz: shapely.geometry.Polygon, width_y: float) -> trimesh.Trimesh:
     """Prism of a polygon drawn in the (x, z) plane, extruded symmetrically along y."""
+    import trimesh
+
     prism = trimesh.creation.extrude_polygon(polygon_xz, width_y)
     # Rotate +90 deg about x: polygon (x, y) -> (x, z), extrusion +z -> -y.
     prism.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2.0, [1, 0, 0]))
@@ -75,6 +84,8 @@ def _extrude_xz(polygon_xz: shapely.geometry.Polygon, width_y: float) -> trimesh
 def _loft_ellipses(sections_zab: list[tuple[float, float, float]]) -> trimesh.Trimesh:
     """Closed loft through horizontal ellipses ``(z, semi_axis_x, semi_axis_y)``, bottom to
     top, capped at both ends."""
+    import trimesh
+
     n = CIRCLE_SECTIONS
     angles = 2.0 * np.pi * np.arange(n) / n
     rings = [
@@ -99,10 +110,15 @@ def _loft_ellipses(sections_zab: list[tuple[float, float, float]]) -> trimesh.Tr
 
 
 def _box_xz(x0: float, x1: float, z0: float, z1: float) -> shapely.geometry.Polygon:
+    import shapely.geometry
+
     return shapely.geometry.box(x0, z0, x1, z1)
 
 
 def _ellipse_xz(centre_x: float, centre_z: float, semi_x: float, semi_z: float):
+    import shapely.affinity
+    import shapely.geometry
+
     circle = shapely.geometry.Point(centre_x, centre_z).buffer(1.0, quad_segs=32)
     return shapely.affinity.scale(circle, semi_x, semi_z, origin=(centre_x, centre_z))
 
@@ -111,10 +127,14 @@ def _ellipse_xz(centre_x: float, centre_z: float, semi_x: float, semi_z: float):
 
 
 def _box(d: Mapping[str, float]) -> trimesh.Trimesh:
+    import trimesh
+
     return trimesh.creation.box(extents=[d["thickness"], d["length"], d["height"]])
 
 
 def _cylinder(d: Mapping[str, float]) -> trimesh.Trimesh:
+    import trimesh
+
     return trimesh.creation.cylinder(
         radius=d["diameter"] / 2.0, height=d["height"], sections=CIRCLE_SECTIONS
     )
@@ -162,6 +182,8 @@ def _mug(d: Mapping[str, float]) -> trimesh.Trimesh:
 
 
 def _loaf(d: Mapping[str, float]) -> trimesh.Trimesh:
+    import shapely.geometry
+
     half_w, side_h, dome_h = d["width"] / 2.0, d["side_height"], d["height"] - d["side_height"]
     dome = [(half_w * np.cos(a), side_h + dome_h * np.sin(a)) for a in np.linspace(0.0, np.pi, 33)]
     outline = shapely.geometry.Polygon([(-half_w, 0.0), (half_w, 0.0), *dome])
@@ -169,6 +191,9 @@ def _loaf(d: Mapping[str, float]) -> trimesh.Trimesh:
 
 
 def _car(d: Mapping[str, float]) -> trimesh.Trimesh:
+    import shapely.geometry
+    import trimesh
+
     half_l, clearance, belt = d["length"] / 2.0, d["ground_clearance"], d["beltline_height"]
     bevel = 0.25 * (belt - clearance)
     lower = shapely.geometry.Polygon(
@@ -195,6 +220,8 @@ def _car(d: Mapping[str, float]) -> trimesh.Trimesh:
 
 
 def _spray_bottle(d: Mapping[str, float]) -> trimesh.Trimesh:
+    import shapely.ops
+
     body_a, body_b, taper = d["body_depth"] / 2.0, d["body_width"] / 2.0, d["body_taper"]
     neck_r = d["neck_diameter"] / 2.0
     body_top = d["body_height"]

@@ -53,14 +53,20 @@ def _captures_folder(args: argparse.Namespace, experiment) -> Path | None:
     return Path(args.captures).resolve()
 
 
+#: The trial keys a sweep's trials set themselves unless the user names them, even at the
+#: default's own value: the paper's reproductions keep their single view
+#: (docs/after-view.md), and a sweep's trials draw no pictures.
+NAMED_TRIAL_KEYS = ("after_view", "pictures")
+
+
 def user_settings(config) -> dict:
     """What the sweep's trials take from the user: the values that differ from the
-    defaults, and ``trial.after_view`` whenever the user named it, even at the default's
-    own value: the paper's reproductions keep their single view unless asked
-    (docs/after-view.md), so the choice travels with the config."""
+    defaults, and each of :data:`NAMED_TRIAL_KEYS` whenever the user named it, so the
+    choice travels with the config."""
     user = config.differing()
-    if "trial.after_view" in config.changed:
-        user.setdefault("trial", {})["after_view"] = config.trial.after_view
+    for key in NAMED_TRIAL_KEYS:
+        if f"trial.{key}" in config.changed:
+            user.setdefault("trial", {})[key] = getattr(config.trial, key)
     return user
 
 
@@ -145,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
                 scheduler=args.scheduler,
                 fingerprint=fingerprint,
                 rerun_stale=args.overwrite,
+                preload=experiment.worker_imports,
             )
         except ValueError as exc:
             raise ConfigError(str(exc)) from exc

@@ -13,7 +13,9 @@ Every row offers what the sweep engine needs: ``name``, ``description``,
 it scores the labelled captures of ``--captures DIR``), ``randomised`` (whether it
 draws its cases at random unless ``symfuse sweep --grid`` asks for the paper's grid),
 ``tasks(options)``, ``run_one`` (a top-level, picklable function from a task's JSON params
-to its JSON row) and ``report(rows, out_dir)`` (the CSV, figures and ``report.md``). Nothing
+to its JSON row), ``worker_imports`` (the modules local workers load once, before any
+task: :data:`TRIAL_WORKER_IMPORTS` for full trials; a module experiment's
+``WORKER_IMPORTS``) and ``report(rows, out_dir)`` (the CSV, figures and ``report.md``). Nothing
 heavy is imported until a row is run, so listing the experiments stays cheap.
 """
 
@@ -46,9 +48,15 @@ class Experiment(Protocol):
     def randomised(self) -> bool: ...
     @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]: ...
+    @property
+    def worker_imports(self) -> tuple[str, ...]: ...
     def tasks(self, options: ExperimentOptions) -> list[SweepTask]: ...
     def report(self, rows: list[dict], out_dir: Path) -> list[Path]: ...
 
+
+#: What the workers of an experiment whose tasks are full trials load once, before any
+#: task (:mod:`pipeline.experiments.trial_worker`).
+TRIAL_WORKER_IMPORTS = ("pipeline.experiments.trial_worker",)
 
 #: Trials of a randomised Fig. 8 or 9 study.
 RANDOM_TRIALS = 400
@@ -108,6 +116,8 @@ class SymmetryGrid:
         from pipeline.experiments.synthetic_study import run_trial
 
         return run_trial
+
+    worker_imports = ()
 
     def tasks(self, options: ExperimentOptions) -> list[SweepTask]:
         from pipeline.experiments.synthetic_study import (
@@ -196,6 +206,8 @@ class MeasureTable:
 
         return run_paper_trial
 
+    worker_imports = TRIAL_WORKER_IMPORTS
+
     def tasks(self, options: ExperimentOptions) -> list[SweepTask]:
         from pipeline.experiments.paper_tasks import (
             QUICK_VIEW_OFFSET_DEG,
@@ -215,8 +227,8 @@ class MeasureTable:
 @dataclass(frozen=True)
 class ModuleExperiment:
     """An experiment with its own grid or report, implemented by a module exposing
-    ``DESCRIPTION``, ``tasks``, ``run_one``, ``report`` and optionally ``CONFIG_SECTIONS``
-    and ``READS_SCANS``."""
+    ``DESCRIPTION``, ``tasks``, ``run_one``, ``report`` and optionally ``CONFIG_SECTIONS``,
+    ``READS_SCANS`` and ``WORKER_IMPORTS``."""
 
     name: str
     module_name: str
@@ -248,6 +260,10 @@ class ModuleExperiment:
     @property
     def run_one(self) -> Callable[[dict], dict[str, Any]]:
         return self.module.run_one
+
+    @property
+    def worker_imports(self) -> tuple[str, ...]:
+        return getattr(self.module, "WORKER_IMPORTS", ())
 
     def tasks(self, options: ExperimentOptions) -> list[SweepTask]:
         return self.module.tasks(options)

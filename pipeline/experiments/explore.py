@@ -38,6 +38,7 @@ from pipeline.config import NEXT_GRASP_STRATEGIES
 from pipeline.estimation.later_grasps import EARLIER_SHAPE
 from pipeline.experiments import ExperimentOptions, SweepTask
 from pipeline.experiments.common import failures_section, fmt, task_seed
+from pipeline.experiments.definitions import TRIAL_WORKER_IMPORTS
 from pipeline.experiments.init import yaws_deg
 from pipeline.experiments.paper_tasks import paper_task, sweep_params
 from pipeline.experiments.paper_trial import run_paper_trial
@@ -45,6 +46,9 @@ from pipeline.experiments.rows import count_rows, failure_lines, finished_rows, 
 from pipeline.experiments.sweep import write_csv
 
 NAME = "explore"
+#: Each task is a full trial: the workers load its modules once.
+WORKER_IMPORTS = TRIAL_WORKER_IMPORTS
+
 DESCRIPTION = (
     "three grasps per pose, later ones chosen by paper, random or information: deviation "
     "after each grasp (catalogue, and --scans DIR)"

@@ -15,12 +15,16 @@ from typing import Any
 import numpy as np
 
 from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.definitions import TRIAL_WORKER_IMPORTS
 from pipeline.experiments.deviation_report import report_deviation
 from pipeline.experiments.paper_tasks import QUICK_VIEW_OFFSET_DEG, object_tasks
 from pipeline.experiments.paper_trial import run_paper_trial
 from pipeline.experiments.rows import group_rows
 
 NAME = "kth"
+#: Each task is a full trial: the workers load its modules once.
+WORKER_IMPORTS = TRIAL_WORKER_IMPORTS
+
 DESCRIPTION = "three-finger set, SDH-2 + stereo, VC: deviation per object and stage (paper Fig. 23)"
 
 #: Catalogue object -> number of poses in the paper (Table 4).

@@ -34,6 +34,7 @@ import numpy as np
 from pipeline.errors import estimate_failed
 from pipeline.experiments import ExperimentOptions, SweepTask, explore
 from pipeline.experiments.common import fmt, plugin_registry, task_seed
+from pipeline.experiments.definitions import TRIAL_WORKER_IMPORTS
 from pipeline.experiments.init import yaws_deg
 from pipeline.experiments.paper_tasks import paper_task, sweep_params, user_settings
 from pipeline.experiments.paper_trial import FAILURE_STAGES, run_paper_trial
@@ -41,6 +42,9 @@ from pipeline.experiments.rows import value
 from pipeline.experiments.sweep import write_csv
 
 NAME = "objects"
+#: Each task is a full trial: the workers load its modules once.
+WORKER_IMPORTS = TRIAL_WORKER_IMPORTS
+
 DESCRIPTION = (
     "every object (catalogue, and --scans DIR) at 10 seeded yaws, one grasp with --gripper "
     "auto: opposing contacts, refusals, tipping, fused no worse than vision, failure stages"

@@ -180,17 +180,25 @@ def paper_view(params: Mapping[str, Any]) -> tuple[str, ...]:
     return () if chosen else ("trial.after_view=false",)
 
 
+def sweep_pictures(params: Mapping[str, Any]) -> tuple[str, ...]:
+    """No pictures in a sweep's trial (the sweep's report draws its own figures from the
+    rows) unless the user's config chooses ``trial.pictures`` itself."""
+    chosen = "pictures" in params.get("config", {}).get("trial", {})
+    return () if chosen else ("trial.pictures=false",)
+
+
 def trial_overrides(params: Mapping[str, Any]) -> list[str]:
     """The ``--set`` strings that turn the sweep's config into the trial of ``params``: its
-    object, hand, seed, yaw and initialiser, the paper's grasp strategy, segmentation and
-    single view (:data:`PAPER_GRASP`, :data:`PAPER_SEGMENTATION`, :func:`paper_view`,
-    unless ``paper_grasp`` is false: the shipped defaults), the experiment's overrides and
-    the estimator."""
+    object, hand, seed, yaw and initialiser, its pictures (:func:`sweep_pictures`), the
+    paper's grasp strategy, segmentation and single view (:data:`PAPER_GRASP`,
+    :data:`PAPER_SEGMENTATION`, :func:`paper_view`, unless ``paper_grasp`` is false: the
+    shipped defaults), the experiment's overrides and the estimator."""
     estimator = params["estimator"]
     paper = params.get("paper_grasp", True)
     overrides = [
         f"trial.object={toml_value(params['object'])}",
         f"trial.gripper={params['gripper']}",
+        *sweep_pictures(params),
         *(PAPER_GRASP + PAPER_SEGMENTATION + paper_view(params) if paper else ()),
         f"trial.seed={int(params['seed'])}",
         f"trial.yaw_deg={toml_value(float(params['yaw_deg']))}",

@@ -13,12 +13,16 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.experiments import ExperimentOptions, SweepTask
+from pipeline.experiments.definitions import TRIAL_WORKER_IMPORTS
 from pipeline.experiments.deviation_report import report_deviation
 from pipeline.experiments.paper_tasks import QUICK_VIEW_OFFSET_DEG, VIEW_OFFSETS_DEG, object_tasks
 from pipeline.experiments.paper_trial import run_paper_trial
 from pipeline.experiments.rows import INIT_LABELS, group_rows
 
 NAME = "spray"
+#: Each task is a full trial: the workers load its modules once.
+WORKER_IMPORTS = TRIAL_WORKER_IMPORTS
+
 DESCRIPTION = "spray bottle, PG-70: deviation box plots per stage, VC and PS (paper Figs. 14-19)"
 OBJECT = "spray_bottle"
 INITS = ("vc", "ps")

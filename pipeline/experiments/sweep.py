@@ -60,8 +60,9 @@ def run_sweep(
     progress: bool = True,
     fingerprint: str = "",
     rerun_stale: bool = False,
+    preload: Sequence[str] = (),
 ) -> list[dict]:
-    # Nine parameters: what to run and where, then how, each keyword-only with a default.
+    # Ten parameters: what to run and where, then how, each keyword-only with a default.
     """Run every task not yet in ``results_path`` and return the rows of all ``tasks``.
 
     Args:
@@ -71,11 +72,15 @@ def run_sweep(
         results_path: the JSONL results file; created with its folder if missing.
         workers: local worker processes (default ``os.cpu_count()``); 1 runs every task in
             this process, which is the easiest to debug. Ignored by the Dask executor.
-        executor: ``"local"`` (a process pool, started with ``spawn``) or ``"dask"``.
+        executor: ``"local"`` (a process pool, started with ``spawn``, or forked from a
+            fork server with ``preload``) or ``"dask"``.
         scheduler: the Dask scheduler address (required for ``executor="dask"``).
         progress: show a tqdm progress bar on stderr.
         fingerprint: what else the rows depend on (a hash of the config the trials read).
         rerun_stale: drop and re-run stale rows (see the module doc) instead of refusing.
+        preload: modules the local workers load before any task (an experiment's
+            ``worker_imports``): imported once, in a fork server the workers are forked
+            from, instead of once per worker. Empty: the workers are spawned.
 
     Returns:
         One row per task, in the order of ``tasks`` (rows of tasks finished by an earlier
@@ -118,7 +123,7 @@ def run_sweep(
         contextlib.closing(
             _run_dask(client, pending, run_one)
             if client is not None
-            else _run_local(pending, run_one, workers or os.cpu_count() or 1)
+            else _run_local(pending, run_one, workers or os.cpu_count() or 1, preload)
         ) as lines,
     ):
         _append_rows(lines, results, bar, rows_by_key)
@@ -393,13 +398,15 @@ def _error_line(head: dict, exc: BaseException) -> str:
 Pending = list[tuple[str, dict, str]]  # key, params, config hash
 
 
-def _run_local(pending: Pending, run_one: RunOne, workers: int) -> Iterator[str]:
+def _run_local(
+    pending: Pending, run_one: RunOne, workers: int, preload: Sequence[str]
+) -> Iterator[str]:
     if workers <= 1 or len(pending) <= 1:
         for task in pending:
             yield run_task(run_one, *task)
         return
     pool = concurrent.futures.ProcessPoolExecutor(
-        max_workers=min(workers, len(pending)), mp_context=multiprocessing.get_context("spawn")
+        max_workers=min(workers, len(pending)), mp_context=_worker_context(preload)
     )
     broken: BrokenProcessPool | None = None
     try:
@@ -419,6 +426,18 @@ def _run_local(pending: Pending, run_one: RunOne, workers: int) -> Iterator[str]
             "kept: re-run to resume, or use --workers 1 to find the task"
         )
         raise broken
+
+
+def _worker_context(preload: Sequence[str]) -> multiprocessing.context.BaseContext:
+    """How the local workers start: spawned (a fresh interpreter each), or with
+    ``preload`` forked from a fork server that imported those modules once. The fork
+    server is a fresh interpreter too: the workers inherit none of this process's state
+    (its threads, its open files, a progress bar), only the modules it loaded."""
+    if not preload:
+        return multiprocessing.get_context("spawn")
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(list(preload))
+    return context
 
 
 def _dask_client(scheduler: str) -> Any:

@@ -180,10 +180,10 @@ class IekfEstimator(Estimator):
         )
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
+        started = time.perf_counter()  # Stage 0's setup includes loading the fusion
         from pipeline.api.estimation import fuse
 
         p = self.params
-        started = time.perf_counter()
         window = (p.window_along_normal_m, p.window_across_normal_m)
         fusion = fusion_problem(
             problem, p, self.name, window, p.facing_filter, self.after_view_settings()
