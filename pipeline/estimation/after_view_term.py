@@ -31,7 +31,7 @@ once per view (docs/method.md).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import gammaincinv
@@ -58,6 +58,14 @@ class AfterViewSettings:
         hand_calibration: measure the calibration error on the hand (see above).
         hand_floor_yaw_rad, hand_floor_xy_m: std of that measurement's error beyond its own
             covariance (the hand's model against its image, points by its edge).
+        hand_gate_m: the hand's registration starts pairing points this near (m): the
+            calibration error's reach, narrower than the object's (whose gate also spans
+            the grasp's motion), so a finger cannot pair with its neighbour.
+        hand_normal_cos: a hand point pairs only with a surface point whose normal
+            agrees this well with its own (:class:`RegistrationSettings`).
+        hand_min_leverage_points: a direction of the calibration error the hand's points
+            fix with less information than this many points at full leverage keeps its
+            prior (:class:`RegistrationSettings`).
         gate_alpha: false-alarm probability of the innovation's chi-square gate (3 dof).
     """
 
@@ -69,6 +77,9 @@ class AfterViewSettings:
     hand_calibration: bool = False
     hand_floor_yaw_rad: float = 0.02
     hand_floor_xy_m: float = 0.002
+    hand_gate_m: float = 0.006
+    hand_normal_cos: float = 0.7
+    hand_min_leverage_points: float = 4.0
     gate_alpha: float = 0.001
 
 
@@ -152,11 +163,17 @@ def hand_error(
     # the near side's points through a thin finger).
     camera_m = np.asarray(view.observation.T_robot_camera)[:3, 3]
     seen = np.einsum("ij,ij->i", view.hand_normals, camera_m - view.hand_surface) > 0.0
+    control = replace(
+        settings.registration,
+        start_gate_m=settings.hand_gate_m,
+        min_normal_cos=settings.hand_normal_cos,
+        min_leverage_points=settings.hand_min_leverage_points,
+    )
     hand = register_planar(
         view.hand_points,
         view.hand_surface[seen],
         pivot_m,
-        settings.registration,
+        control,
         view.hand_normals[seen],
         prior_covariance=calibration,
     )
