@@ -51,6 +51,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
     parser.add_argument("--seed", type=counting_number(0), help="random seed of the trial")
     parser.add_argument("--yaw", type=float, metavar="DEG", help="object yaw on the table")
+    parser.add_argument("--rest", metavar="K|random", help=REST_HELP)
     parser.add_argument(
         "--grasps",
         type=counting_number(1),
@@ -81,6 +82,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_rerun_option(parser)
     add_wide_option(parser)
     return parser
+
+
+REST_HELP = (
+    "place the object in its K-th most likely stable pose (0: the most likely), or one drawn "
+    "with the seed (random); default: upright, as the mesh stands"
+)
 
 
 def three_numbers(text: str) -> tuple[float, float, float]:

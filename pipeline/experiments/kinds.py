@@ -29,6 +29,7 @@ from pipeline.experiments import ExperimentOptions, SweepTask, explore
 from pipeline.experiments.common import fmt, task_seed
 from pipeline.experiments.init import yaws_deg
 from pipeline.experiments.paper_tasks import paper_task, user_settings
+from pipeline.experiments.rows import rest_fields
 from pipeline.experiments.sweep import write_csv
 
 NAME = "kinds"
@@ -40,8 +41,6 @@ DESCRIPTION = (
 READS_SCANS = True
 YAWS = 4
 QUICK_OBJECTS = ("salt_cylinder", "cd_drive")
-#: A true axis within this angle of +z makes an upright object a body of revolution (deg).
-UPRIGHT_DEG = 5.0
 
 
 def tasks(options: ExperimentOptions) -> list[SweepTask]:
@@ -75,21 +74,21 @@ def tasks(options: ExperimentOptions) -> list[SweepTask]:
 
 def run_one(params: Mapping[str, Any]) -> dict[str, Any]:
     """View, segment, choose the kind and score both completions of one task."""
-    from pipeline.catalogue.objects import load_object
+    from pipeline.catalogue.rest import scene_object
     from pipeline.experiments.common import plugin_registry
     from pipeline.experiments.paper_tasks import trial_config
     from pipeline.metrics import mesh_deviation
     from pipeline.metrics.evaluation import GroundTruth, shape_scores
     from pipeline.symmetry.axis_fit import fit_axis
     from pipeline.symmetry.kinds import complete, free_space_share
-    from pipeline.symmetry.scoring import round_centre, symmetry_errors
+    from pipeline.symmetry.scoring import symmetry_errors, true_kind
     from pipeline.symmetry.truth_file import true_symmetries
     from pipeline.types import SceneSetup, Symmetry
 
     registry = plugin_registry()
     config = trial_config(params)
     settings = config.trial
-    obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
+    obj = scene_object(settings)
     setup = SceneSetup(
         obj, settings.x_m, settings.y_m, float(np.radians(settings.yaw_deg)), settings.seed
     )
@@ -107,14 +106,11 @@ def run_one(params: Mapping[str, Any]) -> dict[str, Any]:
     vertices = np.asarray(obj.mesh.vertices) @ T[:3, :3].T + T[:3, 3]
     truth = GroundTruth(vertices, np.asarray(obj.mesh.faces), obj.symmetry, None, T[:2, 3])
     centre = vertices.min(axis=0) / 2.0 + vertices.max(axis=0) / 2.0
-    upright = round_centre(truths) is not None or any(
-        not s.is_plane and abs(s.direction[2]) >= math.cos(math.radians(UPRIGHT_DEG))
-        for s in truths
-    )
     row: dict[str, Any] = {
         "label": params["label"],
         "part": params["part"],
-        "true_kind": "axis" if upright else "plane" if truths else "none",
+        **rest_fields(None if obj.rest is None else obj.rest.to_json()),
+        "true_kind": true_kind(truths),
         "chosen_kind": init.kind,
         "status": init.status,
         **{f"score_{kind}": value for kind, value in init.kind_scores.items()},

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 from pipeline.errors import StageFailure
 from pipeline.experiments.common import plugin_registry
 from pipeline.experiments.paper_tasks import trial_config
-from pipeline.experiments.rows import STAGES
+from pipeline.experiments.rows import STAGES, rest_fields
 from pipeline.io.formats import consistency_fields, hypothesis_field
 
 if TYPE_CHECKING:
@@ -83,6 +83,7 @@ def paper_trial(
                 "failed": str(exc),
                 "status": "failed",
                 "diverged": False,
+                **rest_fields(document.get("rest")),
                 **failure_fields(document),
                 "seconds": time.perf_counter() - started,
             }
@@ -104,6 +105,8 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
         "timings": dict(document.get("timings", {})),
         "selected_stage": document.get("selected_stage"),
         "gripper": document.get("gripper"),
+        **rest_fields(document.get("rest")),
+        "true_kind": document.get("true_kind"),
     }
     for stage_json, stage_metrics in zip(document["stages"], metrics, strict=True):
         prefix = f"stage{stage_json['stage']}"
