@@ -280,6 +280,8 @@ def run(args: argparse.Namespace) -> int:
         record = run_trial(config, registry, staging, report=_progress)
     print(trial_summary(record, args.wide))
     print(wrapped(selection_line(record.result)))
+    if "completion" in record.document.get("init", {}):
+        print(wrapped(f"init: {record.document['init']['completion']}"))
     print(wrapped(grasp_line(record.document)))
     if settings.grasps > 1 or settings.until_std_mm > 0:
         print(grasps_summary(record.document, args.wide))
