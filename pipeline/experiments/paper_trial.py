@@ -3,7 +3,9 @@
 Result rows (``k`` = stage 0, 1, 2): ``failed`` (None, or the reason a stage refused:
 empty segmentation, refused or unexecuted grasp, rejected initialisation), ``status`` (the
 final stage's, or ``"failed"``), ``diverged``, ``points``, ``taxels_in_contact``,
-``gripper`` (the hand that grasped), ``selected_stage``,
+``gripper`` (the hand that grasped), ``selected_stage``, ``rest_pose``,
+``rest_probability``, ``rest_keeps_vertical`` and ``true_kind`` (the object's resting pose
+and the kind of symmetry that describes it as it lies, also on a failed trial's row),
 ``seconds``, ``timings``, and per stage ``stage{k}_status``, ``stage{k}_iterations``,
 ``stage{k}_hypothesis`` (the alternative hypothesis its model comes from, empty for the
 fused model; docs/method.md §9), ``stage{k}_deviation_{min,q1,median,q3,max,mean}_mm``
@@ -84,6 +86,7 @@ def paper_trial(
                 "status": "failed",
                 "diverged": False,
                 **rest_fields(document.get("rest")),
+                "true_kind": document.get("true_kind"),
                 **failure_fields(document),
                 "seconds": time.perf_counter() - started,
             }
