@@ -180,14 +180,43 @@ def test_standard_weights_match_dense_gaussian_densities():
         index, points, G, PIVOT, taxels, window, state_covariance, alternative=False
     )
     for side in found.sides():
-        covariance = side_covariances(taxels, window, G, PIVOT, state_covariance, side.back)
-        images = apply_side(points, G, PIVOT, side.back)
-        for i in range(len(taxels)):
-            expected = _gated_densities(images, taxels[i], covariance[i])
-            got = np.zeros(len(points))
-            got[side.point[side.taxel == i]] = side.weight[side.taxel == i]
-            np.testing.assert_allclose(got, expected, rtol=1e-9)
-            assert side.mass[i] == pytest.approx(expected.sum(), rel=1e-9)
+        _assert_dense_weights(side, points, G, taxels, window, state_covariance)
+
+
+def _assert_dense_weights(side, points, g, taxels, window, state_covariance):
+    """Every listed weight and mass of ``side`` is the dense oracle's."""
+    covariance = side_covariances(taxels, window, g, PIVOT, state_covariance, side.back)
+    images = apply_side(points, g, PIVOT, side.back)
+    for i in range(len(taxels)):
+        expected = _gated_densities(images, taxels[i], covariance[i])
+        got = np.zeros(len(points))
+        got[side.point[side.taxel == i]] = side.weight[side.taxel == i]
+        np.testing.assert_allclose(got, expected, rtol=1e-9)
+        assert side.mass[i] == pytest.approx(expected.sum(), rel=1e-9)
+
+
+def test_kept_gate_candidates_give_the_dense_weights_as_the_state_moves():
+    """The listed gates' candidates kept between calls (GateCandidates): after a small step
+    of the state they cover the new gates and are reused, after a large one they do not and
+    are searched again; either way every weight is the dense oracle's."""
+    points = RNG.uniform(-0.03, 0.03, (2000, 3))
+    taxels = RNG.uniform(-0.02, 0.02, (6, 3))
+    window = normal_ellipsoids(RNG.normal(size=(6, 3)), 0.004, 0.0015)
+    state_covariance = np.diag([0.01, 0.002, 0.002, 0.002, 0.003, 0.02]) ** 2
+    index = PointIndex(points)
+    step = np.array([0.001, 0.0002, -0.0001, 0.0001, 0.0002, 0.002])
+    reused = []
+    for g in (G, G + step, G + 2 * step, G + 20 * step):
+        kept = dict(index.candidates)
+        found = find_correspondences(
+            index, points, g, PIVOT, taxels, window, state_covariance, alternative=False
+        )
+        for side in found.sides():
+            if (side.back, False) in kept:
+                reused.append(index.candidates[(side.back, False)] is kept[(side.back, False)])
+            _assert_dense_weights(side, points, g, taxels, window, state_covariance)
+    # Both sides reuse their candidates after the two small steps, neither after the jump.
+    assert reused == [True, True, True, True, False, False]
 
 
 @pytest.mark.parametrize("need_pairs", [True, False])
