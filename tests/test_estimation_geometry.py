@@ -21,6 +21,7 @@ from pipeline.estimation.correspondences import (
 from pipeline.estimation.covariances import normal_ellipsoids
 from pipeline.estimation.geometry import (
     apply_side,
+    completed_model,
     image_step_bound,
     invert_side,
     rebase_bias_translation,
@@ -110,6 +111,12 @@ def test_image_step_bound_is_the_largest_motion_over_the_hull_and_its_margin():
     shifted = points + margin * offsets / np.linalg.norm(offsets, axis=1, keepdims=True)
     bound = image_step_bound(vertices, G, g_new, PIVOT, margin)
     assert largest_motion(shifted) <= bound < largest_motion(points) + 2 * margin * 0.1
+
+
+def test_completed_model_is_the_front_then_the_mirrored_cloud():
+    points = RNG.normal(0.0, 0.1, (50, 3))
+    expected = np.vstack([apply_side(points, G, PIVOT, back) for back in (False, True)])
+    np.testing.assert_allclose(completed_model(points, G, PIVOT), expected, rtol=0, atol=1e-15)
 
 
 def test_vector_median_picks_the_central_member():
