@@ -114,7 +114,7 @@ def test_image_step_bound_is_the_largest_motion_over_the_hull_and_its_margin():
 
 
 def test_completed_model_is_the_front_then_the_mirrored_cloud():
-    points = RNG.normal(0.0, 0.1, (50, 3))
+    points = np.random.default_rng(3).normal(0.0, 0.1, (50, 3))
     expected = np.vstack([apply_side(points, G, PIVOT, back) for back in (False, True)])
     np.testing.assert_allclose(completed_model(points, G, PIVOT), expected, rtol=0, atol=1e-15)
 
@@ -203,17 +203,20 @@ def _assert_dense_weights(side, points, g, taxels, window, state_covariance):
 
 
 def test_kept_gate_candidates_give_the_dense_weights_as_the_state_moves():
-    """The listed gates' candidates kept between calls (GateCandidates): after a small step
-    of the state they cover the new gates and are reused, after a large one they do not and
-    are searched again; either way every weight is the dense oracle's."""
-    points = RNG.uniform(-0.03, 0.03, (2000, 3))
-    taxels = RNG.uniform(-0.02, 0.02, (6, 3))
-    window = normal_ellipsoids(RNG.normal(size=(6, 3)), 0.004, 0.0015)
+    """The listed gates' candidates kept between calls (GateCandidates): the second call
+    keeps them, after small steps of the state they cover the new gates and are reused,
+    after a large one they do not and are searched again; either way every weight is the
+    dense oracle's."""
+    # A generator of its own: the draws of the tests after it stay as they were.
+    rng = np.random.default_rng(11)
+    points = rng.uniform(-0.03, 0.03, (2000, 3))
+    taxels = rng.uniform(-0.02, 0.02, (6, 3))
+    window = normal_ellipsoids(rng.normal(size=(6, 3)), 0.004, 0.0015)
     state_covariance = np.diag([0.01, 0.002, 0.002, 0.002, 0.003, 0.02]) ** 2
     index = PointIndex(points)
     step = np.array([0.001, 0.0002, -0.0001, 0.0001, 0.0002, 0.002])
     reused = []
-    for g in (G, G + step, G + 2 * step, G + 20 * step):
+    for g in (G, G + step, G + 2 * step, G + 3 * step, G + 23 * step):
         kept = dict(index.candidates)
         found = find_correspondences(
             index, points, g, PIVOT, taxels, window, state_covariance, alternative=False

@@ -50,6 +50,7 @@ from pipeline.estimation.aggregation import (
 from pipeline.estimation.aggregation import voxel_moments as _voxel_moments
 from pipeline.estimation.alternative_centres import alternative_centres
 from pipeline.estimation.covariances import correspondence_covariances
+from pipeline.estimation.gate_candidates import CANDIDATE_REACH, GateCandidates
 from pipeline.estimation.geometry import box_corners, invert_side, side_jacobian, side_linear_part
 from pipeline.estimation.indexsets import union, unique_inverse
 from pipeline.estimation.surface import any_azimuth, compatible, facing_labels, point_labels
@@ -61,53 +62,9 @@ WIDE_GATE_FRACTION = 0.25
 _SUM_BLOCK_POINTS = 4096
 #: Voxel edge of the centroids whose convex hull bounds the cloud (m), see PointIndex.hull.
 HULL_VOXEL_M = 0.005
-#: Whitened radius (gate units, the gate's own is sqrt(7.815) = 2.8) within which a gate's
-#: candidates are kept for the next call with the points unmoved (:class:`GateCandidates`).
-CANDIDATE_REACH = float(np.sqrt(GATE_CHI2_3DOF_95)) + 1.0
 #: Unlisted sums go through the voxel-aggregated cloud when it has at most this fraction of
 #: the points (see :mod:`.aggregation`); otherwise the gates are too narrow for it to pay.
 AGGREGATE_FRACTION = 0.5
-
-
-@dataclass(frozen=True)
-class GateCandidates:
-    """Every reference point within :data:`CANDIDATE_REACH` of some gates, kept for the
-    next call that tests the same taxels against the unmoved points.
-
-    Within a pass of the filter the gates move by a fraction of their width from one
-    iteration to the next, so a second tree search would find the same points again. A
-    point outside the kept set was at whitened distance ``|y| >= reach`` from its old
-    gate; in the new gate, with ``M = L_new^-1 L_old`` and ``delta`` the centre's motion
-    whitened by the old gate, its distance is ``|M (y + delta)| >= sigma_min(M) (reach -
-    |delta|)``. When that bound reaches the gate's ``sqrt(7.815)`` for every taxel
-    (:meth:`covers`), the kept set holds every point of the new gates and the exact test on
-    it gives the weights a search would (the tree lists a centre's points in its own order,
-    whatever the radius, so even the order of the pairs is the same).
-
-    Attributes:
-        centres: ``(T, 3)`` the gates' centres when the points were found.
-        lower: ``(T, 3, 3)`` Cholesky factors of their covariances.
-        counts: ``(T,)`` points kept per gate.
-        point: ``(K,)`` the kept points, gate by gate.
-    """
-
-    centres: np.ndarray
-    lower: np.ndarray
-    counts: np.ndarray
-    point: np.ndarray
-
-    def covers(self, centres: np.ndarray, inverse: np.ndarray) -> bool:
-        """True when every point inside the gates of ``centres`` and inverse covariances
-        ``inverse`` ((T, 3, 3)) is kept (see the class docstring)."""
-        if len(centres) != len(self.centres):
-            return False
-        moved = np.linalg.solve(self.lower, (self.centres - centres)[:, :, None])[:, :, 0]
-        reach = CANDIDATE_REACH - np.linalg.norm(moved, axis=1)
-        stretch = np.einsum("tji,tjk,tkl->til", self.lower, inverse, self.lower)
-        shortest = np.sqrt(np.maximum(np.linalg.eigvalsh(stretch)[:, 0], 0.0))
-        # A relative margin of 1e-9 against the rounding of the bound itself.
-        gate = np.sqrt(GATE_CHI2_3DOF_95) * (1.0 + 1e-9)
-        return bool(np.all((reach > 0.0) & (shortest * reach >= gate)))
 
 
 class PointIndex:
@@ -128,8 +85,10 @@ class PointIndex:
         self._labels: dict[bool, np.ndarray] = {}
         self._hull: tuple[np.ndarray, float] | None = None
         self._ranks: list[tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]] = []
-        #: The listed gates' candidates of the last call per caller's key (GateCandidates).
+        #: Gate candidates kept per caller's key (GateCandidates), and what each key's last
+        #: call searched (see :meth:`steady`).
         self.candidates: dict[object, GateCandidates] = {}
+        self._searched: dict[object, object] = {}
         self._columns: np.ndarray | None = None
 
     def labels(self, azimuth: bool) -> np.ndarray:
@@ -149,6 +108,16 @@ class PointIndex:
         ranks = np.unique(labels, return_inverse=True)
         self._ranks.append((labels, ranks))
         return ranks
+
+    def steady(self, key: object, searched: object) -> bool:
+        """Record what ``key``'s gates now search (``searched``: how many listed gates) and
+        tell whether its last call searched the same. Keeping candidates costs a wider
+        search, which pays only when the next call tests the same gates: the first listed
+        call after a change (the first of a pass, after sums over voxels) searches
+        plainly, the second keeps its candidates."""
+        same = self._searched.get(key) == searched
+        self._searched[key] = searched
+        return same
 
     def columns(self, points: np.ndarray) -> np.ndarray:
         """``points`` as ``(3, N)`` contiguous coordinates, cached for the reference
@@ -380,7 +349,9 @@ def _gated_weights(
     and, with ``allowed(taxel, point)``, by the surface filter. With a ``key`` (the points
     unmoved) the candidates within :data:`CANDIDATE_REACH` are kept in the index under it,
     and the next call with that key tests them instead of searching again while they
-    cover its gates (:class:`GateCandidates`).
+    cover its gates (:class:`~.gate_candidates.GateCandidates`; the tree lists a centre's
+    points in its own order whatever the radius, so the pairs even come in the same order
+    as a search's).
     """
     if len(centres_pre) == 0:
         empty = np.empty(0, dtype=np.int64)
@@ -493,7 +464,7 @@ def _side_weights(
     wide gates. ``bands``: (point, taxel) labels of the surface filter (:mod:`.surface`;
     azimuth on the front only), or None. ``key``: the listed gates' candidates are kept
     under it for the next call with the same key while the points are unmoved
-    (:class:`GateCandidates`); None searches afresh."""
+    (:class:`~.gate_candidates.GateCandidates`); None searches afresh."""
     eigenvalues = np.linalg.eigvalsh(covariance_pre)
     radii = np.sqrt(GATE_CHI2_3DOF_95 * eigenvalues[:, -1]) + displacement_m
     normaliser = 1.0 / np.sqrt((2.0 * np.pi) ** 3 * np.prod(eigenvalues, axis=1))
@@ -505,8 +476,8 @@ def _side_weights(
         if len(moments.count) <= AGGREGATE_FRACTION * len(points):
             allowed = None
             if bands is not None:
-                allowed = _compatible_pairs(np.unique(moments.label, return_inverse=True), bands[1])
-
+                labels = np.unique(moments.label, return_inverse=True)
+                allowed = _compatible_pairs(labels, bands[1])
             mass, weighted_sum, inside = gaussian_sums(
                 moments, centres_pre, covariance_pre, normaliser, allowed
             )
@@ -520,6 +491,7 @@ def _side_weights(
         wide = radii > WIDE_GATE_FRACTION * index.diagonal_m
     listed = np.flatnonzero(~wide)
     columns = index.columns(points)
+    unmoved = key is not None and displacement_m == 0.0 and points is index.reference
     allowed = None
     if bands is not None:
         allowed = _compatible_pairs(index.label_ranks(bands[0]), bands[1][listed])
@@ -531,7 +503,7 @@ def _side_weights(
         radii[listed],
         normaliser[listed],
         allowed,
-        key if displacement_m == 0.0 and points is index.reference else None,
+        key if unmoved and index.steady(key, ("listed", len(listed))) else None,
     )
     taxel = listed.take(taxel)
     # float64 even without pairs (bincount of nothing is an integer array).
