@@ -100,14 +100,16 @@ class PointIndex:
         return self._labels[azimuth]
 
     def label_ranks(self, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``np.unique(labels, return_inverse=True)`` of one of :meth:`labels`' arrays,
-        cached (the listed gates look every candidate's label up by its rank)."""
+        """``np.unique(labels, return_inverse=True)`` of one of :meth:`labels`' arrays
+        (small integers from -1: counted, not sorted), cached (the listed gates look every
+        candidate's label up by its rank)."""
         for array, ranks in self._ranks:
             if array is labels:
                 return ranks
-        ranks = np.unique(labels, return_inverse=True)
-        self._ranks.append((labels, ranks))
-        return ranks
+        lowest = labels.min(initial=0)
+        values, inverse, _ = unique_inverse(labels - lowest)
+        self._ranks.append((labels, (values + lowest, inverse)))
+        return self._ranks[-1][1]
 
     def steady(self, key: object, searched: object) -> bool:
         """Record what ``key``'s gates now search (``searched``: how many listed gates) and
