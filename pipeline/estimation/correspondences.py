@@ -52,7 +52,7 @@ from pipeline.estimation.alternative_centres import alternative_centres
 from pipeline.estimation.covariances import correspondence_covariances
 from pipeline.estimation.gate_candidates import CANDIDATE_REACH, GateCandidates
 from pipeline.estimation.geometry import box_corners, invert_side, side_jacobian, side_linear_part
-from pipeline.estimation.indexsets import union, unique_inverse
+from pipeline.estimation.indexsets import ranks, union, unique_inverse
 from pipeline.estimation.surface import any_azimuth, compatible, facing_labels, point_labels
 
 #: A gate whose radius exceeds this fraction of the cloud's bounding-box diagonal is summed
@@ -100,15 +100,13 @@ class PointIndex:
         return self._labels[azimuth]
 
     def label_ranks(self, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``np.unique(labels, return_inverse=True)`` of one of :meth:`labels`' arrays
-        (small integers from -1: counted, not sorted), cached (the listed gates look every
-        candidate's label up by its rank)."""
-        for array, ranks in self._ranks:
+        """:func:`~.indexsets.ranks` of one of :meth:`labels`' arrays, cached (the listed
+        gates look every candidate's label up by its rank; every voxel grid splits its
+        cells by them)."""
+        for array, found in self._ranks:
             if array is labels:
-                return ranks
-        lowest = labels.min(initial=0)
-        values, inverse, _ = unique_inverse(labels - lowest)
-        self._ranks.append((labels, (values + lowest, inverse)))
+                return found
+        self._ranks.append((labels, ranks(labels)))
         return self._ranks[-1][1]
 
     def steady(self, key: object, searched: object) -> bool:
@@ -137,7 +135,13 @@ class PointIndex:
         key = (tuple(int(e) for e in exponents), azimuth)
         if key not in self._moments:
             labels = None if azimuth is None else self.labels(azimuth)
-            self._moments[key] = _voxel_moments(self.reference, np.exp2(exponents / 4.0), labels)
+            self._moments[key] = _voxel_moments(
+                self.reference,
+                np.exp2(exponents / 4.0),
+                labels,
+                self.columns(self.reference),
+                None if labels is None else self.label_ranks(labels),
+            )
         return self._moments[key]
 
     def hull(self) -> tuple[np.ndarray, float]:
