@@ -16,7 +16,10 @@ Search strategy: both sides' maps are isometries, so a taxel's gate is searched 
 the filter has moved since (Stage 2) are covered by widening the search radius by the
 largest displacement so far, and every candidate is then tested exactly at its current
 position. The cost of a search therefore grows with N only through the tree queries and the
-number of points that really fall inside the gates.
+number of points that really fall inside the gates. While the points stay put (Stage 1) a
+side keeps its gates' candidates from one call to the next and searches again only when a
+bound on the gates' motion no longer proves that they hold every point of the new gates
+(:mod:`.gate_candidates`).
 
 Wide gates: before the first update the back's gates span the whole object (a prior ``m_r``
 std of tens of millimetres), so listing every (taxel, point) pair would cost ``O(M N)``

@@ -1,11 +1,10 @@
 """Gate candidates kept from one iteration of the filter to the next.
 
 Within a pass of the filter the points stay put (Stage 1) and the gates move by a fraction
-of their width from one iteration to the next, so searching the points near
-every gate again would find the same ones. :class:`GateCandidates` keeps, per gate, every
-point within :data:`CANDIDATE_REACH` of it and proves, for the next call's gates, that
-nothing outside can be inside them; the exact gate test on the kept members then gives
-what a search would.
+of their width from one iteration to the next, so searching the points near every gate
+again would find the same ones. :class:`GateCandidates` keeps, per gate, every point within
+:data:`CANDIDATE_REACH` of it and proves, for the next call's gates, that nothing outside
+can be inside them; the exact gate test on the kept points then gives what a search would.
 """
 
 from __future__ import annotations
