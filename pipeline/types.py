@@ -771,13 +771,19 @@ class Consistency:
         return self.free_space_violations <= self.free_space_limit
 
     @property
+    def free_space_excess(self) -> float:
+        """The points in seen free space as a share of their limit (0 when the camera's
+        test did not run): how far the camera contradicts the model."""
+        if self.free_space_violations is None or self.free_space_limit is None:
+            return 0.0
+        return self.free_space_violations / max(self.free_space_limit, 1)
+
+    @property
     def excess(self) -> float:
         """The largest ratio of a statistic to its bound (<= 1 when consistent): how far the
         evidence contradicts the model, comparable between stages."""
-        ratios = [self.nis / self.nis_threshold if np.isfinite(self.nis) else 0.0]
-        if self.free_space_violations is not None and self.free_space_limit is not None:
-            ratios.append(self.free_space_violations / max(self.free_space_limit, 1))
-        return float(max(ratios))
+        taxels = self.nis / self.nis_threshold if np.isfinite(self.nis) else 0.0
+        return float(max(taxels, self.free_space_excess))
 
 
 @dataclass(frozen=True)

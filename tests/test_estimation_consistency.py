@@ -199,9 +199,14 @@ def test_with_no_consistent_stage_the_camera_ranks_first():
     # Among stages the camera accepts, the least contradicted by the taxels.
     stages = [stage(0, 16.7, violations=15), stage(1, 3.0, 20), stage(2, 0.1, 645)]
     assert select_stage(stages)[0] == 1
-    # When the camera accepts none, the smallest excess over both tests.
+    # When the camera accepts none, the fewest points in seen free space for the limit.
     stages = [stage(0, 16.7, violations=150), stage(1, 3.0, 400), stage(2, 2.0, 120)]
     assert select_stage(stages)[0] == 2
+    # ... even where the taxels contradict that stage more than the others' larger excess
+    # (4.3 of the taxels' bound against 4.2 of the camera's: the pitcher's handle).
+    stages = [stage(0, 4.3, violations=106), stage(1, 0.1, 425), stage(2, 0.1, 420)]
+    index, reason = select_stage(stages)
+    assert index == 0 and "fewest points in seen free space" in reason
 
 
 def test_a_bounded_hypothesis_does_not_replace_a_consistent_stage_0():
@@ -214,6 +219,18 @@ def test_a_bounded_hypothesis_does_not_replace_a_consistent_stage_0():
     # A hypothesis taken in full (its own step passes) stands as any consistent stage.
     full = dataclasses.replace(last, hypothesis=Hypothesis("held-angle", replaced="failed"))
     assert select_stage([stage(0, 0.5), stage(1, 0.4), full])[0] == 2
+
+
+def test_a_capped_stage_must_explain_the_taxels_clearly_better_than_a_consistent_stage_0():
+    capped = dataclasses.replace(stage(2, 0.3), status="max_iterations")
+    index, reason = select_stage([stage(0, 0.5), stage(1, 0.4), capped])
+    assert index == 0 and "iteration cap" in reason and "0.30 vs 0.50" in reason
+    # Half of Stage 0's misfit or less: the capped stage stands.
+    assert select_stage([stage(0, 0.6), stage(1, 0.4), capped])[0] == 2
+    # A converged stage needs no such margin, nor does a capped one over an inconsistent
+    # Stage 0.
+    assert select_stage([stage(0, 0.5), stage(1, 0.4), stage(2, 0.3)])[0] == 2
+    assert select_stage([stage(0, 9.0), stage(1, 0.4), capped])[0] == 2
 
 
 def test_a_last_stage_that_kept_its_prior_gives_way_to_the_last_that_did_not_fail():

@@ -11,10 +11,12 @@ from pipeline.params import build
 from pipeline.perception.visibility import visibility_violations
 from pipeline.sim.hand_models import GRIPPERS
 from pipeline.synthetic import (
+    SyntheticObject,
     box_object,
     cylinder_object,
     synthetic_observation,
 )
+from pipeline.synthetic.tabletop import Box
 from pipeline.types import (
     Contacts,
     PointCloud,
@@ -161,6 +163,31 @@ def test_vc_searches_every_orientation_on_a_round_footprint(box_view):
         theta = np.unique(np.round([h.plane.theta_rad for h in init.hypotheses], 9))
         assert len(theta) == count
         assert np.degrees(theta.max() - theta.min()) == pytest.approx(span_deg)
+
+
+def test_vc_searches_every_orientation_before_it_rejects():
+    # A C-shaped footprint (a spine along y, arms toward -x at both ends) is mirror-symmetric
+    # only about y = 0, across its major axis: no plane within 45 deg of containing that
+    # axis is supported, so VC widens to +-90 deg (37 angles) and finds it.
+    height = 0.04
+    c_shape = SyntheticObject(
+        "c-shape",
+        (
+            Box((0.03, 0.0, height / 2), (0.01, 0.08, height / 2)),
+            Box((0.0, 0.07, height / 2), (0.03, 0.01, height / 2)),
+            Box((0.0, -0.07, height / 2), (0.03, 0.01, height / 2)),
+        ),
+        ((0.0, 1.0),),
+    )
+    yaw = 0.35
+    observation = synthetic_observation(c_shape, (0.6, 0.0, yaw), rng=np.random.default_rng(2))
+    cloud = TableCluster().segment(observation)
+    near_seed = VcInitialiser(VcInitialiser.Params(max_violation_fraction=1.0))
+    assert near_seed.propose(cloud, observation).hypotheses[0].score > 0.2
+    init = VcInitialiser().propose(cloud, observation)
+    assert init.status == "ok" and len(init.hypotheses) == 37 * 25
+    angle, offset = _true_plane_error(init.plane, yaw, np.array([0.6, 0.0]), [(0.0, 1.0)])
+    assert angle < 5.0 and offset < 5.0
 
 
 def test_pca_and_given():

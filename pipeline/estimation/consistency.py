@@ -50,6 +50,9 @@ SURFACE_NEIGHBOURS = 8
 SIDE_SEARCH_M = 0.03
 #: A patch whose second principal spread is below this fraction of its first is a line.
 FLAT_PATCH_RATIO = 0.1
+#: A fused stage that hit the iteration cap is selected over a consistent Stage 0 only when
+#: its taxel statistic is at most this share of Stage 0's (docs/method.md §9).
+CAPPED_NIS_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -292,15 +295,20 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
     models that both pass, the tests cannot say which is closer to the truth. Unless it is
     a bounded hypothesis (:attr:`~pipeline.types.Hypothesis.bounded`) while Stage 0 is
     consistent: its step passes only because it was shortened until it did, so the
-    evidence supports no part of it over Stage 0, which is selected. When it is
-    inconsistent, the camera ranks first: a model that puts matter where the camera saw
+    evidence supports no part of it over Stage 0, which is selected. Nor when it hit the
+    iteration cap (``max_iterations``) while Stage 0 is consistent and it removed less than
+    half of Stage 0's taxel misfit (:data:`CAPPED_NIS_SHARE`): an iteration that did not
+    settle claims only what it explains, and a touch it explains barely better than the
+    initialiser's model does not support giving that model up. When it is inconsistent,
+    the camera ranks first: a model that puts matter where the camera saw
     none is wrong in its shape whatever the taxels say, while taxels off a model the camera
     accepts may be the object's motion between seeing and touching, or the camera's pose
     error (the bias, which Stage 0 does not estimate), or a part that symmetry cannot
-    complete (a handle). Among the stages the image accepts, or among all when it accepts
-    none, the one with the smallest :attr:`~pipeline.types.Consistency.excess` is selected
-    (the later one on a tie), so fusion never makes the model worse than vision alone
-    without saying so.
+    complete (a handle). Among the stages the image accepts, the one with the smallest
+    :attr:`~pipeline.types.Consistency.excess` is selected (the later one on a tie); when
+    it accepts none, the one with the fewest points in seen free space for its limit, then
+    the smallest excess. So fusion never makes the model worse than vision alone without
+    saying so.
 
     Stages without a diagnosis are never selected over the last. A last stage that fell
     back to its prior (``no_correspondence``, ``diverged``) gives way to the last stage
@@ -334,11 +342,30 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
                 f"Stage {last} keeps {hypothesis.step:.0%} of a '{hypothesis.name}' step "
                 f"the evidence contradicts in full; Stage 0 is consistent with it"
             )
+        if (
+            stages[last].status == "max_iterations"
+            and initial is not None
+            and initial.consistent
+            and final.nis > CAPPED_NIS_SHARE * initial.nis
+        ):
+            # The iterate is not a fixed point of the fusion: only a clearly better fit to
+            # the touch speaks for it, and the consistent Stage 0 explains the touch nearly
+            # as well.
+            return 0, (
+                f"Stage {last} hit the iteration cap and removes less than half of Stage 0's "
+                f"taxel misfit (NIS {final.nis:.2f} vs {initial.nis:.2f}); Stage 0 is consistent "
+                "with the evidence"
+            )
         return last, f"Stage {last} is consistent with the evidence"
     assessed = [s for s in stages if s.consistency is not None]
     seen_right = [s for s in assessed if s.consistency.passes_free_space]
-    pool = seen_right or assessed
-    best = min(reversed(pool), key=lambda s: s.consistency.excess)
+    if seen_right:
+        best = min(reversed(seen_right), key=lambda s: s.consistency.excess)
+    else:
+        best = min(
+            reversed(assessed),
+            key=lambda s: (s.consistency.free_space_excess, s.consistency.excess),
+        )
     if best.stage == last:
         return last, f"no stage is consistent; Stage {last} contradicts the evidence least"
     if best.consistency.consistent:
@@ -351,6 +378,12 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
             f"Stage {last} contradicts the camera ({final.reason}); Stage {best.stage} is the "
             f"stage the camera accepts that contradicts the taxels least "
             f"({best.consistency.excess:.2f} of the bound)"
+        )
+    if not seen_right:
+        return best.stage, (
+            f"no stage passes the camera's test; Stage {best.stage} puts the fewest points "
+            f"in seen free space ({best.consistency.free_space_excess:.2f} of the limit vs "
+            f"{final.free_space_excess:.2f} for Stage {last})"
         )
     return best.stage, (
         f"Stage {last} contradicts the evidence ({final.reason}); Stage {best.stage} "

@@ -40,7 +40,9 @@ class VcInitialiser(SymmetryInitialiser):
     tied (typically several with no violation at all), the most compact completion
     (:func:`tie_spread`). ``SymmetryInit.hypotheses``
     holds every hypothesis, best first, with ``score`` = fraction of violating points. When
-    even the best one exceeds ``max_violation_fraction`` the result is ``"rejected"``.
+    even the best one exceeds ``max_violation_fraction``, every orientation (+-90 deg at
+    the same step) is searched, and when the best of those exceeds it too the result is
+    ``"rejected"``.
     ``refine`` keeps the proposal (zero bias, pivot at the cloud's centroid).
 
     With ``kind = "evidence"`` VC also fits a vertical rotation axis to the view and proposes
@@ -131,15 +133,73 @@ class VcInitialiser(SymmetryInitialiser):
             view = axes.centroid_m - np.asarray(observation.T_robot_camera)[:3, 3]
             if abs(view[:2] @ axes.major[:2]) > abs(view[:2] @ axes.minor[:2]):
                 seed_normal = axes.major
-        max_angle_deg, orientations = p.max_angle_deg, p.orientations
+        seed_rad = float(np.arctan2(seed_normal[1], seed_normal[0]))
         variance_major, variance_minor = axes.variances_m2
-        if variance_major < p.round_axis_ratio**2 * variance_minor and orientations > 1:
+        # On a round footprint the seed axis means nothing: every orientation is searched.
+        every = p.orientations > 1 and variance_major < p.round_axis_ratio**2 * variance_minor
+        hypotheses = self._ranked(cloud, observation, axes.centroid_m, seed_rad, every)
+        narrow = p.orientations > 1 and p.max_angle_deg < 90.0 and not every
+        if hypotheses[0].score > p.max_violation_fraction and narrow:
+            # No plane near the seed is supported: the object's mirror plane may lie across
+            # its major axis (a banana, curved in the view, mirrors end to end), so every
+            # orientation is tried before the view is said to support none.
+            every = True
+            hypotheses = self._ranked(cloud, observation, axes.centroid_m, seed_rad, every)
+        best = hypotheses[0]
+        bias = Bias(pivot_m=axes.centroid_m)
+        if best.score > p.max_violation_fraction:
+            searched = " (every orientation)" if every else ""
+            return SymmetryInit(
+                plane=best.plane,
+                bias=bias,
+                hypotheses=hypotheses,
+                status="rejected",
+                reason=(
+                    f"the best of {len(hypotheses)} plane hypotheses{searched} puts "
+                    f"{best.score:.0%} of the mirrored points in seen free space or out of "
+                    f"view (max_violation_fraction = {p.max_violation_fraction:.0%}): no "
+                    "mirror plane the view supports, or the true one is nearly parallel to "
+                    "the viewing direction"
+                ),
+            )
+        if p.kind == "vertical-plane":
+            return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
+        # The axis fit needs scipy: listing the plugins must not load it.
+        from pipeline.api.symmetry import choose_kind
+
+        choice = choose_kind(
+            cloud.points,
+            observation,
+            best.plane,
+            tolerance_m=p.tolerance_m,
+            max_profile_rms_m=p.max_profile_rms_m,
+            margin=p.kind_margin,
+        )
+        symmetry = choice.symmetry if choice.symmetry.kind == "axis" else None
+        return SymmetryInit(
+            choice.plane, bias, hypotheses, symmetry=symmetry, kind_scores=choice.scores
+        )
+
+    def _ranked(
+        self,
+        cloud: PointCloud,
+        observation: DepthObservation,
+        centroid_m: np.ndarray,
+        seed_rad: float,
+        every_orientation: bool,
+    ) -> tuple[SymmetryHypothesis, ...]:
+        """Every hypothesis of the grid about the seed normal ``seed_rad`` and the cloud's
+        ``centroid_m`` (frame R), best first; ``every_orientation`` extends the
+        orientations to +-90 deg at the same step."""
+        p = self.params
+        max_angle_deg, orientations = p.max_angle_deg, p.orientations
+        if every_orientation:
             step_deg = 2.0 * max_angle_deg / (orientations - 1)
             orientations = int(np.ceil(180.0 / step_deg)) + 1
             max_angle_deg = 90.0
         grid = plane_grid(
-            float(np.arctan2(seed_normal[1], seed_normal[0])),
-            axes.centroid_m,
+            seed_rad,
+            centroid_m,
             max_angle_rad=np.deg2rad(max_angle_deg),
             orientations=orientations,
             max_offset_m=p.max_offset_m,
@@ -164,46 +224,13 @@ class VcInitialiser(SymmetryInitialiser):
         violations = np.where(in_front, len(cloud), violations)
         spread = tie_spread(cloud.points, theta, offset, violations, depth_sum)
         order = np.lexsort((spread, depth_sum, violations))
-        hypotheses = tuple(
+        return tuple(
             SymmetryHypothesis(
                 plane=SymmetryPlane(float(theta[i]), float(offset[i])),
                 score=float(violations[i]) / len(cloud),
                 violations=int(violations[i]),
             )
             for i in order
-        )
-        best = hypotheses[0]
-        bias = Bias(pivot_m=axes.centroid_m)
-        if best.score > p.max_violation_fraction:
-            return SymmetryInit(
-                plane=best.plane,
-                bias=bias,
-                hypotheses=hypotheses,
-                status="rejected",
-                reason=(
-                    f"the best of {len(hypotheses)} plane hypotheses puts {best.score:.0%} of "
-                    "the mirrored points in seen free space or out of view "
-                    f"(max_violation_fraction = {p.max_violation_fraction:.0%}): no mirror "
-                    "plane the view supports, or the true one is nearly parallel to the "
-                    "viewing direction"
-                ),
-            )
-        if p.kind == "vertical-plane":
-            return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
-        # The axis fit needs scipy: listing the plugins must not load it.
-        from pipeline.api.symmetry import choose_kind
-
-        choice = choose_kind(
-            cloud.points,
-            observation,
-            best.plane,
-            tolerance_m=p.tolerance_m,
-            max_profile_rms_m=p.max_profile_rms_m,
-            margin=p.kind_margin,
-        )
-        symmetry = choice.symmetry if choice.symmetry.kind == "axis" else None
-        return SymmetryInit(
-            choice.plane, bias, hypotheses, symmetry=symmetry, kind_scores=choice.scores
         )
 
 
