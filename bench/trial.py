@@ -14,6 +14,13 @@ then the default trial as a fresh ``symfuse trial`` process (interpreter start a
 included) and ``symfuse complete`` on a recorded Kinect capture (``$SYMFUSE_CAPTURE``, by
 default the one in ``tests/data``; skipped when absent), each a new process.
 
+``python bench/trial.py --baseline REV [--rounds N] [--repeats N]`` instead compares this
+tree with another revision (unpacked with ``git archive`` as ``sweep_speed.py`` does) on
+the default and the SDH-2 trial: each tree's warm trials in a new process of its own, the
+two trees alternating for ``--rounds`` rounds, every phase's processor time the median
+over the rounds of each process's median; the last trials' ``result.json`` are compared
+but for their times (the phases' and each stage's).
+
 Targets (issue 41), in processor time: the default trial at most 2.0 s, its planner 0.4 s,
 segmenter 0.3 s and evaluation 0.3 s, the pictures 0.4 s; in wall time, the new process at
 most 1.0 s longer than the warm trial, measured in the same run. Issue 45: the after-view
@@ -24,16 +31,20 @@ most 1.0 s longer than the warm trial, measured in the same run. Issue 45: the a
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from commands import run_process
+from planner_check import differences
 from summary import record
+from sweep_speed import ROOT, unpack
 
 #: Warm default trial, pictures off (s), and the phases with a target of their own (s).
 TRIAL_TARGET_S = 2.0
@@ -59,9 +70,9 @@ class Measured:
     total_wall: float
 
 
-def in_process(repeats: int, overrides: list[str]) -> Measured:
+def in_process(repeats: int, overrides: list[str], last_result: Path | None = None) -> Measured:
     """Every phase's and the whole trial's median processor and wall time (after one
-    warm-up trial)."""
+    warm-up trial); the last trial's ``result.json`` copied to ``last_result`` if given."""
     from pipeline.config import load_config
     from pipeline.registry import load_registry
     from pipeline.run.trial import run_trial
@@ -82,6 +93,8 @@ def in_process(repeats: int, overrides: list[str]) -> Measured:
                 cpu.setdefault(phase, []).append(seconds)
             for phase, seconds in record_.timings.items():
                 wall.setdefault(phase, []).append(seconds)
+        if last_result is not None:
+            last_result.write_text((Path(folder) / f"run{repeats - 1}/result.json").read_text())
     return Measured(
         {p: statistics.median(v) for p, v in cpu.items()},
         {p: statistics.median(v) for p, v in wall.items()},
@@ -113,10 +126,76 @@ def capture() -> Path | None:
     return path if path.is_file() else None
 
 
+def tree_trial(tree: Path, repeats: int, overrides: list[str], result: Path) -> Measured:
+    """:func:`in_process` in a new process with ``tree``'s code first on the path."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tree), str(ROOT / "bench")])}
+    command = [sys.executable, str(ROOT / "bench/trial.py"), "--measure", str(result)]
+    command += ["--repeats", str(repeats), *(f"--set={o}" for o in overrides)]
+    done = subprocess.run(command, env=env, cwd=tree, check=True, capture_output=True, text=True)
+    return Measured(**json.loads(done.stdout))
+
+
+#: The keys of ``result.json`` that hold times: the phases' and each stage's.
+TIME_KEYS = ("timings", "seconds")
+
+
+def _untimed(document: object) -> object:
+    """``document`` without its times (for comparing two trials' ``result.json``)."""
+    if isinstance(document, dict):
+        return {k: _untimed(v) for k, v in document.items() if k not in TIME_KEYS}
+    if isinstance(document, list):
+        return [_untimed(v) for v in document]
+    return document
+
+
+def _median_cpu(measured: list[Measured], phase: str) -> float:
+    """The median over ``measured`` of a phase's processor time (``run_trial``: the whole
+    trial's)."""
+    return statistics.median(
+        m.total_cpu if phase == "run_trial" else m.cpu.get(phase, 0.0) for m in measured
+    )
+
+
+def compare(revision: str, rounds: int, repeats: int) -> None:
+    """The default and the SDH-2 trial's phases, this tree against ``revision``."""
+    off = ["trial.pictures=false"]
+    trials = {"default": off, "sdh": [*off, "trial.gripper=sdh"]}
+    with tempfile.TemporaryDirectory(prefix="symfuse-trial-") as folder:
+        trees = {"baseline": unpack(revision, Path(folder)), "this tree": ROOT}
+        for name, overrides in trials.items():
+            runs: dict[str, list[Measured]] = {label: [] for label in trees}
+            results = {label: Path(folder) / f"{name}-{k}.json" for k, label in enumerate(trees)}
+            for _ in range(rounds):
+                for label, tree in trees.items():
+                    runs[label].append(tree_trial(tree, repeats, overrides, results[label]))
+            phases = list(dict.fromkeys(p for m in runs["this tree"] for p in m.cpu))
+            print(f"{name} trial, processor time (s): median of {rounds} processes' medians")
+            print(f"{'phase':<12} {'baseline':>9} {'this tree':>9}")
+            for phase in [*phases, "run_trial"]:
+                cells = "".join(f" {_median_cpu(m, phase):>9.3f}" for m in runs.values())
+                print(f"{phase:<12}{cells}")
+            documents = [_untimed(json.loads(path.read_text())) for path in results.values()]
+            found = differences(*documents)
+            print(f"result.json fields that differ but for the times: {len(found)}")
+            for where, _ in found[:10]:
+                print(f"    {where}")
+            print()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--baseline", help="git revision to compare this tree with")
+    parser.add_argument("--rounds", type=int, default=3, help="processes per tree (--baseline)")
+    parser.add_argument("--measure", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--set", action="append", default=[], help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.measure:
+        print(json.dumps(asdict(in_process(args.repeats, args.set, args.measure))))
+        return
+    if args.baseline:
+        compare(args.baseline, args.rounds, args.repeats)
+        return
     off = ["trial.pictures=false"]
     trials = {
         "default": off,

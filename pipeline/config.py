@@ -33,6 +33,7 @@ from typing import Any, Literal, get_args, get_type_hints
 
 import tomli_w
 
+from pipeline.catalogue.rest import parse_rest
 from pipeline.errors import ConfigError
 from pipeline.params import build, param, to_toml
 from pipeline.registry import StageRegistry
@@ -60,6 +61,12 @@ class TrialSettings:
         0.0, "object position on the table, robot frame y (m)", above=-1.0, below=1.0
     )
     yaw_deg: float = param(0.0, "object rotation about the table normal (deg)")
+    rest: str = param(
+        "upright",
+        "how the object lies on the table: upright (the mesh's own frame), K (its K-th most "
+        "likely stable pose, 0 the most likely) or random (one drawn with the trial's seed "
+        "by the poses' probabilities)",
+    )
     pictures: bool = param(True, "write the PNG pictures (sweeps of many trials may skip them)")
     units: Literal["m", "mm"] = param(
         "m", "length unit of a mesh file given as object (a URDF states its own scale)"
@@ -333,6 +340,7 @@ def _validate(raw: Mapping[str, Any], registry: StageRegistry) -> Config:
         choices[stage] = use
         params[stage].setdefault(use, registration.cls.Params())
     _check_gripper(settings["trial"].gripper, choices["world"], registry)
+    parse_rest(settings["trial"].rest)
     return Config(settings=settings, choices=choices, params=params)
 
 

@@ -16,6 +16,7 @@ from pipeline.estimation.after_view_term import (
 )
 from pipeline.estimation.iekf import fuse_after_view
 from pipeline.estimation.registration import (
+    RegistrationSettings,
     apply_planar,
     invert_planar,
     planar_residuals,
@@ -159,6 +160,38 @@ def test_registration_refuses_a_view_that_fixes_no_direction_along_the_face():
     )
     assert registered.motion[1] == pytest.approx(0.001, abs=1e-4)
     assert np.sqrt(registered.covariance[2, 2]) == pytest.approx(0.005, rel=0.01)
+
+
+def test_a_direction_only_a_few_edge_points_fix_keeps_its_prior():
+    # A face seen face-on fixes the motion along its normal (x); across it only eight
+    # grazing points on a fin's side face speak, and they sit 2 mm off (an edge's mixed
+    # pixels).
+    rng = np.random.default_rng(11)
+    face = rng.uniform([0.0, -0.02, 0.0], [0.0, 0.02, 0.1], (2000, 3))
+    side = rng.uniform([0.0, 0.03, 0.0], [0.01, 0.03, 0.1], (200, 3))
+    first = np.vstack([face, side])
+    normals = np.vstack([np.tile([1.0, 0.0, 0.0], (2000, 1)), np.tile([0.0, 1.0, 0.0], (200, 1))])
+    shift = np.array([0.001, 0.0, 0.0])
+    edge = side[:8] + shift + np.array([0.0, 0.002, 0.0])
+    observed = np.vstack([face + shift + rng.normal(0.0, 0.001, face.shape), edge])
+    prior = np.diag([0.02**2, 0.005**2, 0.005**2])
+    pivot = face.mean(axis=0)
+
+    def registered(points: float) -> np.ndarray:
+        control = RegistrationSettings(min_leverage_points=points)
+        moved = register_planar(observed, first, pivot, control, normals, prior)
+        assert moved is not None and moved.converged
+        return moved
+
+    trusting, honest = registered(0.0), registered(10.0)
+    # Counted as eight independent points the edge drags the slide by a millimetre and
+    # claims it to under one.
+    assert trusting.motion[2] > 8e-4
+    assert np.sqrt(trusting.covariance[2, 2]) < 0.001
+    # With less information than ten points' the direction keeps the prior.
+    assert abs(honest.motion[2]) < 5e-4
+    assert np.sqrt(honest.covariance[2, 2]) == pytest.approx(0.005, rel=0.02)
+    assert honest.motion[1] == pytest.approx(shift[0], abs=1e-4)
 
 
 def test_after_view_recovers_a_slide_along_the_plane_the_jaws_cannot_feel():

@@ -54,8 +54,8 @@ def test_unknown_key_is_named(registry, tmp_path):
         load_config(registry, [path])
     assert str(error.value) == (
         "unknown config key 'trial.sede' (did you mean 'seed'? "
-        "known keys: object, gripper, seed, x_m, y_m, yaw_deg, pictures, units, grasps, "
-        "next_grasp, until_std_mm, after_view, retries, symmetry)"
+        "known keys: object, gripper, seed, x_m, y_m, yaw_deg, rest, pictures, units, "
+        "grasps, next_grasp, until_std_mm, after_view, retries, symmetry)"
     )
     # A renamed key points to its new name.
     with pytest.raises(ConfigError, match="did you mean 'regrasp_b_xy_m'"):

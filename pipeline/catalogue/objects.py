@@ -39,6 +39,8 @@ from pipeline.types import Symmetry, SymmetryPlane
 if TYPE_CHECKING:
     import trimesh
 
+    from pipeline.catalogue.rest import RestPose
+
 _log = logging.getLogger(__name__)
 
 #: The catalogue specification file.
@@ -111,6 +113,8 @@ class CatalogueObject:
             source states (``--symmetry``, a ``symmetry.json`` beside the mesh file:
             :mod:`pipeline.symmetry.truth_file`); empty: the evaluation finds them by
             search (:func:`pipeline.symmetry.truth_file.true_symmetries`).
+        rest: the stable pose the object was turned into from its loaded frame
+            (:mod:`pipeline.catalogue.rest`), or None: as loaded, upright.
     """
 
     name: str
@@ -126,6 +130,7 @@ class CatalogueObject:
     source: str = "catalogue"
     urdf_path: str | None = None
     symmetries: tuple[Symmetry, ...] = ()
+    rest: RestPose | None = None
 
 
 # ---------------------------------------------------------------- specification
@@ -326,7 +331,7 @@ def _load_mesh_file(
         symmetries = (Symmetry.from_plane(plane),)
     elif (stated := truth_file.beside(path)) is not None:
         symmetries = tuple(_moved(s, shift) for s in truth_file.read_symmetries(stated)[0])
-        level = [found for found in map(_vertical_plane, symmetries) if found is not None]
+        level = [found for found in map(vertical_plane, symmetries) if found is not None]
         plane = level[0] if level else None
     watertight = bool(mesh.is_watertight)
     if not watertight:
@@ -355,7 +360,7 @@ def _moved(symmetry: Symmetry, shift_m: np.ndarray) -> Symmetry:
     )
 
 
-def _vertical_plane(symmetry: Symmetry) -> SymmetryPlane | None:
+def vertical_plane(symmetry: Symmetry) -> SymmetryPlane | None:
     """The symmetry as the paper's vertical plane, when it is a plane with a level normal:
     the plane errors of the evaluation
     (:func:`pipeline.metrics.evaluation.plane_errors`) score it."""

@@ -63,6 +63,7 @@ KEY_OPTIONS: tuple[KeyOption, ...] = (
     KeyOption("trial", "init", "initialiser.use"),
     KeyOption("trial", "seed", "trial.seed"),
     KeyOption("trial", "yaw", "trial.yaw_deg"),
+    KeyOption("trial", "rest", "trial.rest", _quoted),
     KeyOption("trial", "grasps", "trial.grasps"),
     KeyOption("trial", "next_grasp", "trial.next_grasp"),
     KeyOption("trial", "until_std", "trial.until_std_mm"),
@@ -75,6 +76,7 @@ KEY_OPTIONS: tuple[KeyOption, ...] = (
     KeyOption("complete", "camera", "sensor.recorded.camera", _quoted),
     KeyOption("complete", "topic", "sensor.recorded.topic", _quoted),
     KeyOption("sweep", "estimator", "estimator.use"),
+    KeyOption("sweep", "rest", "trial.rest", _quoted),
 )
 
 

@@ -210,6 +210,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="DIR",
         help="scenes: the labelled captures DIR/**/*.pcd (a 'label' field, OSD convention)",
     )
+    parser.add_argument(
+        "--rest",
+        metavar="K|random",
+        help="every trial's object in its K-th stable pose, or one drawn with the trial's "
+        "seed (random); default: upright",
+    )
     parser.add_argument("--seed", type=counting_number(0), default=0, help="base seed (default 0)")
     parser.add_argument(
         "--repeats", type=counting_number(1), help="trials per grid point (default: paper's)"

@@ -51,6 +51,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--init", metavar="NAME", help="symmetry initialiser (ps, vc, pca, ...)")
     parser.add_argument("--seed", type=counting_number(0), help="random seed of the trial")
     parser.add_argument("--yaw", type=float, metavar="DEG", help="object yaw on the table")
+    parser.add_argument("--rest", metavar="K|random", help=REST_HELP)
     parser.add_argument(
         "--grasps",
         type=counting_number(1),
@@ -81,6 +82,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_rerun_option(parser)
     add_wide_option(parser)
     return parser
+
+
+REST_HELP = (
+    "place the object in its K-th most likely stable pose (0: the most likely), or one drawn "
+    "with the seed (random); default: upright, as the mesh stands"
+)
 
 
 def three_numbers(text: str) -> tuple[float, float, float]:
@@ -273,6 +280,8 @@ def run(args: argparse.Namespace) -> int:
         record = run_trial(config, registry, staging, report=_progress)
     print(trial_summary(record, args.wide))
     print(wrapped(selection_line(record.result)))
+    if "completion" in record.document.get("init", {}):
+        print(wrapped(f"init: {record.document['init']['completion']}"))
     print(wrapped(grasp_line(record.document)))
     if settings.grasps > 1 or settings.until_std_mm > 0:
         print(grasps_summary(record.document, args.wide))

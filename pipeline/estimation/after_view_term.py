@@ -13,13 +13,13 @@ camera-to-robot calibration error both views share, so
 (:func:`compose`). The registration's error is its Gauss-Newton covariance (the sensor's
 noise over the points the hand leaves visible) plus a floor (``floor_*``) for what that
 covariance does not count: the object's tilt in the grasp, which a planar motion cannot
-follow, the points' correlated noise and the hand's edge. ``E`` is by default unknown, zero
-with std ``calibration_*``: the after-view measures the object's motion, not where the
-camera put it. With ``hand_calibration`` the hand measures ``E``: the points the after-view
-sees on the hand, registered to the hand's surface where its known pose puts it (with that
-prior), give ``E`` as the object's points give ``D``; measured on the simulated PG-70 this
-is right to a millimetre on most poses and off by 3-5 mm, with a covariance that claims a
-tenth of a millimetre, on others (docs/after-view.md), so it stays off.
+follow, the points' correlated noise and the hand's edge. ``E``'s prior is zero with std
+``calibration_*``: by itself the after-view measures the object's motion, not where the
+camera put it. With ``hand_calibration`` (the default) the hand measures ``E``: the points
+the after-view sees on the hand, registered to the hand's surface where its known pose puts
+it (with that prior), give ``E`` as the object's points give ``D``. The hand's thin fingers
+need a registration that stays honest where they show the camera little
+(:func:`hand_error`): a direction of ``E`` the hand's view does not fix keeps its prior.
 
 The measurement is linear in ``g``, so fusing it before a grasp's taxels is the same as
 fusing both at once; an innovation beyond the chi-square gate is an outlier (a wrong
@@ -31,7 +31,7 @@ once per view (docs/method.md).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import gammaincinv
@@ -58,6 +58,14 @@ class AfterViewSettings:
         hand_calibration: measure the calibration error on the hand (see above).
         hand_floor_yaw_rad, hand_floor_xy_m: std of that measurement's error beyond its own
             covariance (the hand's model against its image, points by its edge).
+        hand_gate_m: the hand's registration starts pairing points this near (m): the
+            calibration error's reach, narrower than the object's (whose gate also spans
+            the grasp's motion), so a finger cannot pair with its neighbour.
+        hand_normal_cos: a hand point pairs only with a surface point whose normal
+            agrees this well with its own (:class:`RegistrationSettings`).
+        hand_min_leverage_points: a direction of the calibration error the hand's points
+            fix with less information than this many points at full leverage keeps its
+            prior (:class:`RegistrationSettings`).
         gate_alpha: false-alarm probability of the innovation's chi-square gate (3 dof).
     """
 
@@ -66,9 +74,12 @@ class AfterViewSettings:
     calibration_xy_m: float = 0.005
     floor_yaw_rad: float = 0.02
     floor_xy_m: float = 0.001
-    hand_calibration: bool = False
-    hand_floor_yaw_rad: float = 0.02
-    hand_floor_xy_m: float = 0.002
+    hand_calibration: bool = True
+    hand_floor_yaw_rad: float = 0.005
+    hand_floor_xy_m: float = 0.0005
+    hand_gate_m: float = 0.006
+    hand_normal_cos: float = 0.7
+    hand_min_leverage_points: float = 4.0
     gate_alpha: float = 0.001
 
 
@@ -147,16 +158,31 @@ def hand_error(
     view: AfterView, pivot_m: np.ndarray, settings: AfterViewSettings, calibration: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """The calibration error ``E`` and its covariance from the hand's points, under the
-    prior ``calibration``; the prior itself when the registration fails."""
+    prior ``calibration``; the prior itself when the registration fails.
+
+    The registration starts within the calibration error's reach (``hand_gate_m``), pairs
+    a seen point only with hand surface whose normal agrees with its own
+    (``hand_normal_cos``: a finger's face by its edge must not pair with the face around
+    the corner), and leaves to the prior every direction the points fix with less than
+    ``hand_min_leverage_points`` points' information (a PG-70 seen head-on fixes ``E``
+    along the line of sight through thousands of points, across it through a few grazing
+    edge pixels).
+    """
     # Only the hand's faces turned to the camera can be seen (the far side would pair with
     # the near side's points through a thin finger).
     camera_m = np.asarray(view.observation.T_robot_camera)[:3, 3]
     seen = np.einsum("ij,ij->i", view.hand_normals, camera_m - view.hand_surface) > 0.0
+    control = replace(
+        settings.registration,
+        start_gate_m=settings.hand_gate_m,
+        min_normal_cos=settings.hand_normal_cos,
+        min_leverage_points=settings.hand_min_leverage_points,
+    )
     hand = register_planar(
         view.hand_points,
         view.hand_surface[seen],
         pivot_m,
-        settings.registration,
+        control,
         view.hand_normals[seen],
         prior_covariance=calibration,
     )

@@ -14,6 +14,14 @@ spread, so points the first view never saw (or the hand's edge) drop out. Its co
 the Gauss-Newton one, ``sigma^2 (J^T J)^-1``, with ``sigma`` the larger of the given noise
 and the inliers' RMS: it shrinks with the number of points the hand leaves visible.
 
+Two controls make it honest on a surface seen nearly edge-on or face-on (the hand's thin
+fingers): a point pairs only with a surface point whose normal agrees with its own
+(``min_normal_cos``), so a face's points by an edge cannot pair with the face around the
+corner; and a direction of the motion that the points fix with less information than
+``min_leverage_points`` points would give at full leverage (a face-on view, where only a
+few grazing points by the edges say anything across the line of sight) takes none of the
+points' information: a prior governs it, or with no prior there is no registration.
+
 Pure numeric kernel: no I/O, no simulation.
 """
 
@@ -45,6 +53,12 @@ class RegistrationSettings:
         max_iterations: Gauss-Newton iteration cap.
         tolerance_m: converged when no point of the cloud moves by more than this (m).
         neighbours: points each first-view normal is fitted to.
+        min_normal_cos: a pair counts only when the first view's normal and the observed
+            point's own (fitted to its ``neighbours``) agree this well, ``|n . n'|``
+            (0: every pair counts, and no observed normals are fitted).
+        min_leverage_points: a direction of the motion (yaw scaled by the cloud's reach)
+            whose information from the points is less than this many points' at full
+            leverage (``1 / sigma^2`` each) takes none of it (0: every direction keeps it).
     """
 
     noise_std_m: float = 0.002
@@ -54,6 +68,8 @@ class RegistrationSettings:
     max_iterations: int = 40
     tolerance_m: float = 1e-5
     neighbours: int = 12
+    min_normal_cos: float = 0.0
+    min_leverage_points: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -145,6 +161,9 @@ def register_planar(
     if np.count_nonzero(usable) < settings.min_inliers or len(observed) < settings.min_inliers:
         return None
     first, normals = first[usable], normals[usable]
+    observed_normals = None
+    if settings.min_normal_cos > 0.0:
+        observed_normals = surface_normals(observed, settings.neighbours)
     tree = cKDTree(first)
     pivot_m = np.asarray(pivot_m, dtype=float)
     reach = float(np.max(np.linalg.norm(first - pivot_m, axis=1)))
@@ -153,20 +172,18 @@ def register_planar(
     motion = np.zeros(3)
     gate_m, converged = settings.start_gate_m, False
     for _ in range(settings.max_iterations):
-        # Pair in the first view's frame: the after-view's points moved back by D.
-        distance, nearest = tree.query(
-            invert_planar(observed, motion, pivot_m), distance_upper_bound=gate_m
-        )
-        paired = np.isfinite(distance)
+        paired, nearest = _pairs(tree, observed, motion, pivot_m, gate_m)
+        paired &= _agree(observed_normals, normals, nearest, motion, settings.min_normal_cos)
         if np.count_nonzero(paired) < settings.min_inliers:
             return None
         residuals, jacobian = planar_residuals(
             observed[paired], first[nearest[paired]], normals[nearest[paired]], motion, pivot_m
         )
-        normal_matrix = weight * jacobian.T @ jacobian + information
+        kept = _leverage_projection(jacobian, reach, settings.min_leverage_points)
+        normal_matrix = weight * kept.T @ jacobian.T @ jacobian @ kept + information
         if np.linalg.cond(normal_matrix) > 1e12:
             return None
-        gradient = weight * jacobian.T @ residuals + information @ motion
+        gradient = weight * kept.T @ jacobian.T @ residuals + information @ motion
         step = -np.linalg.solve(normal_matrix, gradient)
         motion = motion + step
         rms = float(np.sqrt(np.mean(residuals**2)))
@@ -180,7 +197,8 @@ def register_planar(
     )
     rms = float(np.sqrt(np.mean(residuals**2)))
     sigma = max(rms, settings.noise_std_m)
-    covariance = np.linalg.inv(jacobian.T @ jacobian / sigma**2 + information)
+    kept = _leverage_projection(jacobian, reach, settings.min_leverage_points)
+    covariance = np.linalg.inv(kept.T @ jacobian.T @ jacobian @ kept / sigma**2 + information)
     return PlanarRegistration(
         motion=motion,
         covariance=covariance,
@@ -189,3 +207,48 @@ def register_planar(
         rms_m=rms,
         converged=converged,
     )
+
+
+def _pairs(
+    tree: cKDTree,
+    observed: np.ndarray,
+    motion: np.ndarray,
+    pivot_m: np.ndarray,
+    gate_m: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which observed points have a first-view point within ``gate_m`` once moved back by
+    ``motion`` (``(N,)`` bool), and its index (``len(first)`` where none)."""
+    distance, nearest = tree.query(
+        invert_planar(observed, motion, pivot_m), distance_upper_bound=gate_m
+    )
+    return np.isfinite(distance), nearest
+
+
+def _agree(
+    observed_normals: np.ndarray | None,
+    normals: np.ndarray,
+    nearest: np.ndarray,
+    motion: np.ndarray,
+    min_cos: float,
+) -> np.ndarray | bool:
+    """``(N,)`` bool: each observed point's normal agrees with its pair's, turned by the
+    motion's yaw, to ``|cos| >= min_cos`` (True when no observed normals are fitted)."""
+    if observed_normals is None:
+        return True
+    turned = normals[np.minimum(nearest, len(normals) - 1)] @ rotation_z(float(motion[0])).T
+    return np.abs(np.einsum("ij,ij->i", turned, observed_normals)) >= min_cos
+
+
+def _leverage_projection(jacobian: np.ndarray, reach_m: float, min_points: float) -> np.ndarray:
+    """``(3, 3)`` projector onto the directions of the motion the rows of ``jacobian`` fix
+    with at least ``min_points`` points' information at full leverage (a unit-normal
+    residual per metre of motion, the yaw counted at ``reach_m``); the identity when
+    ``min_points`` is 0."""
+    if min_points <= 0.0:
+        return np.eye(3)
+    scale = np.array([1.0 / reach_m, 1.0, 1.0])
+    scaled = jacobian * scale
+    values, vectors = np.linalg.eigh(scaled.T @ scaled)
+    strong = vectors[:, values >= min_points]
+    # Back to the motion's own coordinates: D V V^T D^-1 with D = diag(scale).
+    return (strong @ strong.T) * scale[:, None] / scale[None, :]

@@ -247,7 +247,7 @@ def attempt(world: Any, setup: Any, gripper: str, plan: GraspPlan) -> Attempt:
 def grasp_models(params: Mapping[str, Any], record: TrialRecord) -> dict[str, Any]:
     """Plan ``params["grasps"]`` grasps on each model and execute each; the row fields
     (module doc)."""
-    from pipeline.catalogue.objects import load_object
+    from pipeline.catalogue.rest import scene_object
     from pipeline.planning.hand_choice import create_planner
     from pipeline.types import Bias, PointCloud, SceneSetup, SymmetryInit
 
@@ -257,7 +257,7 @@ def grasp_models(params: Mapping[str, Any], record: TrialRecord) -> dict[str, An
     document = record.document
     gripper = document["gripper"]
     planner = create_planner(config, registry, document["stages_used"]["planner"])
-    obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
+    obj = scene_object(settings)
     setup = SceneSetup(
         obj, settings.x_m, settings.y_m, float(np.radians(settings.yaw_deg)), settings.seed
     )

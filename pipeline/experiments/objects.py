@@ -263,6 +263,7 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             f"| {_stage_cells(done, 'chamfer_mm', (0, 2))} "
             f"| {_stage_cells(done, 'fscore_5mm', (0, 2))} |"
         )
+    lines += kind_lines(rows)
     lines += taxonomy_lines(by_object)
     lines += refusal_lines(rows)
     report_path = out_dir / "report.md"
@@ -277,6 +278,59 @@ def _stage_cells(rows: Sequence[Mapping[str, Any]], metric: str, stages: Sequenc
     values = [_median([value(row, f"stage{k}_{metric}") for row in rows]) for k in stages]
     values.append(_median([selected_value(row, metric) for row in rows]))
     return " / ".join(fmt(v, 2) for v in values)
+
+
+def part_of(row: Mapping[str, Any], scans: Sequence[str]) -> str:
+    """``catalogue``, or for a scan (``scans``: their labels in name order) ``tune`` (even
+    positions) or ``check`` (odd): the halves a rule is tuned and checked on."""
+    label = row["params"]["label"]
+    return ("tune", "check")[scans.index(label) % 2] if label in scans else "catalogue"
+
+
+def kind_lines(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The trials per part and per the kind of symmetry that describes the object as it
+    lies (:func:`pipeline.symmetry.scoring.true_kind`), with how many lay on their side."""
+    scans = sorted(
+        {
+            row["params"]["label"]
+            for row in rows
+            if row["params"].get("object", row["params"]["label"]) != row["params"]["label"]
+        }
+    )
+    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault((part_of(row, scans), str(row.get("true_kind") or "-")), []).append(row)
+    lines = [
+        "",
+        "## By the kind of symmetry as the object lies",
+        "",
+        "The object's true kind in its rest pose (`axis`: a body of revolution standing; "
+        "`vertical-plane`: a vertical mirror plane, or an axis lying; `plane`: only mirror "
+        "planes that lean); 'lying': trials whose rest pose did not stand the object on its "
+        "base or top. Angle error: the selected stage's plane against the nearest true "
+        "symmetry (median, deg). Scans: the tune half (even positions in name order) and the "
+        "check half (odd).",
+        "",
+        "| part | true kind | trials | lying | opposing contacts | no worse than vision "
+        "| selected deviation (mm) | angle error S0 / selected (deg) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for (part, kind), group in sorted(groups.items()):
+        n = len(group)
+        done = [row for row in group if finished(row)]
+        angles = (
+            _median([value(row, "stage0_symmetry_angle_error_deg") for row in done]),
+            _median([selected_value(row, "symmetry_angle_error_deg") for row in done]),
+        )
+        lines.append(
+            f"| {part} | {kind} | {n} "
+            f"| {sum(row.get('rest_keeps_vertical') is False for row in group)} "
+            f"| {_share(sum(bool(row.get('opposing_contacts')) for row in group), n)} "
+            f"| {_share(sum(map(no_worse, group)), n)} "
+            f"| {fmt(_median([selected_deviation(row) for row in done]), 2)} "
+            f"| {fmt(angles[0], 1)} / {fmt(angles[1], 1)} |"
+        )
+    return lines
 
 
 def taxonomy_lines(by_object: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[str]:

@@ -3,7 +3,9 @@
 Result rows (``k`` = stage 0, 1, 2): ``failed`` (None, or the reason a stage refused:
 empty segmentation, refused or unexecuted grasp, rejected initialisation), ``status`` (the
 final stage's, or ``"failed"``), ``diverged``, ``points``, ``taxels_in_contact``,
-``gripper`` (the hand that grasped), ``selected_stage``,
+``gripper`` (the hand that grasped), ``selected_stage``, ``rest_pose``,
+``rest_probability``, ``rest_keeps_vertical`` and ``true_kind`` (the object's resting pose
+and the kind of symmetry that describes it as it lies, also on a failed trial's row),
 ``seconds``, ``timings``, and per stage ``stage{k}_status``, ``stage{k}_iterations``,
 ``stage{k}_hypothesis`` (the alternative hypothesis its model comes from, empty for the
 fused model; docs/method.md §9), ``stage{k}_deviation_{min,q1,median,q3,max,mean}_mm``
@@ -30,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 from pipeline.errors import StageFailure
 from pipeline.experiments.common import plugin_registry
 from pipeline.experiments.paper_tasks import trial_config
-from pipeline.experiments.rows import STAGES
+from pipeline.experiments.rows import STAGES, rest_fields
 from pipeline.io.formats import consistency_fields, hypothesis_field
 
 if TYPE_CHECKING:
@@ -83,6 +85,8 @@ def paper_trial(
                 "failed": str(exc),
                 "status": "failed",
                 "diverged": False,
+                **rest_fields(document.get("rest")),
+                "true_kind": document.get("true_kind"),
                 **failure_fields(document),
                 "seconds": time.perf_counter() - started,
             }
@@ -104,6 +108,8 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
         "timings": dict(document.get("timings", {})),
         "selected_stage": document.get("selected_stage"),
         "gripper": document.get("gripper"),
+        **rest_fields(document.get("rest")),
+        "true_kind": document.get("true_kind"),
     }
     for stage_json, stage_metrics in zip(document["stages"], metrics, strict=True):
         prefix = f"stage{stage_json['stage']}"

@@ -94,3 +94,16 @@ def mean_five_numbers(rows: Sequence[Mapping[str, Any]], stage: int) -> np.ndarr
         [[value(row, f"stage{stage}_deviation_{name}_mm") for name in FIVE_NUMBERS] for row in rows]
     )
     return np.nanmean(table, axis=0)
+
+
+def rest_fields(rest: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The row fields of the object's rest pose, from ``result.json``'s ``rest`` entry
+    (None: upright, as loaded): ``rest_pose`` (``"upright"`` or the stable pose's number),
+    ``rest_probability`` and ``rest_keeps_vertical`` (whether it stands on its base or top)."""
+    if rest is None:
+        return {"rest_pose": "upright", "rest_probability": None, "rest_keeps_vertical": True}
+    return {
+        "rest_pose": rest["index"],
+        "rest_probability": rest["probability"],
+        "rest_keeps_vertical": rest["keeps_vertical"],
+    }

@@ -190,7 +190,8 @@ def pad_coverages(
     query = query[inside]
     if len(query) == 0:
         return [None] * len(origins_m)
-    kept = points_robot[source[inside]]
+    source = source[inside]
+    kept = points_robot[source]
     # Each pad's taxels numbered apart: taxel // per_pad is the pad.
     taxel = query * per_pad + (row * cols + col)[inside]
     # Depths along each pad's motion as one pad alone computes them (the same rounding).
@@ -207,9 +208,11 @@ def pad_coverages(
     nearest = np.full(len(origins_m) * per_pad, np.inf)
     np.minimum.at(nearest, taxel, depth)
     layer = depth <= nearest[taxel] + LAYER_M
-    taxel, depth, kept = taxel[layer], depth[layer], kept[layer]
+    taxel, depth, source = taxel[layer], depth[layer], source[layer]
     by_taxel = np.lexsort((depth, taxel))
-    taxel, depth, kept = taxel[by_taxel], depth[by_taxel], kept[by_taxel]
+    # The points' indices follow the sort; the points themselves are taken for the
+    # contacts alone.
+    taxel, depth, source = taxel[by_taxel], depth[by_taxel], source[by_taxel]
     first, counts = _runs(taxel)  # every taxel keeps its nearest point
     seen = taxel[first]
     local = seen % per_pad
@@ -233,15 +236,16 @@ def pad_coverages(
     row_counts = np.count_nonzero(touched_rows, axis=1)
     touching = np.add.reduceat(touches, pad_first)
     sensing = per_pad if senses is None else int(np.count_nonzero(senses))
+    under_touching = np.repeat(touches, counts)  # the points of the touching taxels
     contacts: list[PadContact | None] = [None] * len(origins_m)
     for k in np.flatnonzero(row_counts >= _MIN_CONTACT_ROWS):  # else an edge or a top
         cells = slice(pad_first[k], pad_first[k] + pad_cells[k])
         pad = pads[k]
-        in_pad = kept[first[cells.start] : first[cells.stop - 1] + counts[cells.stop - 1]]
+        in_pad = slice(first[cells.start], first[cells.stop - 1] + counts[cells.stop - 1])
         contacts[pad] = PadContact(
             touch_m=float(touch[k]) + float(origins_m[pad] @ directions[pad]),
             coverage=int(touching[k]) / sensing,
-            points=in_pad[np.repeat(touches[cells], counts[cells])],
+            points=points_robot[source[in_pad][under_touching[in_pad]]],
             # The surface's slopes from the taxels' cells alone, as without bare cells.
             surface_fit=(
                 taxels.col_u[local[cells][fits[cells]] % cols],

@@ -35,6 +35,11 @@ from two sides, its centre on the line between their bases, while the thumb clos
 side. Tried where the object is too narrow across for fingers 1 and 2 facing the thumb."""
 TOO_NARROW = "too narrow for fingers facing the thumb"
 """Why :func:`sdh_candidate` rejects a grasp at spread 0 that the pinch may take instead."""
+CLOSING_HIT = "a proximal link would hit the object while closing"
+"""Why :func:`sdh_candidate` rejects a grasp whose knuckle or proximal link meets the seen
+cloud on the fingers' way from the pre-shape to their contacts: checked at the contacts
+before the pre-shape search (a link there rejects every pre-shape), the way to them after
+it."""
 #: Steps of the pre-shape search: proximal angles tried below the contact angle (rad).
 _OPEN_STEP_RAD = math.radians(3.0)
 
@@ -117,8 +122,11 @@ def sdh_candidate(
     the most closed common proximal angle, at least 3 deg before the earliest contact, at
     which every finger, the knuckles and the palm descend clear of the cloud
     (:meth:`FingerKinematics.finger_profile`); ``opening_m`` is that pre-shape's opening.
-    From there to its contact no finger's knuckle or proximal link may meet the cloud
-    (:meth:`FingerKinematics.closing_hits`). The hand's shape is ``sdh``'s.
+    From there to its contact no finger's knuckle or proximal link may meet the seen cloud
+    (:meth:`FingerKinematics.closing_hits`); at the contact angles that is checked before
+    the pre-shape search, and a grasp rejected there is rejected for its closing
+    (:data:`CLOSING_HIT`) whatever its pre-shape would have been. The hand's shape is
+    ``sdh``'s.
     """
     return sdh_candidates(
         cloud, centre_m, [(angle_rad, direction, height_m)], spread_rad, sdh, settings
@@ -160,6 +168,7 @@ def sdh_candidates(
     s = settings
     kinematics, pad = sdh.kinematics, sdh.pad
     centre_offset = sdh.centre_offset_m(spread_rad)
+    facings = kinematics.finger_facings(spread_rad)
     hands = []
     for angle_rad, direction, height_m in poses:
         x_hand = np.array([direction[0], direction[1], 0.0])
@@ -172,7 +181,7 @@ def sdh_candidates(
             y_hand,
             centre_m - centre_offset * x_hand,
             rotation,
-            kinematics.finger_facings(spread_rad) @ rotation.T,
+            facings @ rotation.T,
             _distal_taxels(pad, height_m),
             cloud.band(height_m, pad.rows * pad.pitch_m / 2.0),
         )
@@ -252,6 +261,14 @@ def _checked(
         return Candidate.rejected(
             angle_rad, height_m, spread_rad, "the palm would hit the object's top"
         )
+    # Points deeper than the proximal link reaches from its joint are never hit closing.
+    reach = _closing_reach_m(k, s.touch_tolerance_m)
+    within = cloud.above(palm_z - k.knuckle_depth_m - reach - _MARGIN_M, visible=True)
+    closing = _closing_corridors(k, within, bases, facings, palm_z, s)
+    # Every closing ends at the contact angles, whatever the pre-shape: a link that meets
+    # the cloud there rejects the grasp before the pre-shape search.
+    if _closing_collides(k, closing, [[alpha] for alpha in alphas], s):
+        return Candidate.rejected(angle_rad, height_m, spread_rad, CLOSING_HIT)
     open_alpha = _clear_preshape(k, cloud, bases, facings, palm_z, min(alphas), s)
     if open_alpha is None:
         return Candidate.rejected(
@@ -260,13 +277,9 @@ def _checked(
     opening = k.opening_for_alpha(open_alpha)
     if opening > sdh.aperture_m + 1e-9:
         return Candidate.rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
-    # Points deeper than the proximal link reaches from its joint are never hit closing.
-    reach = _closing_reach_m(k, s.touch_tolerance_m)
-    within = cloud.above(palm_z - k.knuckle_depth_m - reach - _MARGIN_M, visible=True)
-    if _closing_collides(k, within, bases, facings, palm_z, open_alpha, alphas, s):
-        return Candidate.rejected(
-            angle_rad, height_m, spread_rad, "a proximal link would hit the object while closing"
-        )
+    on_the_way = [list(np.arange(open_alpha, contact, _OPEN_STEP_RAD)) for contact in alphas]
+    if _closing_collides(k, closing, on_the_way, s):
+        return Candidate.rejected(angle_rad, height_m, spread_rad, CLOSING_HIT)
     # Closing from the pre-shape, the fingertips are lowest where the proximal links pass
     # closest to vertical.
     steepest = 0.0 if open_alpha <= 0.0 <= max(alphas) else min(abs(open_alpha), abs(max(alphas)))
@@ -322,39 +335,29 @@ def _fingers_contacts(
     origins = np.column_stack([np.concatenate(bases), np.zeros(3 * len(bases))])
     directions = np.column_stack([np.concatenate(facings), np.zeros(3 * len(facings))])
     found = pad_coverages(points, origins, directions, taxels, tolerance_m)
-    hands: list[tuple[list[PadContact], list[float]] | str] = []
-    for first in range(0, len(found), 3):
-        fingers = zip(
-            kinematics.fingers,
-            origins[first : first + 3],
-            directions[first : first + 3],
-            found[first : first + 3],
-            strict=True,
-        )
-        hands.append(_finger_angles(kinematics, fingers))
-    return hands
+    # Every finger's angle in one call: the arcsine is taken element by element alike.
+    reaches = [
+        math.nan if c is None else c.touch_m - o @ d
+        for o, d, c in zip(origins, directions, found, strict=True)
+    ]
+    angles = kinematics.alpha_for_reach(np.array(reaches)).tolist()
+    return [
+        _finger_angles(kinematics, found[first : first + 3], angles[first : first + 3])
+        for first in range(0, len(found), 3)
+    ]
 
 
 def _finger_angles(
-    kinematics: FingerKinematics, fingers
+    kinematics: FingerKinematics, contacts: list[PadContact | None], angles: list[float]
 ) -> tuple[list[PadContact], list[float]] | str:
-    """The contacts and proximal angles of one hand's fingers (name, pad origin and
-    direction, contact or None each), or why a finger finds none (the first such finger's
-    reason)."""
-    fingers = list(fingers)
-    reaches = [c.touch_m - o @ d for _, o, d, c in fingers if c is not None]
-    # Every finger's angle in one call: the arcsine is taken element by element alike.
-    angles = iter(kinematics.alpha_for_reach(np.array(reaches)).tolist())
-    contacts, alphas = [], []
-    for finger, _, _, contact in fingers:
+    """One hand's fingers' contacts and proximal angles (rad), or why a finger finds none
+    (the first such finger's reason)."""
+    for finger, contact, alpha in zip(kinematics.fingers, contacts, angles, strict=True):
         if contact is None:
             return f"{finger} meets no surface"
-        alpha = next(angles)
         if not abs(alpha) < kinematics.joint_limit_rad:
             return f"{finger} cannot reach the surface"
-        contacts.append(contact)
-        alphas.append(alpha)
-    return contacts, alphas
+    return list(contacts), angles
 
 
 def _contact_centre(
@@ -424,29 +427,44 @@ def _clear_preshape(
     return None
 
 
-def _closing_collides(
+def _closing_corridors(
     kinematics: FingerKinematics,
     visible: np.ndarray,
     bases: np.ndarray,
     facings: np.ndarray,
     palm_z: float,
-    open_alpha: float,
-    contact_alphas: list[float],
     s: CandidateSettings,
-) -> bool:
-    """Whether a finger's knuckle or proximal link meets the visible cloud on its way from
-    the pre-shape to its contact angle (checked every 3 deg and at the contact): on a tall
-    object a low grasp swings the proximal links into its upper part. Only seen points
-    count: the mirrored ones are where the plane guesses the back, too uncertain to veto a
-    grasp on."""
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each finger's corridor (:func:`_corridors`) through the ``visible`` points, grown by
+    the touch tolerance, without the points farther from the proximal joint than its
+    knuckle or proximal link reaches at any angle: what :func:`_closing_collides` tests.
+    Only seen points count: the mirrored ones are where the plane guesses the back, too
+    uncertain to veto a grasp on."""
     corridors = _corridors(
         visible, bases, facings, palm_z, kinematics.finger_half_width_m + s.touch_tolerance_m
     )
     reach = _closing_reach_m(kinematics, s.touch_tolerance_m) + _MARGIN_M
-    for (t, d), contact in zip(corridors, contact_alphas, strict=True):
-        near = t * t + (d - kinematics.knuckle_depth_m) ** 2 <= reach * reach
-        alphas = [*np.arange(open_alpha, contact, _OPEN_STEP_RAD), contact]
-        hits = kinematics.closing_hits(t[near], d[near], alphas, s.touch_tolerance_m)
+    near = []
+    for t, d in corridors:
+        kept = t * t + (d - kinematics.knuckle_depth_m) ** 2 <= reach * reach
+        near.append((t[kept], d[kept]))
+    return near
+
+
+def _closing_collides(
+    kinematics: FingerKinematics,
+    corridors: list[tuple[np.ndarray, np.ndarray]],
+    alphas: list[list[float]],
+    s: CandidateSettings,
+) -> bool:
+    """Whether a finger's knuckle or proximal link meets its corridor's points
+    (:func:`_closing_corridors`) at any of its proximal ``alphas`` (rad, a list per
+    finger): on a tall object a low grasp swings the proximal links into its upper part.
+    A closing is checked every 3 deg from the pre-shape and at the contact."""
+    for (t, d), angles in zip(corridors, alphas, strict=True):
+        if not angles:
+            continue
+        hits = kinematics.closing_hits(t, d, angles, s.touch_tolerance_m)
         if np.any(np.count_nonzero(hits, axis=1) >= MIN_HITS):
             return True
     return False

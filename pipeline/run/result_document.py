@@ -41,6 +41,14 @@ def start_document(command: str, **fields: Any) -> dict[str, Any]:
     return {"symfuse": __version__, "command": command, **fields}
 
 
+#: What ``init.completion`` says when the initialiser chose a leaning mirror plane.
+UNFUSED_PLANE = (
+    "mirror-only: the chosen plane leans, and the estimator fuses vertical planes only; its "
+    "stages fuse the vertical plane in 'plane', and the leaning plane's completion (the view "
+    "and its mirror image) is not fused"
+)
+
+
 def init_to_json(
     init: SymmetryInit,
     source: str | None = None,
@@ -57,6 +65,8 @@ def init_to_json(
         "kind_scores": init.kind_scores,
         "bias": bias_to_json(init.bias),
     }
+    if init.kind == "plane":
+        entry["completion"] = UNFUSED_PLANE
     if status:
         entry["status"] = init.status
     if hypotheses:

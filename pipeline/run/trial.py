@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.catalogue.objects import CatalogueObject, load_object
+from pipeline.catalogue.objects import CatalogueObject
+from pipeline.catalogue.rest import scene_object
 from pipeline.config import Config, TrialSettings
 from pipeline.errors import StageFailure, SymfuseError
 from pipeline.io.after_view_files import write_after_view
@@ -70,6 +71,7 @@ from pipeline.stages import (
     TactileModel,
     World,
 )
+from pipeline.symmetry.scoring import true_kind
 from pipeline.symmetry.truth_file import true_symmetries
 from pipeline.types import (
     AfterView,
@@ -165,6 +167,8 @@ def ground_truth(
         anchor = T[:3, 3] + T[:3, :3] @ (obj.symmetry_plane.normal * obj.symmetry_plane.offset_m)
         plane = SymmetryPlane.from_normal(normal[:2], float(normal[:2] @ anchor[:2]))
     dims = obj.dimensions_m
+    # A box's thickness and a cylinder's diameter are measured across the upright object.
+    upright = obj.rest is None or obj.rest.keeps_vertical
     return GroundTruth(
         vertices=vertices,
         faces=np.asarray(obj.mesh.faces),
@@ -173,8 +177,8 @@ def ground_truth(
         # The object origin, or the true plane's point nearest it (a mesh's plane given
         # by the user need not pass through the centre of its bounding box).
         axis_xy_m=anchor[:2].copy(),
-        thickness_m=dims.get("thickness") if obj.kind == "box" else None,
-        diameter_m=dims.get("diameter") if obj.kind == "cylinder" else None,
+        thickness_m=dims.get("thickness") if obj.kind == "box" and upright else None,
+        diameter_m=dims.get("diameter") if obj.kind == "cylinder" and upright else None,
         cloud_motion=cloud_motion,
         symmetries=tuple(s.transformed(T) for s in true_symmetries(obj)),
     )
@@ -357,7 +361,8 @@ def run_trial(
     settings = config.trial
     record = TrialDocument(config)
     stages = TrialStages.build(config, registry)
-    obj = load_object(settings.object, units=settings.units, symmetry=settings.symmetry)
+    obj = scene_object(settings)
+    record.placed(obj.rest, true_kind(true_symmetries(obj)))
     trial = Trial(config, registry, stages, obj, out_dir, PhaseTimer(), record, report)
     try:
         with one_blas_thread():  # small matrices: BLAS threads only contend

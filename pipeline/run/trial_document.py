@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from pipeline.catalogue.rest import RestPose
 from pipeline.config import Config
 from pipeline.io.formats import plan_to_json
 from pipeline.planning.hand_choice import HandChoice, choice_to_json
@@ -49,6 +50,13 @@ class TrialDocument:
             status="running",
             config=config.to_dict(),
         )
+
+    def placed(self, pose: RestPose | None, true_kind: str) -> None:
+        """The stable pose the object was placed in (None: upright, as loaded), and the
+        kind of symmetry that describes it as it lies
+        (:func:`pipeline.symmetry.scoring.true_kind`)."""
+        self.data["rest"] = None if pose is None else pose.to_json()
+        self.data["true_kind"] = true_kind
 
     def start_looking(self) -> None:
         """No first grasp has missed yet."""

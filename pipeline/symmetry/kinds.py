@@ -1,4 +1,5 @@
-"""The kind of symmetry one view supports: the paper's vertical plane or a vertical axis.
+"""The kind of symmetry one view supports: the paper's vertical plane, a vertical axis, or a
+mirror plane of any orientation.
 
 Each kind completes the view its own way (:func:`complete`): a plane mirrors the cloud, an
 axis sweeps the visible profile about itself. The camera judges both completions alike: the
@@ -11,7 +12,11 @@ points in free space than the plane's plus ``margin``: both make the same number
 assumptions about the hidden side (two parameters each), and the sweep says more about it.
 When the axis fits the body but its sweep is refuted, the points off the axis are a part
 (a mug's handle): the plane through the axis and that part is proposed when the camera
-accepts it as well as the best plane.
+accepts it as well as the best plane. A plane of any orientation
+(:mod:`pipeline.symmetry.plane_search`) is judged the same way, its mirror image also
+refuted where it falls below the table, and chosen over the level choice only when its
+completion is refuted less by more than a margin, the penalty for its third parameter: an
+upright object keeps its vertical plane.
 
 Pure numeric but for the depth image it is given.
 """
@@ -19,12 +24,14 @@ Pure numeric but for the depth image it is given.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from pipeline.perception.visibility import free_space_depths
 from pipeline.symmetry.axis_fit import SLICE_M, AxisFit, fit_axis, profile_residuals
+from pipeline.symmetry.plane_search import PlaneFit, best_plane, table_top
 from pipeline.types import DepthObservation, Symmetry, SymmetryPlane
 
 #: Turns of the visible profile a sweep completion holds (the view itself among them).
@@ -38,18 +45,26 @@ class KindChoice:
     """The kind chosen and the evidence.
 
     Attributes:
-        symmetry: the chosen symmetry (``"vertical-plane"`` or ``"axis"``), frame R.
-        plane: the vertical plane the estimator fuses: the chosen one, or for an axis the
-            one through it facing the camera (:func:`plane_through_axis`).
-        scores: kind -> share of its completion in seen free space (inf for an axis that
-            does not fit); lower is better.
+        symmetry: the chosen symmetry (``"vertical-plane"``, ``"axis"`` or ``"plane"``),
+            frame R.
+        plane: the vertical plane the estimator fuses: the chosen one, for an axis the
+            one through it facing the camera (:func:`plane_through_axis`), for a leaning
+            plane the vertical one :attr:`level` chose (the estimator fuses vertical
+            planes only).
+        scores: kind -> share of its completion in seen free space or below the table (inf
+            for an axis that does not fit); lower is better.
         axis_fit: the axis fit, None when the view had too few slices.
+        level: the choice between the vertical plane and the vertical axis alone, as
+            before planes of any orientation were searched.
+        plane_fit: the best plane of any orientation, None when none was searched.
     """
 
     symmetry: Symmetry
     plane: SymmetryPlane
     scores: dict[str, float]
     axis_fit: AxisFit | None
+    level: Symmetry | None = None
+    plane_fit: PlaneFit | None = None
 
 
 def sweep(points_m: np.ndarray, axis: Symmetry, turns: int = SWEEP_TURNS) -> np.ndarray:
@@ -66,12 +81,20 @@ def complete(points_m: np.ndarray, symmetry: Symmetry) -> np.ndarray:
     return sweep(points_m, symmetry)
 
 
-def free_space_share(model_m: np.ndarray, view: DepthObservation, tolerance_m: float) -> float:
+def free_space_share(
+    model_m: np.ndarray,
+    view: DepthObservation,
+    tolerance_m: float,
+    table_z_m: float = -math.inf,
+) -> float:
     """Share of the model's points (an even subsample) lying more than ``tolerance_m`` in
-    front of the surface the camera measured on their ray."""
+    front of the surface the camera measured on their ray, or more than ``tolerance_m``
+    below the table top ``table_z_m`` (a vertical plane's mirror image and a vertical
+    axis' sweep keep every point's height; a leaning plane may throw points into the
+    table)."""
     sample = model_m[:: max(1, len(model_m) // CHECK_POINTS)]
     depths = free_space_depths(sample, view.depth_m, view.intrinsics, view.T_robot_camera)
-    return float(np.mean(depths > tolerance_m))
+    return float(np.mean((depths > tolerance_m) | (sample[:, 2] < table_z_m - tolerance_m)))
 
 
 def plane_through_axis(axis: Symmetry, camera_m: np.ndarray) -> SymmetryPlane:
@@ -90,6 +113,8 @@ def choose_kind(
     tolerance_m: float,
     max_profile_rms_m: float,
     margin: float,
+    plane_margin: float | None = None,
+    max_offset_m: float = 0.06,
 ) -> KindChoice:
     """The kind of symmetry the view of ``points_m`` (frame R) supports best.
 
@@ -99,7 +124,49 @@ def choose_kind(
         max_profile_rms_m: the largest profile RMS of an axis candidate (m).
         margin: how much larger a share of free-space points the axis completion may have
             than the plane's and still be chosen.
+        plane_margin: None: planes of other orientations are not searched. Else the best
+            plane of any orientation (:func:`pipeline.symmetry.plane_search.best_plane`)
+            is chosen when it leans and its completion's share is lower than the level
+            choice's by more than this: the penalty for its third parameter.
+        max_offset_m: the plane search's largest shift from the centroid (m).
     """
+    level = _level_kind(points_m, view, plane, tolerance_m, max_profile_rms_m, margin)
+    level = replace(level, level=level.symmetry)
+    if plane_margin is None:
+        return level
+    fit = best_plane(points_m, view, tolerance_m=tolerance_m, max_offset_m=max_offset_m)
+    table_z = table_top(points_m, view)
+    scores = {
+        **level.scores,
+        "plane": free_space_share(complete(points_m, fit.symmetry), view, tolerance_m, table_z),
+    }
+    if fit.symmetry.kind == "plane" and (
+        scores["plane"] + plane_margin < scores[level.symmetry.kind]
+    ):
+        return replace(level, symmetry=fit.symmetry, scores=scores, plane_fit=fit)
+    return replace(level, scores=scores, plane_fit=fit)
+
+
+def vc_kind(
+    points_m: np.ndarray, view: DepthObservation, plane: SymmetryPlane, params: Any
+) -> KindChoice:
+    """:func:`choose_kind` with VC's parameters: ``params`` holds ``tolerance_m``,
+    ``max_profile_rms_m``, ``kind_margin``, ``plane_margin`` (1: no leaning planes) and
+    ``max_offset_m`` (the ``vc`` initialiser's ``Params``)."""
+    return choose_kind(
+        points_m,
+        view,
+        plane,
+        tolerance_m=params.tolerance_m,
+        max_profile_rms_m=params.max_profile_rms_m,
+        margin=params.kind_margin,
+        plane_margin=params.plane_margin if params.plane_margin < 1.0 else None,
+        max_offset_m=params.max_offset_m,
+    )
+
+
+def _level_kind(points_m, view, plane, tolerance_m, max_profile_rms_m, margin) -> KindChoice:
+    """:func:`choose_kind` between the vertical plane and the vertical axis alone."""
     vertical = Symmetry.from_plane(plane)
     scores = {"vertical-plane": free_space_share(complete(points_m, vertical), view, tolerance_m)}
     fit = fit_axis(points_m)

@@ -115,20 +115,21 @@ class IekfEstimator(Estimator):
             at_least=0.0,
         )
         after_view_hand_calibration: bool = param(
-            False,
+            True,
             "after-view: measure the camera's calibration error on the hand seen holding the "
-            "object, instead of taking it as unknown (right to a millimetre on most poses, "
-            "off by several on some: docs/after-view.md)",
+            "object, where its known pose puts it, instead of taking it as unknown; a "
+            "direction the hand's view does not fix keeps the calibration prior "
+            "(docs/after-view.md)",
         )
         after_view_hand_floor_yaw_rad: float = param(
-            0.02,
+            0.005,
             "after-view, hand calibration: std of its yaw error beyond its own covariance (rad)",
             at_least=0.0,
         )
         after_view_hand_floor_xy_m: float = param(
-            0.002,
+            0.0005,
             "after-view, hand calibration: std of each horizontal component of its error "
-            "beyond its own covariance (m)",
+            "beyond its own covariance (the hand's model against its image) (m)",
             at_least=0.0,
         )
         after_view_gate_alpha: float = param(

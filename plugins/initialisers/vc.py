@@ -50,7 +50,11 @@ class VcInitialiser(SymmetryInitialiser):
     (:func:`pipeline.symmetry.kinds.choose_kind`); the plane it hands the estimator then
     passes through the axis, facing the camera. An axis refuted by a part off it (a mug's
     handle) proposes the plane through the axis and that part instead of the best plane,
-    when the camera accepts it as well.
+    when the camera accepts it as well. It also searches mirror planes of any orientation
+    and proposes a leaning one when the view supports it better by more than
+    ``plane_margin``; the estimator still fuses the best vertical plane, and the leaning
+    plane completes the view alone (mirror only, not fused). When no vertical plane passes
+    (``"rejected"``) but a leaning one does, the rejection carries it and says so.
     """
 
     name = "vc"
@@ -108,6 +112,14 @@ class VcInitialiser(SymmetryInitialiser):
             at_least=0.0,
             at_most=1.0,
         )
+        plane_margin: float = param(
+            0.02,
+            "kind = 'evidence': how much smaller a share of points in seen free space or "
+            "below the table a leaning mirror plane's completion must have than the level "
+            "choice's to be chosen (the penalty for its third parameter); 1: never",
+            at_least=0.0,
+            at_most=1.0,
+        )
 
     @classmethod
     def check_params(cls, params: Params) -> None:
@@ -147,35 +159,39 @@ class VcInitialiser(SymmetryInitialiser):
             hypotheses = self._ranked(cloud, observation, axes.centroid_m, seed_rad, every)
         best = hypotheses[0]
         bias = Bias(pivot_m=axes.centroid_m)
+        choice = None
+        if p.kind == "evidence":
+            # The axis fit needs scipy: listing the plugins must not load it.
+            from pipeline.api.symmetry import vc_kind
+
+            choice = vc_kind(cloud.points, observation, best.plane, p)
         if best.score > p.max_violation_fraction:
             searched = " (every orientation)" if every else ""
+            reason = (
+                f"the best of {len(hypotheses)} plane hypotheses{searched} puts "
+                f"{best.score:.0%} of the mirrored points in seen free space or out of "
+                f"view (max_violation_fraction = {p.max_violation_fraction:.0%}): no "
+                "mirror plane the view supports, or the true one is nearly parallel to "
+                "the viewing direction"
+            )
+            leaning = choice is not None and choice.symmetry.kind == "plane"
+            if leaning:
+                reason += (
+                    "; a leaning mirror plane is supported (init.symmetry), which the "
+                    "estimator cannot fuse (it fuses vertical planes only)"
+                )
             return SymmetryInit(
                 plane=best.plane,
                 bias=bias,
                 hypotheses=hypotheses,
                 status="rejected",
-                reason=(
-                    f"the best of {len(hypotheses)} plane hypotheses{searched} puts "
-                    f"{best.score:.0%} of the mirrored points in seen free space or out of "
-                    f"view (max_violation_fraction = {p.max_violation_fraction:.0%}): no "
-                    "mirror plane the view supports, or the true one is nearly parallel to "
-                    "the viewing direction"
-                ),
+                reason=reason,
+                symmetry=choice.symmetry if leaning else None,
+                kind_scores=choice.scores if choice is not None else {},
             )
-        if p.kind == "vertical-plane":
+        if choice is None:
             return SymmetryInit(plane=best.plane, bias=bias, hypotheses=hypotheses)
-        # The axis fit needs scipy: listing the plugins must not load it.
-        from pipeline.api.symmetry import choose_kind
-
-        choice = choose_kind(
-            cloud.points,
-            observation,
-            best.plane,
-            tolerance_m=p.tolerance_m,
-            max_profile_rms_m=p.max_profile_rms_m,
-            margin=p.kind_margin,
-        )
-        symmetry = choice.symmetry if choice.symmetry.kind == "axis" else None
+        symmetry = choice.symmetry if choice.symmetry.kind != "vertical-plane" else None
         return SymmetryInit(
             choice.plane, bias, hypotheses, symmetry=symmetry, kind_scores=choice.scores
         )
