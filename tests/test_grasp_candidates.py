@@ -481,8 +481,9 @@ def test_a_step_below_the_jaw_s_taxels_stops_it_on_the_pad_s_bare_edge(proud_m, 
     # to 36 mm, stands proud of the part the taxels face: 1 mm is within the tolerance
     # (the taxels press too), 4 mm is not (the pad's edge stops the jaw with every taxel
     # short of the surface, as a stepped brick's body below its studs did).
-    front, back = _wall(-0.021), _wall(0.009)
-    step = _wall(-0.021 - proud_m)
+    # One layer each, so that each taxel's surface is the wall's face.
+    front, back = _wall(-0.021, 0.0), _wall(0.009, 0.0)
+    step = _wall(-0.021 - proud_m, 0.0)
     visible = np.vstack([front[front[:, 2] > 0.0365], step[step[:, 2] <= 0.036]])
     candidate = _jaws_closing_along_y(visible, np.vstack([visible, back]))
     assert candidate.summary.feasible is feasible
