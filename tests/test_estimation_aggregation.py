@@ -67,6 +67,19 @@ def test_voxel_moments_match_a_direct_grouping():
         np.testing.assert_allclose(moments.scatter[voxel], offsets.T @ offsets, atol=1e-15)
 
 
+def test_voxel_moments_from_given_coordinates_and_label_ranks_are_the_same():
+    points = _cylinder_cloud(2000, seed=2)
+    labels = np.random.default_rng(2).integers(-1, 5, len(points))
+    size = np.array([0.004, 0.003, 0.002])
+    plain = voxel_moments(points, size, labels)
+    given = voxel_moments(
+        points, size, labels, np.ascontiguousarray(points.T), np.unique(labels, return_inverse=True)
+    )
+    for name in ("count", "centroid", "scatter", "voxel_of_point", "label"):
+        np.testing.assert_array_equal(getattr(given, name), getattr(plain, name))
+    assert len(np.unique(plain.label)) == 6
+
+
 def test_voxel_edges_keep_every_gate_wider_than_the_ratio():
     rng = np.random.default_rng(2)
     _, covariances = _gates(rng, 20, np.array([0.012, 0.006, 0.0025]))

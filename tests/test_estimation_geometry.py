@@ -21,6 +21,7 @@ from pipeline.estimation.correspondences import (
 from pipeline.estimation.covariances import normal_ellipsoids
 from pipeline.estimation.geometry import (
     apply_side,
+    completed_model,
     image_step_bound,
     invert_side,
     rebase_bias_translation,
@@ -112,6 +113,12 @@ def test_image_step_bound_is_the_largest_motion_over_the_hull_and_its_margin():
     assert largest_motion(shifted) <= bound < largest_motion(points) + 2 * margin * 0.1
 
 
+def test_completed_model_is_the_front_then_the_mirrored_cloud():
+    points = np.random.default_rng(3).normal(0.0, 0.1, (50, 3))
+    expected = np.vstack([apply_side(points, G, PIVOT, back) for back in (False, True)])
+    np.testing.assert_allclose(completed_model(points, G, PIVOT), expected, rtol=0, atol=1e-15)
+
+
 def test_vector_median_picks_the_central_member():
     cluster = np.array([[[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0], [2.5, 0, 0], [40.0, 0, 0]]])
     np.testing.assert_allclose(vector_median(cluster), [[2.0, 0, 0]])
@@ -180,14 +187,46 @@ def test_standard_weights_match_dense_gaussian_densities():
         index, points, G, PIVOT, taxels, window, state_covariance, alternative=False
     )
     for side in found.sides():
-        covariance = side_covariances(taxels, window, G, PIVOT, state_covariance, side.back)
-        images = apply_side(points, G, PIVOT, side.back)
-        for i in range(len(taxels)):
-            expected = _gated_densities(images, taxels[i], covariance[i])
-            got = np.zeros(len(points))
-            got[side.point[side.taxel == i]] = side.weight[side.taxel == i]
-            np.testing.assert_allclose(got, expected, rtol=1e-9)
-            assert side.mass[i] == pytest.approx(expected.sum(), rel=1e-9)
+        _assert_dense_weights(side, points, G, taxels, window, state_covariance)
+
+
+def _assert_dense_weights(side, points, g, taxels, window, state_covariance):
+    """Every listed weight and mass of ``side`` is the dense oracle's."""
+    covariance = side_covariances(taxels, window, g, PIVOT, state_covariance, side.back)
+    images = apply_side(points, g, PIVOT, side.back)
+    for i in range(len(taxels)):
+        expected = _gated_densities(images, taxels[i], covariance[i])
+        got = np.zeros(len(points))
+        got[side.point[side.taxel == i]] = side.weight[side.taxel == i]
+        np.testing.assert_allclose(got, expected, rtol=1e-9)
+        assert side.mass[i] == pytest.approx(expected.sum(), rel=1e-9)
+
+
+def test_kept_gate_candidates_give_the_dense_weights_as_the_state_moves():
+    """The listed gates' candidates kept between calls (GateCandidates): the second call
+    keeps them, after small steps of the state they cover the new gates and are reused,
+    after a large one they do not and are searched again; either way every weight is the
+    dense oracle's."""
+    # A generator of its own: the draws of the tests after it stay as they were.
+    rng = np.random.default_rng(11)
+    points = rng.uniform(-0.03, 0.03, (2000, 3))
+    taxels = rng.uniform(-0.02, 0.02, (6, 3))
+    window = normal_ellipsoids(rng.normal(size=(6, 3)), 0.004, 0.0015)
+    state_covariance = np.diag([0.01, 0.002, 0.002, 0.002, 0.003, 0.02]) ** 2
+    index = PointIndex(points)
+    step = np.array([0.001, 0.0002, -0.0001, 0.0001, 0.0002, 0.002])
+    reused = []
+    for g in (G, G + step, G + 2 * step, G + 3 * step, G + 23 * step):
+        kept = dict(index.candidates)
+        found = find_correspondences(
+            index, points, g, PIVOT, taxels, window, state_covariance, alternative=False
+        )
+        for side in found.sides():
+            if (side.back, False) in kept:
+                reused.append(index.candidates[(side.back, False)] is kept[(side.back, False)])
+            _assert_dense_weights(side, points, g, taxels, window, state_covariance)
+    # Both sides reuse their candidates after the two small steps, neither after the jump.
+    assert reused == [True, True, True, True, False, False]
 
 
 @pytest.mark.parametrize("need_pairs", [True, False])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.estimation.indexsets import union, unique_inverse
+from pipeline.estimation.indexsets import ranks, union, unique_inverse
 
 
 @pytest.mark.parametrize("sizes", [(0,), (0, 0), (5,), (300, 0, 40), (1, 1000, 7)])
@@ -32,3 +32,11 @@ def test_unique_inverse_is_numpys_on_dense_and_sparse_keys(high):
 def test_unique_inverse_of_nothing():
     distinct, inverse, counts = unique_inverse(np.empty(0, dtype=np.int64))
     assert distinct.size == inverse.size == counts.size == 0
+
+
+def test_ranks_are_numpys_unique_with_inverse_from_minus_one():
+    labels = np.random.default_rng(3).integers(-1, 80, 5_000)
+    distinct, inverse = ranks(labels)
+    expected = np.unique(labels, return_inverse=True)
+    np.testing.assert_array_equal(distinct, expected[0])
+    np.testing.assert_array_equal(inverse, expected[1])

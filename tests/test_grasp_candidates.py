@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 import yourdfpy
-from test_planners import _true_plane, _view
+from test_planners import PG70, _true_plane, _view
 
 from pipeline.planning import sdh_candidates, sdh_geometry
 from pipeline.planning.candidate import (
@@ -19,7 +19,7 @@ from pipeline.planning.candidate import (
     height_grid,
 )
 from pipeline.planning.grasp_candidates import common_reason
-from pipeline.planning.grasp_geometry import front_to_back
+from pipeline.planning.grasp_geometry import front_to_back, rotate_z
 from pipeline.planning.pad_contact import (
     flat_pad_taxels,
     pad_coverage,
@@ -28,7 +28,7 @@ from pipeline.planning.pad_contact import (
 )
 from pipeline.planning.parallel_candidates import ParallelHand, front_jaw_gap, parallel_candidate
 from pipeline.synthetic import box_object, cylinder_object
-from pipeline.types import PadLayout
+from pipeline.types import Bias, PadLayout, PointCloud, SymmetryInit, SymmetryPlane
 from plugins.planners.top_parallel import TopParallel
 from plugins.planners.top_three_finger import TopThreeFinger
 from robots import ROOT
@@ -472,3 +472,85 @@ def test_the_lowest_pad_height_is_not_below_the_clearance_it_is_computed_from():
         lowest = float(table) + 0.01 + 0.029
         assert not settings.below_clearance(lowest - 0.029)
         assert settings.below_clearance(lowest - 0.029 - 1e-6)
+
+
+@pytest.mark.parametrize(("proud_m", "feasible"), [(0.001, True), (0.004, False)])
+def test_a_step_below_the_jaw_s_taxels_stops_it_on_the_pad_s_bare_edge(proud_m, feasible):
+    # Pads centred 60 mm up: taxel rows from 37.9 mm, the pad's bare lower edge 35-36.2 mm
+    # flush with its surface, the finger 3 mm behind it below. The front's lower part, up
+    # to 36 mm, stands proud of the part the taxels face: 1 mm is within the tolerance
+    # (the taxels press too), 4 mm is not (the pad's edge stops the jaw with every taxel
+    # short of the surface, as a stepped brick's body below its studs did).
+    # One layer each, so that each taxel's surface is the wall's face.
+    front, back = _wall(-0.021, 0.0), _wall(0.009, 0.0)
+    step = _wall(-0.021 - proud_m, 0.0)
+    visible = np.vstack([front[front[:, 2] > 0.0365], step[step[:, 2] <= 0.036]])
+    candidate = _jaws_closing_along_y(visible, np.vstack([visible, back]))
+    assert candidate.summary.feasible is feasible
+    if not feasible:
+        assert candidate.summary.reason == "the front finger meets the object before its pad"
+
+
+def _reach_to_lying_cylinder(start, closing, lateral, across, up, radius_m, axis):
+    """How far each point of a vertical jaw face - ``across`` along ``lateral`` and ``up``
+    in height from ``start`` - travels along ``closing`` to a cylinder of ``radius_m``
+    lying on the table z = 0 with its axis along ``axis`` through (0, 0, radius_m) (inf
+    where it misses): the closed form of each ray's first intersection."""
+    rays = start + np.outer(across, lateral) + np.outer(up, [0.0, 0.0, 1.0])
+    w = rays - np.array([0.0, 0.0, radius_m])
+    w_perp = w - np.outer(w @ axis, axis)
+    d_perp = closing - (closing @ axis) * axis
+    a, b = d_perp @ d_perp, 2.0 * w_perp @ d_perp
+    c = np.einsum("ij,ij->i", w_perp, w_perp) - radius_m**2
+    disc = b * b - 4.0 * a * c
+    return np.where(disc >= 0.0, (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a), np.inf)
+
+
+def test_a_lying_cylinder_is_pressed_by_the_jaws_taxels():
+    # A cylinder 12-20 mm in radius lying on the table, seen from one side with 1 mm of
+    # depth noise; the planner's PG-70 grasp, checked against the true cylinder: where each
+    # jaw's face (its pad flush, the finger 3 mm behind it beside and below) first meets
+    # it, the nearest taxel must be within 1 mm (the simulated taxels' contact threshold),
+    # not left short while the jaw's bare part presses the cylinder's widest line.
+    hand = _jaw_hand()
+    rng = np.random.default_rng(4)
+    for radius in (0.012, 0.016, 0.02):
+        yaw = rng.uniform(0.0, 2.0 * np.pi)
+        axis = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+        side = np.array([-axis[1], axis[0], 0.0])
+        # The camera 0.6 m up and 0.6 m out, up to 40 deg from square to the axis.
+        camera = 0.6 * rotate_z(side, rng.uniform(-0.7, 0.7)) + [0.0, 0.0, 0.6]
+        t, along = np.meshgrid(
+            np.linspace(0, 2 * np.pi, 240, endpoint=False), np.arange(-0.06, 0.06, 0.0015)
+        )
+        normals = np.cos(t).reshape(-1, 1) * side + np.sin(t).reshape(-1, 1) * [0.0, 0.0, 1.0]
+        points = along.reshape(-1, 1) * axis + radius * normals + [0.0, 0.0, radius]
+        view = (camera - points) / np.linalg.norm(camera - points, axis=1)[:, None]
+        seen = np.einsum("ij,ij->i", normals, view) > 0.05
+        points = points[seen] - view[seen] * rng.normal(0.0, 0.001, (np.count_nonzero(seen), 1))
+        plane = SymmetryInit(SymmetryPlane(math.atan2(side[1], side[0]), 0.0), Bias())
+        plan = TopParallel(TopParallel.Params(cloud_base_above_table_m=0.0)).plan(
+            PointCloud(points, "robot", viewpoint_m=camera), plane, PG70
+        )
+        assert plan.status == "ok", plan.reason
+        direction = plan.closing_direction
+        lateral = np.array([-direction[1], direction[0], 0.0])
+        pad_z = plan.T_robot_hand[2, 3] - hand.palm_to_pad_centre_m
+        u, z = np.meshgrid(
+            np.arange(-hand.jaw_half_width_m, hand.jaw_half_width_m + 1e-9, 2e-4),
+            np.arange(pad_z - hand.pad_centre_to_fingertip_m, pad_z + 0.0236, 2e-4),
+        )
+        on_pad = (np.abs(u) <= hand.pad_width_m / 2) & (z >= pad_z - hand.pad_length_m / 2)
+        recess = np.where(on_pad, 0.0, hand.finger_recess_m).ravel()
+        pitch = hand.pad.pitch_m
+        taxel_u, taxel_z = np.meshgrid(
+            (np.arange(hand.pad.cols) - (hand.pad.cols - 1) / 2) * pitch,
+            pad_z + (np.arange(hand.pad.rows) - (hand.pad.rows - 1) / 2) * pitch,
+        )
+        for sign in (1.0, -1.0):
+            closing = sign * direction
+            start = plan.T_robot_hand[:3, 3] * [1.0, 1.0, 0.0] - 0.2 * closing
+            jaw = (start, closing, lateral)
+            stop = np.min(_reach_to_lying_cylinder(*jaw, u, z, radius, axis) + recess)
+            nearest_taxel = np.min(_reach_to_lying_cylinder(*jaw, taxel_u, taxel_z, radius, axis))
+            assert nearest_taxel - stop <= 0.001, (radius, sign)

@@ -16,7 +16,10 @@ Search strategy: both sides' maps are isometries, so a taxel's gate is searched 
 the filter has moved since (Stage 2) are covered by widening the search radius by the
 largest displacement so far, and every candidate is then tested exactly at its current
 position. The cost of a search therefore grows with N only through the tree queries and the
-number of points that really fall inside the gates.
+number of points that really fall inside the gates. While the points stay put (Stage 1) a
+side keeps its gates' candidates from one call to the next and searches again only when a
+bound on the gates' motion no longer proves that they hold every point of the new gates
+(:mod:`.gate_candidates`).
 
 Wide gates: before the first update the back's gates span the whole object (a prior ``m_r``
 std of tens of millimetres), so listing every (taxel, point) pair would cost ``O(M N)``
@@ -50,8 +53,9 @@ from pipeline.estimation.aggregation import (
 from pipeline.estimation.aggregation import voxel_moments as _voxel_moments
 from pipeline.estimation.alternative_centres import alternative_centres
 from pipeline.estimation.covariances import correspondence_covariances
+from pipeline.estimation.gate_candidates import CANDIDATE_REACH, GateCandidates
 from pipeline.estimation.geometry import box_corners, invert_side, side_jacobian, side_linear_part
-from pipeline.estimation.indexsets import union, unique_inverse
+from pipeline.estimation.indexsets import ranks, union, unique_inverse
 from pipeline.estimation.surface import any_azimuth, compatible, facing_labels, point_labels
 
 #: A gate whose radius exceeds this fraction of the cloud's bounding-box diagonal is summed
@@ -83,6 +87,12 @@ class PointIndex:
         self._moments: dict[tuple[tuple[int, ...], bool | None], VoxelMoments] = {}
         self._labels: dict[bool, np.ndarray] = {}
         self._hull: tuple[np.ndarray, float] | None = None
+        self._ranks: list[tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]] = []
+        #: Gate candidates kept per caller's key (GateCandidates), and what each key's last
+        #: call searched (see :meth:`steady`).
+        self.candidates: dict[object, GateCandidates] = {}
+        self._searched: dict[object, object] = {}
+        self._columns: np.ndarray | None = None
 
     def labels(self, azimuth: bool) -> np.ndarray:
         """Facing label of every reference point (:func:`~.surface.point_labels`), cached;
@@ -92,6 +102,35 @@ class PointIndex:
             self._labels[False] = any_azimuth(self._labels[True])
         return self._labels[azimuth]
 
+    def label_ranks(self, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`~.indexsets.ranks` of one of :meth:`labels`' arrays, cached (the listed
+        gates look every candidate's label up by its rank; every voxel grid splits its
+        cells by them)."""
+        for array, found in self._ranks:
+            if array is labels:
+                return found
+        self._ranks.append((labels, ranks(labels)))
+        return self._ranks[-1][1]
+
+    def steady(self, key: object, searched: object) -> bool:
+        """Record what ``key``'s gates now search (``searched``: how many listed gates) and
+        tell whether its last call searched the same. Keeping candidates costs a wider
+        search, which pays only when the next call tests the same gates: the first listed
+        call after a change (the first of a pass, after sums over voxels) searches
+        plainly, the second keeps its candidates."""
+        same = self._searched.get(key) == searched
+        self._searched[key] = searched
+        return same
+
+    def columns(self, points: np.ndarray) -> np.ndarray:
+        """``points`` as ``(3, N)`` contiguous coordinates, cached for the reference
+        positions (the listed gates gather candidates one coordinate at a time)."""
+        if points is not self.reference:
+            return np.ascontiguousarray(points.T)
+        if self._columns is None:
+            self._columns = np.ascontiguousarray(self.reference.T)
+        return self._columns
+
     def moments(self, exponents: np.ndarray, azimuth: bool | None) -> VoxelMoments:
         """Voxel moments of the reference points for edges ``2^(exponents / 4)`` (m), cached
         (see :func:`~.aggregation.voxel_exponents`); points of different :meth:`labels`
@@ -99,7 +138,13 @@ class PointIndex:
         key = (tuple(int(e) for e in exponents), azimuth)
         if key not in self._moments:
             labels = None if azimuth is None else self.labels(azimuth)
-            self._moments[key] = _voxel_moments(self.reference, np.exp2(exponents / 4.0), labels)
+            self._moments[key] = _voxel_moments(
+                self.reference,
+                np.exp2(exponents / 4.0),
+                labels,
+                self.columns(self.reference),
+                None if labels is None else self.label_ranks(labels),
+            )
         return self._moments[key]
 
     def hull(self) -> tuple[np.ndarray, float]:
@@ -248,44 +293,103 @@ def side_covariances(
     return correspondence_covariances(window, jacobians, state_covariance)
 
 
-def _quadratic_forms(inverse: np.ndarray, rows: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """``d^T A_rows d`` for each offset, gathering only the six distinct entries of A."""
-    a = inverse.reshape(-1, 9)
-    dx, dy, dz = offsets.T
+def _gate_distances(
+    columns: np.ndarray,
+    point: np.ndarray,
+    counts: np.ndarray,
+    centres: np.ndarray,
+    inverse: np.ndarray,
+) -> np.ndarray:
+    """Squared Mahalanobis distance ``d^T C^-1 d`` of each candidate from its centre.
+
+    The candidates come centre by centre (``counts`` of each, ``point`` their indices), so
+    a centre's coordinates and entries of ``inverse`` ((T, 3, 3)) are repeated along its
+    run rather than gathered per pair, and the points' coordinates are gathered one
+    contiguous column of ``columns`` ((3, N)) at a time: with tens of thousands of
+    candidates per call, gathering ``(K, 3)`` rows and ``(K, 9)`` matrix entries cost more
+    than the arithmetic.
+    """
+    entries = inverse.reshape(-1, 9)
+
+    def along_runs(values: np.ndarray) -> np.ndarray:
+        return np.repeat(values, counts)
+
+    dx, dy, dz = (columns[k].take(point) - along_runs(centres[:, k]) for k in range(3))
     return (
-        a[rows, 0] * dx * dx
-        + a[rows, 4] * dy * dy
-        + a[rows, 8] * dz * dz
-        + 2.0 * (a[rows, 1] * dx * dy + a[rows, 2] * dx * dz + a[rows, 5] * dy * dz)
+        along_runs(entries[:, 0]) * dx * dx
+        + along_runs(entries[:, 4]) * dy * dy
+        + along_runs(entries[:, 8]) * dz * dz
+        + 2.0
+        * (
+            along_runs(entries[:, 1]) * dx * dy
+            + along_runs(entries[:, 2]) * dx * dz
+            + along_runs(entries[:, 5]) * dy * dz
+        )
     )
+
+
+def _searched(
+    index: PointIndex, centres: np.ndarray, radii_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each centre's points within its radius on the tree: ``(T,)`` counts and the
+    ``(K,)`` points, centre by centre."""
+    neighbours = index.tree.query_ball_point(centres, radii_m, return_sorted=False)
+    counts = np.fromiter(map(len, neighbours), dtype=np.int64, count=len(neighbours))
+    # One pass over the lists (an array per list costs more than the search at 100k points).
+    point = np.fromiter(chain.from_iterable(neighbours), dtype=np.int64, count=int(counts.sum()))
+    return counts, point
 
 
 def _gated_weights(
     index: PointIndex,
-    points: np.ndarray,
+    columns: np.ndarray,
     centres_pre: np.ndarray,
     covariance_pre: np.ndarray,
     radii_m: np.ndarray,
     normaliser: np.ndarray,
+    allowed: Callable[[np.ndarray, np.ndarray], np.ndarray] | None,
+    key: object = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pairs (taxel, point, density) inside each centre's gate, in the pre-image frame.
 
     Each centre's ball of radius ``radii_m`` (its gate's largest semi-axis plus the
-    displacement bound) is searched on the tree, then every candidate is tested exactly.
+    displacement bound) is searched on the tree, then every candidate is tested exactly on
+    ``columns`` (the current points' ``(3, N)`` coordinates, :meth:`PointIndex.columns`)
+    and, with ``allowed(taxel, point)``, by the surface filter. With a ``key`` (the points
+    unmoved) the candidates within :data:`CANDIDATE_REACH` are kept in the index under it,
+    and the next call with that key tests them instead of searching again while they
+    cover its gates (:class:`~.gate_candidates.GateCandidates`; the tree lists a centre's
+    points in its own order whatever the radius, so the pairs even come in the same order
+    as a search's).
     """
     if len(centres_pre) == 0:
         empty = np.empty(0, dtype=np.int64)
         return empty, empty, np.empty(0)
-    neighbours = index.tree.query_ball_point(centres_pre, radii_m, return_sorted=False)
-    counts = np.fromiter(map(len, neighbours), dtype=np.int64, count=len(neighbours))
-    taxel = np.repeat(np.arange(len(centres_pre)), counts)
-    # One pass over the lists (an array per list costs more than the search at 100k points).
-    point = np.fromiter(chain.from_iterable(neighbours), dtype=np.int64, count=int(counts.sum()))
     inverse = np.linalg.inv(covariance_pre)
-    d2 = _quadratic_forms(inverse, taxel, points[point] - centres_pre[taxel])
-    gated = d2 < GATE_CHI2_3DOF_95
-    taxel, point, d2 = taxel[gated], point[gated], d2[gated]
-    return taxel, point, normaliser[taxel] * np.exp(-0.5 * d2)
+    kept = index.candidates.get(key) if key is not None else None
+    if kept is not None and kept.covers(centres_pre, inverse):
+        counts, point = kept.counts, kept.point
+        d2 = _gate_distances(columns, point, counts, centres_pre, inverse)
+    elif key is None:
+        counts, point = _searched(index, centres_pre, radii_m)
+        d2 = _gate_distances(columns, point, counts, centres_pre, inverse)
+    else:
+        reach = CANDIDATE_REACH / np.sqrt(GATE_CHI2_3DOF_95)
+        counts, point = _searched(index, centres_pre, reach * radii_m)
+        d2 = _gate_distances(columns, point, counts, centres_pre, inverse)
+        near = d2 < CANDIDATE_REACH**2
+        taxel = np.repeat(np.arange(len(centres_pre)), counts)
+        counts = np.bincount(taxel[near], minlength=len(centres_pre))
+        point, d2 = point[near], d2[near]
+        lower = np.linalg.cholesky(covariance_pre)
+        index.candidates[key] = GateCandidates(centres_pre.copy(), lower, counts, point)
+    taxel = np.repeat(np.arange(len(centres_pre)), counts)
+    gated = np.flatnonzero(d2 < GATE_CHI2_3DOF_95)
+    taxel, point = taxel.take(gated), point.take(gated)
+    if allowed is not None:
+        keep = np.flatnonzero(allowed(taxel, point))
+        taxel, point, gated = taxel.take(keep), point.take(keep), gated.take(keep)
+    return taxel, point, normaliser.take(taxel) * np.exp(-0.5 * d2.take(gated))
 
 
 def _summed_weights(
@@ -330,17 +434,24 @@ def _summed_weights(
 
 
 def _compatible_pairs(
-    voxel_label: np.ndarray, taxel_label: np.ndarray
+    member_labels: tuple[np.ndarray, np.ndarray], taxel_label: np.ndarray
 ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """``allowed(taxel, voxel)`` of :func:`~.aggregation.gaussian_sums`: the surface filter's
+    """``allowed(taxel, member)`` of :func:`~.aggregation.gaussian_sums` (members: voxels)
+    and :func:`_gated_weights` (members: points): the surface filter's
     :func:`~.surface.compatible` test, looked up in a table over the few distinct labels
-    (a pair costs two gathers instead of the test's dozen array operations)."""
-    voxel_values, voxel_index = np.unique(voxel_label, return_inverse=True)
-    taxel_values, taxel_index = np.unique(taxel_label, return_inverse=True)
-    table = compatible(voxel_values[:, None], taxel_values[None, :])
+    (a pair costs two gathers instead of the test's dozen array operations).
 
-    def allowed(taxel: np.ndarray, voxel: np.ndarray) -> np.ndarray:
-        return table[voxel_index.take(voxel), taxel_index.take(taxel)]
+    Args:
+        member_labels: the distinct labels of the members and each member's index among
+            them (``np.unique(labels, return_inverse=True)``).
+        taxel_label: ``(T,)`` the taxels' labels.
+    """
+    member_values, member_index = member_labels
+    taxel_values, taxel_index = np.unique(taxel_label, return_inverse=True)
+    table = compatible(member_values[:, None], taxel_values[None, :])
+
+    def allowed(taxel: np.ndarray, member: np.ndarray) -> np.ndarray:
+        return table[member_index.take(member), taxel_index.take(taxel)]
 
     return allowed
 
@@ -354,11 +465,15 @@ def _side_weights(
     displacement_m: float,
     need_pairs: bool,
     bands: tuple[np.ndarray, np.ndarray] | None,
+    key: object = None,
 ) -> SideCorrespondences:
+    # Nine parameters: a numeric kernel given one side's gates and the points as arrays.
     """One side's weights: listed pairs for ordinary gates; without ``need_pairs``, sums over
     the voxel-aggregated cloud (unmoved points, gates wide enough) or whole-cloud sums for
     wide gates. ``bands``: (point, taxel) labels of the surface filter (:mod:`.surface`;
-    azimuth on the front only), or None."""
+    azimuth on the front only), or None. ``key``: the listed gates' candidates are kept
+    under it for the next call with the same key while the points are unmoved
+    (:class:`~.gate_candidates.GateCandidates`); None searches afresh."""
     eigenvalues = np.linalg.eigvalsh(covariance_pre)
     radii = np.sqrt(GATE_CHI2_3DOF_95 * eigenvalues[:, -1]) + displacement_m
     normaliser = 1.0 / np.sqrt((2.0 * np.pi) ** 3 * np.prod(eigenvalues, axis=1))
@@ -370,8 +485,8 @@ def _side_weights(
         if len(moments.count) <= AGGREGATE_FRACTION * len(points):
             allowed = None
             if bands is not None:
-                allowed = _compatible_pairs(moments.label, bands[1])
-
+                labels = np.unique(moments.label, return_inverse=True)
+                allowed = _compatible_pairs(labels, bands[1])
             mass, weighted_sum, inside = gaussian_sums(
                 moments, centres_pre, covariance_pre, normaliser, allowed
             )
@@ -384,22 +499,29 @@ def _side_weights(
     if not need_pairs:
         wide = radii > WIDE_GATE_FRACTION * index.diagonal_m
     listed = np.flatnonzero(~wide)
+    columns = index.columns(points)
+    unmoved = key is not None and displacement_m == 0.0 and points is index.reference
+    allowed = None
+    if bands is not None:
+        allowed = _compatible_pairs(index.label_ranks(bands[0]), bands[1][listed])
     taxel, point, weight = _gated_weights(
         index,
-        points,
+        columns,
         centres_pre[listed],
         covariance_pre[listed],
         radii[listed],
         normaliser[listed],
+        allowed,
+        key if unmoved and index.steady(key, ("listed", len(listed))) else None,
     )
-    taxel = listed[taxel]
-    if bands is not None:
-        keep = compatible(bands[0][point], bands[1][taxel])
-        taxel, point, weight = taxel[keep], point[keep], weight[keep]
+    taxel = listed.take(taxel)
     # float64 even without pairs (bincount of nothing is an integer array).
     mass = np.bincount(taxel, weights=weight, minlength=count).astype(float)
     weighted_sum = np.stack(
-        [np.bincount(taxel, weights=weight * points[point, k], minlength=count) for k in range(3)],
+        [
+            np.bincount(taxel, weights=weight * columns[k].take(point), minlength=count)
+            for k in range(3)
+        ],
         axis=1,
     ).astype(float)
     wide_active = np.empty(0, dtype=np.int64)
@@ -484,6 +606,7 @@ def find_correspondences(
                 displacement_m,
                 need_pairs,
                 bands,
+                (back, alternative),
             )
         )
     return Correspondences(front=sides[0], back=sides[1], alternative=alternative)

@@ -67,6 +67,26 @@ def apply_mirror_bias(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) ->
     return apply_bias(mirror(points, g), g, pivot_m)
 
 
+def completed_model(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
+    """The completed model: ``f_b(p)`` of the ``(N, 3)`` points, then ``f_mb(p)``, (2N, 3).
+
+    Both maps are affine, ``f_b(p) = R p + c + t - R c`` and ``f_mb(p) = R (I - 2 n n^T) p +
+    2 m_r R n + c + t - R c``, so each half is one product and one sum written in place
+    (:func:`apply_bias` and :func:`apply_mirror_bias` make a dozen passes over the points
+    between them: a quarter of a second per stage at a million points).
+    """
+    rotation = rotation_z(g[0])
+    offset = pivot_m + g[1:4] - rotation @ pivot_m
+    count = len(points)
+    completed = np.empty((2 * count, 3))
+    front, back = completed[:count], completed[count:]
+    np.matmul(points, rotation.T, out=front)
+    front += offset
+    np.matmul(points, (rotation @ reflection_matrix(g[5])).T, out=back)
+    back += offset + 2.0 * g[4] * (rotation @ plane_normal(g[5]))
+    return completed
+
+
 def apply_side(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray, back: bool) -> np.ndarray:
     """``f_mb`` when ``back`` else ``f_b``."""
     return apply_mirror_bias(points, g, pivot_m) if back else apply_bias(points, g, pivot_m)

@@ -48,6 +48,14 @@ def unique_inverse(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return distinct.astype(keys.dtype, copy=False), position[keys], all_counts[distinct]
 
 
+def ranks(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(values, return_inverse=True)`` for small integers (labels from -1): the
+    sorted distinct values and each value's index among them, counted over their range."""
+    lowest = values.min(initial=0)
+    distinct, inverse, _ = unique_inverse(values - lowest)
+    return distinct + lowest, inverse
+
+
 def positions(members: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Index of each of ``values`` in ``members`` (sorted distinct non-negative integers that
     hold every value): ``np.searchsorted(members, values)``, through a table over the range

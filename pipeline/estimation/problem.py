@@ -11,7 +11,7 @@ import numpy as np
 
 from pipeline.errors import StageFailure
 from pipeline.estimation.covariances import NO_INFORMATION_M, normal_ellipsoids, unit_normals
-from pipeline.estimation.geometry import apply_bias, apply_mirror_bias, rebase_bias_translation
+from pipeline.estimation.geometry import completed_model, rebase_bias_translation
 from pipeline.types import (
     Bias,
     Contacts,
@@ -89,7 +89,7 @@ def stage_estimate(
     """A :class:`StageEstimate` with the completed model ``{f_b(p)} u {f_mb(p)}``;
     ``grasp_g`` is the state each grasp's taxels are compared under, ``covariance`` the
     reported one and ``filter_covariance`` the filter's own (None: the same)."""
-    completed = np.vstack([apply_bias(points, g, pivot_m), apply_mirror_bias(points, g, pivot_m)])
+    completed = completed_model(points, g, pivot_m)
     return StageEstimate(
         stage=stage,
         plane=_plane(g),

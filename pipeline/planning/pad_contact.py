@@ -79,12 +79,16 @@ class PadTaxels:
     """A vertical pad's taxel grid as it moves horizontally (metres): ``col_u`` the
     columns' offsets across the motion (evenly ``pitch_m`` apart), ``row_z`` the rows'
     heights, ``row_recess`` how far each row lies behind the pad's flat surface (a tip
-    curving away from the object)."""
+    curving away from the object). ``senses`` ``(rows, columns)`` marks the cells that are
+    taxels (None: all); the others are bare parts of the finger (a pad's edges, the finger
+    below and beside it): they stop the pad where they meet the surface first, but never
+    count as touching."""
 
     col_u: np.ndarray
     row_z: np.ndarray
     row_recess: np.ndarray
     pitch_m: float
+    senses: np.ndarray | None = None
 
     @property
     def z_range_m(self) -> tuple[float, float]:
@@ -141,13 +145,13 @@ def pad_coverage(
     the nearest (a z-buffer seen from the pad: a completed cloud also holds the far side,
     which is not the surface in front of it); their median position along
     ``direction`` is the surface in front of it. The pad stops when its first taxel
-    reaches the surface; the taxels whose surface is then within ``tolerance_m`` count as
-    touching.
+    reaches the surface (a bare cell's, :attr:`PadTaxels.senses`, included); the
+    sensing taxels whose surface is then within ``tolerance_m`` count as touching.
 
     Returns:
         The contact, or None when no point lies in front of any taxel or the touching
         taxels span fewer than three rows (about 10 mm: the pad meets an edge or a
-        horizontal top, not a side).
+        horizontal top, not a side, or a bare part of the finger meets the object first).
     """
     origin_m = np.asarray(origin_m, dtype=np.float64)
     direction = np.asarray(direction, dtype=np.float64)
@@ -222,12 +226,16 @@ def pad_coverages(
         np.isfinite(touch_supported), touch_supported, np.minimum.reduceat(surface, pad_first)
     )
     of_cell = np.repeat(np.arange(len(pads)), pad_cells)
-    touches = surface <= touch[of_cell] + tolerance_m
     rows = local // cols
+    touches = surface <= touch[of_cell] + tolerance_m
+    senses = taxels.senses
+    fits = np.ones(len(rows), dtype=bool) if senses is None else senses.ravel()[local]
+    touches &= fits
     touched_rows = np.zeros((len(pads), len(taxels.row_z)), dtype=bool)
     touched_rows[of_cell[touches], rows[touches]] = True
     row_counts = np.count_nonzero(touched_rows, axis=1)
     touching = np.add.reduceat(touches, pad_first)
+    sensing = per_pad if senses is None else int(np.count_nonzero(senses))
     under_touching = np.repeat(touches, counts)  # the points of the touching taxels
     contacts: list[PadContact | None] = [None] * len(origins_m)
     for k in np.flatnonzero(row_counts >= _MIN_CONTACT_ROWS):  # else an edge or a top
@@ -236,12 +244,13 @@ def pad_coverages(
         in_pad = slice(first[cells.start], first[cells.stop - 1] + counts[cells.stop - 1])
         contacts[pad] = PadContact(
             touch_m=float(touch[k]) + float(origins_m[pad] @ directions[pad]),
-            coverage=int(touching[k]) / per_pad,
+            coverage=int(touching[k]) / sensing,
             points=points_robot[source[in_pad][under_touching[in_pad]]],
+            # The surface's slopes from the taxels' cells alone, as without bare cells.
             surface_fit=(
-                taxels.col_u[local[cells] % cols],
-                taxels.row_z[rows[cells]],
-                surface[cells],
+                taxels.col_u[local[cells][fits[cells]] % cols],
+                taxels.row_z[rows[cells][fits[cells]]],
+                surface[cells][fits[cells]],
                 float(touch[k]),
                 tolerance_m,
             ),

@@ -20,7 +20,7 @@ from pipeline.planning.candidate import (
     candidate_score,
 )
 from pipeline.planning.grasp_geometry import hand_pose
-from pipeline.planning.pad_contact import PadContact, PadTaxels, flat_pad_taxels, pad_coverage
+from pipeline.planning.pad_contact import PadTaxels, flat_pad_taxels, pad_coverage
 from pipeline.types import GraspCandidate, GripperSpec, PadLayout
 
 
@@ -34,6 +34,8 @@ class ParallelHand:
     Attributes:
         pad: the front jaw's pad (its first pad): name, taxel rows along the finger and
             columns across it, pitch.
+        pad_length_m, pad_width_m: the pad's extent along its rows and across them, its
+            bare edges beyond the taxels included.
         aperture_m: the widest opening between the pads' surfaces.
         palm_to_pad_centre_m: how far the pads' centres lie below the palm's origin: a
             palm at height ``z`` puts them at ``z - palm_to_pad_centre_m``.
@@ -47,6 +49,8 @@ class ParallelHand:
     """
 
     pad: PadLayout
+    pad_length_m: float
+    pad_width_m: float
     aperture_m: float
     palm_to_pad_centre_m: float
     pad_centre_to_fingertip_m: float
@@ -82,6 +86,8 @@ class ParallelHand:
             )
         return cls(
             pad=pad,
+            pad_length_m=mount.length_m,
+            pad_width_m=mount.width_m,
             aperture_m=gripper.max_aperture_m,
             palm_to_pad_centre_m=mount.centre_m[2],
             pad_centre_to_fingertip_m=mount.centre_to_fingertip_m,
@@ -200,23 +206,24 @@ def parallel_candidate(
         )
 
     contacts = []
-    taxels = _flat_taxels(hand.pad, height_m)
+    jaw = _jaw_taxels(hand, height_m)
     for seen, sign in ((True, 1.0), (False, -1.0)):
         side = "front" if sign > 0 else "back"
-        # Only the points at the pad's rows can touch it.
-        points = cloud.slab(*taxels.z_range_m, visible=seen)
-        contact = pad_coverage(points, position, sign * direction, taxels, s.touch_tolerance_m)
+        # Only the points before the jaw's face, its bare cells included, can touch it.
+        points = cloud.slab(*jaw.z_range_m, visible=seen)
+        # Beyond the pad's sides the finger stands back: its face there meets nothing the
+        # pad's edges do not meet first.
+        points = points[np.abs((points - centre_m) @ lateral) <= hand.pad_width_m / 2.0]
+        contact = pad_coverage(points, position, sign * direction, jaw, s.touch_tolerance_m)
         if contact is None:
-            return Candidate.rejected(angle_rad, height_m, 0.0, f"no surface before the {side} pad")
-        below_pad = cloud.slab(
-            float(np.mean(taxels.row_z)) - hand.pad_centre_to_fingertip_m,
-            taxels.z_range_m[0],
-            visible=seen,
-        )
-        if _finger_meets_first(below_pad, position, sign * direction, taxels, contact, hand, s):
-            return Candidate.rejected(
-                angle_rad, height_m, 0.0, f"the {side} finger meets the object before its pad"
-            )
+            taxels = _flat_taxels(hand.pad, height_m)
+            if pad_coverage(points, position, sign * direction, taxels, s.touch_tolerance_m):
+                # The taxels alone would touch: the jaw's bare part below them meets the
+                # object first (a shoulder, or a lying cylinder's widest line).
+                reason = f"the {side} finger meets the object before its pad"
+            else:
+                reason = f"no surface before the {side} pad"
+            return Candidate.rejected(angle_rad, height_m, 0.0, reason)
         contacts.append(contact)
     if not contacts[0].stops_before(centre_m, direction):
         return Candidate.rejected(angle_rad, height_m, 0.0, BEYOND_CENTRE)
@@ -254,31 +261,36 @@ def _flat_taxels(pad: PadLayout, height_m: float) -> PadTaxels:
     return flat_pad_taxels(pad, height_m)
 
 
-def _finger_meets_first(
-    points: np.ndarray,
-    origin_m: np.ndarray,
-    direction: np.ndarray,
-    taxels: PadTaxels,
-    contact: PadContact,
-    hand: ParallelHand,
-    settings: CandidateSettings,
-) -> bool:
-    """Whether the finger carrying a pad, closing along ``direction``, meets the surface
-    between the pad's lowest taxels and the fingertip before the pad reaches ``contact``:
-    a shoulder below a bottle's cap, say, stops the finger (its face ``finger_recess_m``
-    behind the pad) with the pad short of the cap. (Above the pad the finger also passes
-    an object's top face, which may reach beyond a wrong mirrored back; the pad meets
-    that true back as soon as the finger does.)"""
-    half = taxels.pitch_m / 2.0
-    centre_z = float(np.mean(taxels.row_z))
-    z = points[:, 2]
-    lateral = np.array([-direction[1], direction[0], 0.0])
-    in_band = (
-        (np.abs((points - origin_m) @ lateral) <= taxels.col_u.max() + half)
-        & (z >= centre_z - hand.pad_centre_to_fingertip_m)
-        & (z < taxels.row_z.min() - half)
+@functools.lru_cache(maxsize=64)
+def _jaw_taxels(hand: ParallelHand, height_m: float) -> PadTaxels:
+    """A jaw's face at pad height ``height_m``: the pad's taxels, a bare column beside them
+    on either side (the pad's side edges), and bare rows below them down to the fingertip,
+    all as far apart as the taxels (the lowest row ends at the fingertip). A bare row is
+    flush with the pad's surface where its cells overlap the pad (its lower edge beyond
+    the taxels) and ``finger_recess_m`` behind it below. A jaw closing on a lying
+    cylinder, across it or obliquely, or on a stepped side meets it with a bare part where
+    the surface stands nearer beside or below the taxels: those cells stop the jaw but
+    sense nothing (:attr:`PadTaxels.senses`). The points given must lie within the pad's
+    width."""
+    taxels = _flat_taxels(hand.pad, height_m)
+    pitch = taxels.pitch_m
+    fingertip_z = height_m - hand.pad_centre_to_fingertip_m
+    lowest = float(taxels.row_z.min())
+    bare_z = np.arange(lowest - pitch, fingertip_z + pitch / 2.0, -pitch)
+    if (bare_z[-1] if len(bare_z) else lowest) - pitch / 2.0 > fingertip_z:
+        bare_z = np.append(bare_z, fingertip_z + pitch / 2.0)
+    pad_bottom_z = height_m - hand.pad_length_m / 2.0
+    senses = np.zeros((len(taxels.row_z) + len(bare_z), len(taxels.col_u) + 2), dtype=bool)
+    senses[: len(taxels.row_z), 1:-1] = True
+    return PadTaxels(
+        np.concatenate([[taxels.col_u[0] - pitch], taxels.col_u, [taxels.col_u[-1] + pitch]]),
+        np.concatenate([taxels.row_z, bare_z]),
+        np.concatenate(
+            [
+                taxels.row_recess,
+                np.where(bare_z + pitch / 2.0 > pad_bottom_z, 0.0, hand.finger_recess_m),
+            ]
+        ),
+        pitch,
+        senses,
     )
-    if np.count_nonzero(in_band) < MIN_HITS:
-        return False
-    nearest = float(np.percentile(points[in_band] @ direction, 2.0))
-    return nearest + hand.finger_recess_m < contact.touch_m - settings.touch_tolerance_m
