@@ -203,6 +203,55 @@ def test_a_fused_model_is_planned_with_the_plane_it_mirrors_onto():
     assert np.abs(plane.mirror(completed[:200]) - completed[200:]).max() > 5e-3
 
 
+def test_a_stage_with_a_mesh_is_planned_on_its_surface(tmp_path):
+    # The completed cloud leaves holes where neither the camera nor its mirror image saw
+    # (a ball's sides below its equator); the trial's watertight mesh of the stage closes
+    # them, and is sampled as the true mesh is: evenly, but the face it stands on.
+    import trimesh
+
+    from pipeline.asset.files import obj_text
+    from pipeline.catalogue.objects import load_object
+    from pipeline.types import ObjectPose
+
+    box = trimesh.creation.box(extents=(0.04, 0.06, 0.08))
+    box.apply_translation([0.0, 0.0, 0.04])  # object frame: standing on z = 0
+    (tmp_path / "model_stage0.obj").write_text(obj_text([("model", box)]))
+    T_robot_object = np.eye(4)
+    T_robot_object[:3, :3] = rotation_z(0.3)
+    T_robot_object[:3, 3] = [0.42, 0.01, 0.0]
+    after = ObjectPose(np.array([0.42, 0.01, 0.0]), np.array([0.0, 0.0, 0.0, 1.0]))
+    resting = ObjectPose(np.array([0.40, 0.0, 0.0]), np.array([0.0, 0.0, 0.0, 1.0]))
+    completed = np.zeros((500, 3))
+    plane = SymmetryPlane.from_normal(np.array([1.0, 0.0]), 0.42)
+    stage = SimpleNamespace(stage=0, completed=completed, plane=plane, bias=Bias())
+    record = _record(stage, after)
+    record.out_dir = tmp_path
+    record.document["model"] = {
+        "status": "ok",
+        "T_robot_object": T_robot_object.tolist(),
+        "files": {"stages": {"0": "model_stage0.obj"}},
+    }
+    models = graspability.planning_models(record, load_object("cd_drive"), resting, seed=3)
+    # By hand: the box turned by 0.3 rad about its base centre, which the object's motion
+    # back to rest moves from (0.42, 0.01) to (0.40, 0.0).
+    expected = box.copy()
+    expected.apply_transform(T_robot_object)
+    expected.apply_translation([-0.02, -0.01, 0.0])
+    for name in ("stage0", "fused"):
+        points = models[name].points
+        assert models[name].source == "mesh"
+        assert len(points) == len(completed)
+        _, distance, _ = trimesh.proximity.closest_point(expected, points)
+        assert distance.max() < 1e-6
+        assert points[:, 2].min() > 1e-6  # nothing on the face it stands on
+        assert np.ptp(points[:, 2]) > 0.07
+    # Without a mesh (the trial wrote none), the completed cloud.
+    del record.document["model"]
+    bare = graspability.planning_models(record, load_object("cd_drive"), resting, seed=3)
+    assert bare["stage0"].source == "cloud"
+    np.testing.assert_allclose(bare["stage0"].points, completed - [0.02, 0.01, 0.0], atol=1e-12)
+
+
 def _vertical(normal, point):
     return Symmetry("plane", np.asarray(normal, float), np.asarray(point, float))
 

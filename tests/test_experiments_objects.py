@@ -130,3 +130,17 @@ def test_report_states_shares_failures_and_refusals(tmp_path):
     )
     assert "| all | 0 | 0 | 2 | 1 | 1 | 0 | |" in text
     assert f"- 2 x `{reason}`" in text
+
+
+def test_report_counts_the_closed_meshes_and_the_meshes_as_good_as_their_points(tmp_path):
+    # Selected stage 2: its points' Chamfer distance is 2.0 mm; meshes at 1.5, 2.2 (10 %
+    # over: within) and 2.4 mm; one trial's meshes not all closed, one wrote no model.
+    rows = [
+        _row("a", 0, model_watertight=True, stage2_mesh_chamfer_mm=1.5),
+        _row("a", 1, model_watertight=True, stage2_mesh_chamfer_mm=2.2),
+        _row("b", 0, model_watertight=False, stage2_mesh_chamfer_mm=2.4),
+        _row("b", 1),
+    ]
+    objects.report(rows, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "| 3 | 2/3 (67 %) | 2/3 (67 %) | 1.10, 1.20 |" in text

@@ -7,15 +7,22 @@ trial each, the same seeds and keys). After a trial, the trial's hand and planne
 :data:`GRASPS` grasps (the planner's best, :meth:`~pipeline.stages.GraspPlanner.alternatives`)
 on each of three models (:data:`MODELS`):
 
-- ``stage0``: Stage 0's completed cloud (vision and the initial plane);
-- ``fused``: the completed cloud of the stage the estimator selected;
-- ``true``: as many points drawn evenly on the true mesh but the face it stands on (the
-  ceiling), with the true vertical mirror plane nearest the fused model's
-  (:func:`true_plane`; the fused model's own where the object has none: the planner
-  completes a cloud by its plane).
+- ``stage0``: Stage 0's watertight mesh (vision and the initial plane);
+- ``fused``: the mesh of the stage the estimator selected;
+- ``true``: the true mesh (the ceiling), with the true vertical mirror plane nearest the
+  fused model's (:func:`true_plane`; the fused model's own where the object has none: the
+  planner completes a cloud by its plane).
 
-Each model is the planner's cloud with the plane it is symmetric about (a completed cloud
-mirrors onto itself): a stage's plane moved by its bias
+Each is given to the planner as points drawn evenly on its surface but the face it stands
+on, as many as the selected stage's completed cloud. A stage's mesh is the one the trial
+wrote (:func:`stage_meshes`), its completed cloud closed into a solid: the cloud itself has
+holes where neither the camera nor its mirror image saw (a ball's sides below its
+equator), and a planner that finds no surface there grasps where there is one, above the
+equator, where a squeeze pushes the ball out. A trial without a mesh gives the completed
+cloud (``planned_on``).
+
+Each model comes with the plane it is symmetric about (a completed cloud, and its mesh,
+mirror onto themselves): a stage's plane moved by its bias
 (:func:`~pipeline.metrics.plane_after_bias`; the plane the estimator holds is the one
 before the bias, and mirroring a fused model through it adds a copy turned by twice the
 bias's yaw, too wide for the jaws). Each is moved by the object's true motion from where
@@ -33,7 +40,8 @@ hand could not execute, counts as failed.
 Rows: the trial's row (:mod:`.paper_trial`: Chamfer, F-score and IoU per stage) and per
 model ``<model>_plans``, ``<model>_executed``, ``<model>_held`` (counts),
 ``<model>_success`` (held / :data:`GRASPS`) and ``<model>_first_miss`` (the first attempt
-that was not held and why); ``fused_stage``. A trial that stopped before an estimate
+that was not held and why); ``fused_stage``; ``planned_on`` (``"mesh"``, or ``"cloud"``
+when the trial wrote no mesh). A trial that stopped before an estimate
 has no model and no grasp counts (the report counts it apart).
 """
 
@@ -122,11 +130,14 @@ def run_one(params: dict) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class PlanningModel:
-    """What the planner is given for one model: completed points (frame R, the object at
-    its resting pose) and their mirror plane."""
+    """What the planner is given for one model: points (frame R, the object at its resting
+    pose), their mirror plane, and what the points were drawn from: ``"mesh"`` (a
+    watertight surface) or ``"cloud"`` (a stage's completed cloud, when the trial wrote no
+    mesh)."""
 
     points: np.ndarray
     plane: SymmetryPlane
+    source: str
 
 
 def _pose(entry: Mapping[str, Any]) -> ObjectPose:
@@ -161,16 +172,21 @@ def planning_models(
     def moved(points: np.ndarray) -> np.ndarray:
         return points @ motion[:3, :3].T + motion[:3, 3]
 
+    count = len(result.selected.completed)
+    meshes = stage_meshes(record)
+
     def model(stage: StageEstimate) -> PlanningModel:
         plane = moved_plane(plane_after_bias(stage.plane, stage.bias), motion)
-        return PlanningModel(moved(stage.completed), plane)
+        mesh = meshes.get(stage.stage) if meshes else None
+        if mesh is None:
+            return PlanningModel(moved(stage.completed), plane, "cloud")
+        # Its surface but the face it stands on, sampled as the true mesh's is.
+        return PlanningModel(moved(sample_surface(*mesh, count, seed=seed)), plane, "mesh")
 
     stage0, fused = model(result.stages[0]), model(result.selected)
     T = resting.transform
     # The true surface but the face it stands on, which no model has either.
-    samples = sample_surface(
-        obj.mesh.vertices, obj.mesh.faces, len(result.selected.completed), seed=seed
-    )
+    samples = sample_surface(obj.mesh.vertices, obj.mesh.faces, count, seed=seed)
     truth = ground_truth(obj, resting, resting, None)
     plane = truth.plane
     if plane is None:
@@ -179,8 +195,26 @@ def planning_models(
     return {
         "stage0": stage0,
         "fused": fused,
-        "true": PlanningModel(samples @ T[:3, :3].T + T[:3, 3], plane or fused.plane),
+        "true": PlanningModel(samples @ T[:3, :3].T + T[:3, 3], plane or fused.plane, "mesh"),
     }
+
+
+def stage_meshes(record: TrialRecord) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Each stage's watertight mesh the trial wrote (``model_stage{k}.obj``, docs/formats.md)
+    as vertices (frame R, where the model was scored) and faces; empty when the trial wrote
+    no model (``result.json``'s ``model`` entry says why)."""
+    import trimesh
+
+    entry = record.document.get("model", {})
+    if entry.get("status") != "ok":
+        return {}
+    T = np.asarray(entry["T_robot_object"], dtype=float)
+    meshes = {}
+    for stage, name in entry["files"]["stages"].items():
+        mesh = trimesh.load(record.out_dir / name, force="mesh", process=False)
+        vertices = np.asarray(mesh.vertices, dtype=float) @ T[:3, :3].T + T[:3, 3]
+        meshes[int(stage)] = (vertices, np.asarray(mesh.faces))
+    return meshes
 
 
 def true_plane(
@@ -270,6 +304,7 @@ def grasp_models(params: Mapping[str, Any], record: TrialRecord) -> dict[str, An
         resting = world.object_pose()
         spec = world.gripper_spec(gripper)
         models = planning_models(record, obj, resting, settings.seed)
+        fields["planned_on"] = models["fused"].source
         for name, model in models.items():
             cloud = PointCloud(model.points, "robot", None, viewpoint)
             plans = planner.alternatives(cloud, SymmetryInit(model.plane, Bias()), spec)[:count]
@@ -365,8 +400,8 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
     lines = [
         "# Grasp success per model",
         "",
-        f"Each trial's hand plans {GRASPS} grasps (its planner's best) on each model: Stage "
-        "0's completed cloud, the fused (selected) stage's, and the true mesh's surface (the "
+        f"Each trial's hand plans {GRASPS} grasps (its planner's best) on each model's "
+        "surface: Stage 0's mesh, the fused (selected) stage's, and the true mesh (the "
         "ceiling). Each grasp is executed on the true object, from its resting pose every "
         f"time, lifted {100 * LIFT_M:.0f} cm and held {HOLD_S:g} s; it succeeds when the "
         "object rose with the hand (within the slip allowance) and lies between at least "

@@ -16,7 +16,9 @@ trials refused (with the planners' measured reason), those whose grasp tipped th
 (the selected stage at most :data:`NO_WORSE_MM` worse than Stage 0, by the median
 deviation) and those the estimator flagged (a failed final status); the median over trials
 of the median deviation, the Chamfer distance and the F-score at 5 mm per stage; and where
-each trial that did not end fused and no worse failed (:data:`FAILURE_STAGES`). Every task
+each trial that did not end fused and no worse failed (:data:`FAILURE_STAGES`). Over the
+trials that wrote a model: those whose every stage's mesh is closed, and those whose
+selected mesh is as good a model as its points (:func:`model_lines`). Every task
 has a row: a trial that stopped early has the reason it stopped, one that raised has its
 error (counted ``raised``).
 """
@@ -65,6 +67,11 @@ TIPPED_DEG = 5.0
 OPPOSING_TARGET = 0.90
 NO_WORSE_TARGET = 0.95
 DEVIATION_TARGET_MM = 3.0
+#: Targets of the model files: every stage's mesh closed in this share of the trials that
+#: wrote a model, and the selected stage's mesh a model as good as its points, its Chamfer
+#: distance to the truth at most this factor of theirs.
+WATERTIGHT_TARGET = 0.98
+MESH_CHAMFER_FACTOR = 1.10
 #: Where a trial that did not end fused and no worse than vision failed: the stages of
 #: :data:`~pipeline.experiments.paper_trial.FAILURE_STAGES`, and ``raised`` (an exception:
 #: a bug).
@@ -264,12 +271,44 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
             f"| {_stage_cells(done, 'fscore_5mm', (0, 2))} |"
         )
     lines += kind_lines(rows)
+    lines += model_lines(rows)
     lines += taxonomy_lines(by_object)
     lines += refusal_lines(rows)
     report_path = out_dir / "report.md"
     report_path.write_text("\n".join(lines) + "\n")
     figure = objects_figure(by_object, out_dir / "objects.png", estimator)
     return [csv_path, figure, report_path]
+
+
+def model_lines(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The model files of the trials that wrote one: how many have every stage's mesh
+    closed, and how many have the selected stage's mesh within
+    :data:`MESH_CHAMFER_FACTOR` of its points' Chamfer distance (with the median and the
+    largest ratio)."""
+    made = [row for row in rows if "model_watertight" in row]
+    closed = sum(bool(row["model_watertight"]) for row in made)
+    ratios = np.asarray(
+        [selected_value(row, "mesh_chamfer_mm") / selected_value(row, "chamfer_mm") for row in made]
+    )
+    ratios = ratios[np.isfinite(ratios)]
+    within = int(np.sum(ratios <= MESH_CHAMFER_FACTOR))
+    largest = fmt(float(ratios.max()), 2) if ratios.size else "-"
+    return [
+        "",
+        "## The model files",
+        "",
+        f"Trials that wrote a model (`model_stage{{k}}.obj`). Targets: every stage's mesh "
+        f"closed in at least {100 * WATERTIGHT_TARGET:.0f} % of them; the selected stage's "
+        f"mesh within {100 * (MESH_CHAMFER_FACTOR - 1):.0f} % of its points' Chamfer distance "
+        "to the truth.",
+        "",
+        "| trials with a model | every mesh closed "
+        f"| mesh Chamfer within {100 * (MESH_CHAMFER_FACTOR - 1):.0f} % of the points' "
+        "| mesh / points: median, largest |",
+        "|---|---|---|---|",
+        f"| {len(made)} | {_share(closed, len(made))} | {_share(within, ratios.size)} "
+        f"| {fmt(_median(ratios), 2)}, {largest} |",
+    ]
 
 
 def _stage_cells(rows: Sequence[Mapping[str, Any]], metric: str, stages: Sequence[int]) -> str:

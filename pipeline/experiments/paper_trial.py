@@ -12,7 +12,8 @@ fused model; docs/method.md §9), ``stage{k}_deviation_{min,q1,median,q3,max,mea
 and every scalar metric of :func:`pipeline.metrics.evaluation.evaluate_stage` as
 ``stage{k}_<metric>`` (thickness, side angle, diameter, plane errors, and the shape scores:
 ``chamfer_mm``, ``precision_2mm``, ``recall_2mm``, ``fscore_2mm``, the same at 5 mm,
-``iou``); ``opposing_contacts`` (whether the first grasp's pads pressed from opposing
+``iou``); ``model_watertight`` (whether every stage's mesh the trial wrote is closed; absent when
+it wrote none); ``opposing_contacts`` (whether the first grasp's pads pressed from opposing
 sides) and, once a grasp was executed, ``grasp_tilt_deg``, ``grasp_shift_mm`` and
 ``grasp_reapproaches``. A failed trial's row says where it stopped (``failed_stage``) and
 whether the planners refused (``refused``): :func:`failure_fields`.
@@ -127,6 +128,9 @@ def trial_row(document: Mapping[str, Any], metrics: Sequence[Mapping[str, Any]])
             elif isinstance(value, int | float):
                 row[f"{prefix}_{name}"] = float(value)
     row["diverged"] = is_diverged(row)
+    model = document.get("model") or {}
+    if model.get("status") == "ok":
+        row["model_watertight"] = all(model["watertight"].values())
     row.update(grasp_motion_fields(document))
     row["opposing_contacts"] = True  # the first grasp was fused: its pads opposed
     if document.get("next_grasp"):
