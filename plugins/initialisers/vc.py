@@ -41,8 +41,9 @@ class VcInitialiser(SymmetryInitialiser):
     (:func:`tie_spread`). ``SymmetryInit.hypotheses``
     holds every hypothesis, best first, with ``score`` = fraction of violating points. When
     even the best one exceeds ``max_violation_fraction``, every orientation (+-90 deg at
-    the same step) is searched, and when the best of those exceeds it too the result is
-    ``"rejected"``.
+    the same step) is searched, and when the best of those exceeds
+    ``max_violation_fraction_widened`` (a stricter bar: that second look tries twice the
+    hypotheses, against the footprint's axes) the result is ``"rejected"``.
     ``refine`` keeps the proposal (zero bias, pivot at the cloud's centroid).
 
     With ``kind = "evidence"`` VC also fits a vertical rotation axis to the view and proposes
@@ -90,6 +91,14 @@ class VcInitialiser(SymmetryInitialiser):
         max_violation_fraction: float = param(
             0.2,
             "reject when the best hypothesis has a larger fraction of violating points",
+            at_least=0.0,
+            at_most=1.0,
+        )
+        max_violation_fraction_widened: float = param(
+            0.1,
+            "reject a plane only the every-orientation search found (after no plane near "
+            "the footprint's axes passed max_violation_fraction) when its fraction of "
+            "violating points is larger",
             at_least=0.0,
             at_most=1.0,
         )
@@ -151,11 +160,16 @@ class VcInitialiser(SymmetryInitialiser):
         every = p.orientations > 1 and variance_major < p.round_axis_ratio**2 * variance_minor
         hypotheses = self._ranked(cloud, observation, axes.centroid_m, seed_rad, every)
         narrow = p.orientations > 1 and p.max_angle_deg < 90.0 and not every
-        if hypotheses[0].score > p.max_violation_fraction and narrow:
+        limit, bar = p.max_violation_fraction, "max_violation_fraction"
+        if hypotheses[0].score > limit and narrow:
             # No plane near the seed is supported: the object's mirror plane may lie across
             # its major axis (a banana, curved in the view, mirrors end to end), so every
             # orientation is tried before the view is said to support none.
+            # That second look, over twice the hypotheses and against the footprint's axes,
+            # passes a wrong plane more easily (an L-shaped block's diagonal mirrors one leg
+            # onto the other, most of it hidden behind the object), so it has its own bar.
             every = True
+            limit, bar = p.max_violation_fraction_widened, "max_violation_fraction_widened"
             hypotheses = self._ranked(cloud, observation, axes.centroid_m, seed_rad, every)
         best = hypotheses[0]
         bias = Bias(pivot_m=axes.centroid_m)
@@ -165,12 +179,12 @@ class VcInitialiser(SymmetryInitialiser):
             from pipeline.api.symmetry import vc_kind
 
             choice = vc_kind(cloud.points, observation, best.plane, p)
-        if best.score > p.max_violation_fraction:
+        if best.score > limit:
             searched = " (every orientation)" if every else ""
             reason = (
                 f"the best of {len(hypotheses)} plane hypotheses{searched} puts "
                 f"{best.score:.0%} of the mirrored points in seen free space or out of "
-                f"view (max_violation_fraction = {p.max_violation_fraction:.0%}): no "
+                f"view ({bar} = {limit:.0%}): no "
                 "mirror plane the view supports, or the true one is nearly parallel to "
                 "the viewing direction"
             )
