@@ -140,3 +140,11 @@ def test_trimesh_imports_without_networkx_and_scipy_optimize_under_the_hook():
         "      trimesh.bounds.optimize.minimize is scipy.optimize.minimize)"
     )
     assert printed_under_the_hook(code) == ["True"] * 5
+
+
+@pytest.mark.slow
+def test_a_sweeps_fork_server_imports_the_trial_under_the_hook():
+    """The fork server's imports (:mod:`pipeline.experiments.trial_worker`) install the
+    hook first: the trial's modules load without numpy's test tools or networkx."""
+    code = "import pipeline.experiments.trial_worker"
+    assert loaded_after(code, ("numpy.f2py", "numpy.testing", "networkx")) == []
