@@ -32,6 +32,7 @@ from pipeline.metrics import (
     sample_surface,
     side_wall,
     solid_grid,
+    solid_share_inside,
     surface_scores,
 )
 from pipeline.symmetry.scoring import symmetry_errors
@@ -93,9 +94,6 @@ class GroundTruth:
         """The true object's solid on a grid of cells (for the volumetric IoU)."""
         return solid_grid(self.vertices, self.faces)
 
-
-#: At most this many cells of the true solid are tested against a model's mesh for its IoU.
-IOU_CELLS = 50_000
 
 #: The 99 % quantile of the chi-square distribution with 4 degrees of freedom: the bound a
 #: truthful covariance keeps :func:`bias_errors`' ``bias_nees`` under 99 % of the time.
@@ -233,11 +231,7 @@ def mesh_scores(mesh: trimesh.Trimesh, truth: GroundTruth) -> dict[str, float]:
         truth.surface.distances(samples), surface.distances(truth.surface_samples)
     )
     solid = truth.solid
-    cells = solid.cells
-    # An evenly spaced subset of the true solid's cells: the share inside the mesh to well
-    # under a percentage point, at a fraction of the cost.
-    stride = max(1, len(cells) // IOU_CELLS)
-    inside_share = float(np.mean(surface.occupancy(cells[::stride])))
+    inside_share = solid_share_inside(surface, solid, float(vertices[:, 2].min()))
     volume = abs(float(mesh.volume))
     shared = min(inside_share * solid.volume_m3, volume)
     union = volume + solid.volume_m3 - shared
