@@ -148,11 +148,12 @@ class SolidGrid:
         return counts
 
 
-def _crossings_below(
+def _odd_crossings_below(
     scene, origin: np.ndarray, centres: list[np.ndarray], pitch: float, axis: int
 ) -> np.ndarray:
-    """``(nx, ny, nz)`` int: how often a ray along ``+axis`` from outside the grid crosses the
-    mesh of ``scene`` before each cell centre, one ray per line of cells."""
+    """``(nx, ny, nz)`` uint8: 1 where a ray along ``+axis`` from outside the grid crosses
+    the mesh of ``scene`` an odd number of times before the cell centre, one ray per line of
+    cells."""
     across = [i for i in range(3) if i != axis]
     grid = np.meshgrid(centres[across[0]], centres[across[1]], indexing="ij")
     starts = np.empty((grid[0].size, 3))
@@ -168,7 +169,9 @@ def _crossings_below(
     n = len(centres[axis])
     beyond = np.clip(np.floor(hits["t_hit"].numpy() / pitch), 0, n).astype(np.int64)
     counts = np.bincount(line * (n + 1) + beyond, minlength=len(starts) * (n + 1))
-    below = np.cumsum(counts.reshape(len(starts), n + 1)[:, :n], axis=1)
+    # Only the parity matters: a running count modulo 256 keeps it, in a byte per cell.
+    below = np.cumsum(counts.reshape(len(starts), n + 1)[:, :n], axis=1, dtype=np.uint8)
+    below &= 1
     return np.moveaxis(below.reshape(len(grid[0]), len(grid[0][0]), n), 2, axis)
 
 
@@ -194,7 +197,9 @@ def solid_grid(vertices: np.ndarray, faces: np.ndarray, max_cells: int = 1_000_0
     counts = np.ceil(extent / pitch).astype(int)
     centres = [low[i] + pitch * (np.arange(counts[i]) + 0.5) for i in range(3)]
     scene, origin = _raycasting_scene(vertices, faces)
-    votes = sum(_crossings_below(scene, origin, centres, pitch, axis) % 2 for axis in range(3))
+    votes = _odd_crossings_below(scene, origin, centres, pitch, 0)
+    for axis in (1, 2):
+        votes += _odd_crossings_below(scene, origin, centres, pitch, axis)
     return SolidGrid(votes >= 2, low + 0.5 * pitch, pitch)
 
 
