@@ -224,6 +224,8 @@ def mesh_scores(mesh: trimesh.Trimesh, truth: GroundTruth) -> dict[str, float]:
     each true surface sample's exact distance to the mesh; ``mesh_iou`` counts the true
     solid's cells inside the mesh against the mesh's exact volume.
     """
+    from pipeline.asset.mass import signed_volume
+
     vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     samples = sample_surface(vertices, faces, SURFACE_SAMPLES, seed=0, skip_support=False)
     surface = MeshSurface(vertices, faces)
@@ -232,7 +234,7 @@ def mesh_scores(mesh: trimesh.Trimesh, truth: GroundTruth) -> dict[str, float]:
     )
     solid = truth.solid
     inside_share = solid_share_inside(surface, solid, float(vertices[:, 2].min()))
-    volume = abs(float(mesh.volume))
+    volume = abs(signed_volume(mesh))
     shared = min(inside_share * solid.volume_m3, volume)
     union = volume + solid.volume_m3 - shared
     scores["iou"] = shared / union if union > 0.0 else 0.0
