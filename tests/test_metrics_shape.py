@@ -10,6 +10,7 @@ import trimesh
 
 from pipeline.metrics import (
     MeshSurface,
+    grid_order,
     hull_iou,
     mesh_occupancy,
     nearest_distances,
@@ -233,3 +234,22 @@ def test_share_inside_tests_the_cells_of_an_odd_column_one_by_one():
 def _box_arrays(extents: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     box = trimesh.creation.box(extents=extents)
     return np.asarray(box.vertices), np.asarray(box.faces)
+
+
+def test_sample_distances_asked_in_grid_order_are_each_samples_own():
+    """:meth:`GroundTruth.sample_distances` asks in :func:`grid_order` (a permutation that
+    keeps neighbours together) and returns every sample's value in the samples' order."""
+    from pipeline.metrics.evaluation import GroundTruth
+
+    box = _tilted(trimesh.creation.box(extents=(0.08, 0.05, 0.1)), 4)
+    truth = GroundTruth(np.asarray(box.vertices), np.asarray(box.faces), "none", None, np.zeros(2))
+    samples = truth.surface_samples
+    order = grid_order(samples)
+    np.testing.assert_array_equal(np.sort(order), np.arange(len(samples)))
+    steps = np.linalg.norm(np.diff(samples[order], axis=0), axis=1)
+    assert np.median(steps) < 0.25 * np.median(np.linalg.norm(np.diff(samples, axis=0), axis=1))
+    model = np.random.default_rng(3).uniform(-0.05, 0.05, (500, 3)) + box.centroid
+    np.testing.assert_array_equal(
+        truth.sample_distances(lambda queries: nearest_distances(queries, model)),
+        nearest_distances(samples, model),
+    )

@@ -39,6 +39,7 @@ from pipeline.metrics.fits import (
 from pipeline.metrics.shape_scores import (
     FSCORE_THRESHOLDS_M,
     SolidGrid,
+    grid_order,
     hull_iou,
     nearest_distances,
     sample_surface,
@@ -63,6 +64,7 @@ __all__ = [
     "diameter_error",
     "fit_circle_taubin",
     "fit_line_irls",
+    "grid_order",
     "hull_iou",
     "mesh_deviation",
     "mesh_occupancy",

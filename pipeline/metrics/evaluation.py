@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -26,6 +26,7 @@ from pipeline.metrics import (
     SolidGrid,
     box_thickness,
     fit_circle_taubin,
+    grid_order,
     hull_iou,
     nearest_distances,
     plane_after_bias,
@@ -83,6 +84,22 @@ class GroundTruth:
         """``(SURFACE_SAMPLES, 3)`` points on the true surface but the face the object stands
         on (fixed seed: the same points for every stage and every run)."""
         return sample_surface(self.vertices, self.faces, SURFACE_SAMPLES, seed=0)
+
+    @functools.cached_property
+    def _sample_order(self) -> np.ndarray:
+        """The surface samples' indices in :func:`grid_order` (near samples one after
+        another)."""
+        return grid_order(self.surface_samples)
+
+    def sample_distances(self, distances: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """``distances(surface_samples)`` (one value per sample, m), each sample's value as
+        that function gives it, asked in :func:`grid_order`: a k-d tree's or a mesh's
+        hierarchy answers near queries one after another from what it has in cache (about
+        a third faster for 20,000 samples)."""
+        order = self._sample_order
+        result = np.empty(len(order))
+        result[order] = distances(self.surface_samples[order])
+        return result
 
     @functools.cached_property
     def surface(self) -> MeshSurface:
@@ -210,7 +227,8 @@ def shape_scores(
     surface sample's distance to the nearest completed point. ``iou`` is the volumetric IoU
     of the completed model's convex hull with the true solid.
     """
-    scores = surface_scores(distances_m, nearest_distances(truth.surface_samples, completed))
+    to_model = truth.sample_distances(lambda samples: nearest_distances(samples, completed))
+    scores = surface_scores(distances_m, to_model)
     scores["iou"] = hull_iou(completed, truth.solid)
     return scores
 
@@ -230,7 +248,7 @@ def mesh_scores(mesh: trimesh.Trimesh, truth: GroundTruth) -> dict[str, float]:
     samples = sample_surface(vertices, faces, SURFACE_SAMPLES, seed=0, skip_support=False)
     surface = MeshSurface(vertices, faces)
     scores = surface_scores(
-        truth.surface.distances(samples), surface.distances(truth.surface_samples)
+        truth.surface.distances(samples), truth.sample_distances(surface.distances)
     )
     solid = truth.solid
     inside_share = solid_share_inside(surface, solid, float(vertices[:, 2].min()))

@@ -28,6 +28,14 @@ def nearest_distances(queries: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.asarray(distances, dtype=np.float64)
 
 
+def grid_order(points: np.ndarray, cell_m: float = 0.004) -> np.ndarray:
+    """``(N,)`` indices that visit ``(N, 3)`` points cell by cell of a grid of ``cell_m``
+    cubes (rows of cells along z, then y, then x): neighbours in space become neighbours in
+    the order, so queries asked in it walk a search tree along paths just taken."""
+    cells = np.floor((points - points.min(axis=0)) / cell_m).astype(np.int64)
+    return np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0]))
+
+
 def threshold_label(threshold_m: float) -> str:
     """``0.002 -> "2mm"``: the suffix of a threshold's metric names."""
     return f"{threshold_m * 1e3:g}mm"
