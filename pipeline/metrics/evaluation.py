@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from pipeline.metrics import (
     DeviationSummary,
@@ -112,10 +111,6 @@ class GroundTruth:
         return solid_grid(self.vertices, self.faces)
 
 
-#: The 99 % quantile of the chi-square distribution with 4 degrees of freedom: the bound a
-#: truthful covariance keeps :func:`bias_errors`' ``bias_nees`` under 99 % of the time.
-BIAS_NEES_BOUND = float(2.0 * gammaincinv(2.0, 0.99))
-
 #: Points sampled on the true surface for recall and Chamfer distance: the recall's standard
 #: error is below 0.4 percentage points.
 SURFACE_SAMPLES = 20_000
@@ -186,8 +181,9 @@ def bias_errors(
     ``across``) and horizontally within it (``along``, which pads on a flat side hardly
     see). ``bias_nees`` is the normalised estimation error squared ``e^T P_b^-1 e`` over the
     four bias components ``(yaw, x, y, z)``: a covariance that tells the truth makes it
-    chi-square with 4 degrees of freedom (mean 4, below :data:`BIAS_NEES_BOUND` 99 % of the
-    time); inf when the covariance claims a component exactly known that is not.
+    chi-square with 4 degrees of freedom (mean 4, below
+    :data:`pipeline.experiments.paper_report.BIAS_NEES_BOUND` 99 % of the time); inf when
+    the covariance claims a component exactly known that is not.
 
     Args:
         bias: the estimated bias (its pivot is used for the truth as well).
