@@ -26,7 +26,7 @@ from pipeline.estimation.geometry import (
 )
 from pipeline.estimation.iekf import IekfSettings, fuse
 from pipeline.estimation.measurement import freeze, linearise, predict
-from pipeline.estimation.problem import bias_plane_covariance, estimate_result
+from pipeline.estimation.problem import bias_plane_covariance, estimate_result, general_plane
 from pipeline.estimation.structured import StructuredCovariance, block_diagonal
 from pipeline.io.formats import stage_to_json
 
@@ -231,3 +231,17 @@ def test_a_leaning_plane_is_diagnosed_selected_and_reported(box):
         # The vertical stand-in shares the azimuth and the point nearest the origin.
         assert stage.plane.theta_rad == pytest.approx(g[5])
         assert stage.plane.offset_m == pytest.approx(g[4] * np.cos(g[6]))
+
+
+def test_a_downward_normal_is_reported_by_its_upward_opposite():
+    covariance = np.diag(np.square(PRIOR_STD))
+    covariance[4, 6] = covariance[6, 4] = 1e-4
+    downward = np.array([*G7[:6], -0.6])
+    symmetry = general_plane(downward, covariance)
+    m_r, azimuth, elevation = symmetry.values
+    assert m_r == pytest.approx(-downward[4])
+    assert elevation == pytest.approx(0.6)
+    assert np.cos(azimuth - downward[5]) == pytest.approx(-1.0)
+    flipped = covariance[4:, 4:] * np.array([[1, -1, 1], [-1, 1, -1], [1, -1, 1]])
+    np.testing.assert_allclose(symmetry.covariance, flipped)
+    assert general_plane(G7[:6], covariance[:6, :6]) is None

@@ -165,14 +165,16 @@ def general_plane(g: np.ndarray, covariance: np.ndarray) -> Symmetry | None:
     """A leaning plane's state (seven parameters) as a ``"plane"`` symmetry with the
     ``(m_r, m_azimuth, m_elevation)`` block of ``covariance``; None for the paper's state.
 
-    The symmetry names the normal with a non-negative elevation, the state may hold its
-    opposite: the parameters' covariance then changes the signs of the offset's rows (the
-    opposite normal's azimuth and elevation move with the state's)."""
+    The symmetry's parameters name the normal with a non-negative elevation; the state may
+    hold its opposite, whose offset is ``-m_r``, azimuth ``m_theta + pi`` and elevation
+    ``-m_phi``: the covariance's offset and elevation rows and columns then change sign."""
     if len(g) == BIAS_PLANE_DIM:
         return None
     normal = state_normal(g)
     block = np.array(covariance, dtype=float)[4:, 4:]
-    if normal[2] < 0.0:
+    x, y, z = normal
+    if z < 0.0 or (z == 0.0 and (x < 0.0 or (x == 0.0 and y < 0.0))):
+        # Symmetry.values names the opposite normal: m_r and the elevation change sign.
         flip = np.diag([-1.0, 1.0, -1.0])
         block = flip @ block @ flip
     return Symmetry("plane", normal, g[4] * normal, block)
