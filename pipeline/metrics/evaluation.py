@@ -150,7 +150,7 @@ def evaluate_stage(
     metrics: dict[str, Any] = {
         "deviation_m": DeviationSummary.from_distances(distances).as_dict(),
         **plane_errors(plane, truth),
-        **symmetry_errors(Symmetry.from_plane(plane), truth.symmetries, centre),
+        **symmetry_errors(_moved_symmetry(stage, plane), truth.symmetries, centre),
         **shape_scores(stage.completed, distances, truth),
     }
     if truth.cloud_motion is not None:
@@ -167,6 +167,14 @@ def evaluate_stage(
         circle = fit_circle_taubin(side_wall(stage.completed))
         metrics.update(_measure("diameter", circle.diameter_m, truth.diameter_m))
     return metrics, distances
+
+
+def _moved_symmetry(stage: StageEstimate, moved_plane: SymmetryPlane) -> Symmetry:
+    """The stage's mirror plane after its bias: the leaning plane it fused, else the
+    vertical ``moved_plane``."""
+    if stage.symmetry is None:
+        return Symmetry.from_plane(moved_plane)
+    return stage.symmetry.transformed(stage.bias.transform)
 
 
 def bias_errors(
