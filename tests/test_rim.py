@@ -72,7 +72,9 @@ def test_the_distal_link_is_hit_below_and_above_its_pad_but_not_at_it(distal_pad
         (0.042, 0.0): False,  # at the pad's rows: the pad's contact decides
     }
     points = np.array([_at_distal(d, f, alpha) for d, f in cases])
-    hits = SDH.distal_hits(points[:, 0], points[:, 1], [alpha], TOLERANCE_M, rows, curve_start)
+    hits = SDH.distal_hits(
+        points[:, 0], points[:, 1], [alpha], TOLERANCE_M, rows, curve_start, TOLERANCE_M
+    )
     assert hits.shape == (1, len(cases))
     assert hits[0].tolist() == list(cases.values())
 

@@ -22,6 +22,7 @@ from pipeline.planning.candidate import (
 )
 from pipeline.planning.grasp_geometry import hand_pose
 from pipeline.planning.pad_contact import (
+    LAYER_M,
     PadContact,
     PadTaxels,
     pad_coverages,
@@ -499,7 +500,14 @@ def _closing_collides(
     ``distal_pad_m``: :meth:`SdhHand.distal_pad_m`). A closing is checked every 3 deg from
     the pre-shape and at the contact."""
     rows, curve_start = distal_pad_m
-    distal = functools.partial(kinematics.distal_hits, pad_rows_m=rows, curve_start_m=curve_start)
+    # The pad's touch is the middle of the surface layer before each taxel (LAYER_M deep):
+    # the same surface reaches up to half that layer nearer.
+    distal = functools.partial(
+        kinematics.distal_hits,
+        pad_rows_m=rows,
+        curve_start_m=curve_start,
+        front_allowance_m=s.touch_tolerance_m + LAYER_M / 2.0,
+    )
     for hits, reason in ((kinematics.closing_hits, CLOSING_HIT), (distal, DISTAL_HIT)):
         for (t, d), angles in zip(corridors, alphas, strict=True):
             if angles and np.any(

@@ -246,11 +246,12 @@ class FingerKinematics:
         clearance_m: float,
         pad_rows_m: tuple[float, float],
         curve_start_m: float,
+        front_allowance_m: float,
     ) -> np.ndarray:
         """``(K, N)``: which points (as in :meth:`closing_hits`) lie inside the finger's
         distal link, parallel to the palm axis, above or below its pad's taxel rows, at
         each of the ``K`` proximal angles ``alphas_rad``: behind its front by more than
-        ``clearance_m``, within ``clearance_m`` of its back, its joint and its tip.
+        ``front_allowance_m``, within ``clearance_m`` of its back, its joint and its tip.
 
         ``pad_rows_m`` is where the taxel rows begin and end along the link from the
         distal joint (m). Between them the pad's predicted contact
@@ -275,7 +276,7 @@ class FingerKinematics:
                 | (down > bottom) & (down <= self.distal_length_m + clearance_m)
             )
             & (forward >= self.distal_back_m - clearance_m)
-            & (forward <= self.distal_pad_offset_m - recess - clearance_m)
+            & (forward <= self.distal_pad_offset_m - recess - front_allowance_m)
         )
 
 
