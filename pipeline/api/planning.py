@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from pipeline.planning.next_grasp import MeasurementModel
     from pipeline.planning.pad_contact import sdh_flat_part_edge_m
     from pipeline.planning.parallel_candidates import ParallelHand, parallel_candidate
+    from pipeline.planning.rim import find_rim, rim_pinches, rim_sites
     from pipeline.planning.sdh_candidates import (
         PINCH_SPREAD_RAD,
         SDH_SPREADS,
@@ -82,6 +83,9 @@ _SOURCES = {
     "parallel_candidate": ("pipeline.planning.parallel_candidates", "parallel_candidate"),
     "parallel_top_grasp": ("pipeline.planning.grasp_geometry", "parallel_top_grasp"),
     "plan_from_candidates": ("pipeline.planning.grasp_candidates", "plan_from_candidates"),
+    "find_rim": ("pipeline.planning.rim", "find_rim"),
+    "rim_pinches": ("pipeline.planning.rim", "rim_pinches"),
+    "rim_sites": ("pipeline.planning.rim", "rim_sites"),
     "rotate_z": ("pipeline.planning.grasp_geometry", "rotate_z"),
     "sdh_candidate": ("pipeline.planning.sdh_candidates", "sdh_candidate"),
     "sdh_candidates": ("pipeline.planning.sdh_candidates", "sdh_candidates"),
@@ -108,12 +112,15 @@ __all__ = [
     "candidate_frame",
     "closing_angles",
     "cylindrical_top_grasp",
+    "find_rim",
     "front_to_back",
     "hand_pose",
     "pad_band",
     "parallel_candidate",
     "parallel_top_grasp",
     "plan_from_candidates",
+    "rim_pinches",
+    "rim_sites",
     "rotate_z",
     "sdh_candidate",
     "sdh_candidates",

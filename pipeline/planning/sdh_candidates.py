@@ -21,7 +21,14 @@ from pipeline.planning.candidate import (
     candidate_score,
 )
 from pipeline.planning.grasp_geometry import hand_pose
-from pipeline.planning.pad_contact import PadContact, PadTaxels, pad_coverages, sdh_distal_taxels
+from pipeline.planning.pad_contact import (
+    LAYER_M,
+    PadContact,
+    PadTaxels,
+    pad_coverages,
+    sdh_distal_taxels,
+    sdh_flat_part_edge_m,
+)
 from pipeline.planning.sdh_geometry import FingerKinematics
 from pipeline.types import GraspCandidate, GripperSpec, PadLayout
 
@@ -40,6 +47,12 @@ CLOSING_HIT = "a proximal link would hit the object while closing"
 cloud on the fingers' way from the pre-shape to their contacts: checked at the contacts
 before the pre-shape search (a link there rejects every pre-shape), the way to them after
 it."""
+DISTAL_HIT = "a distal link would meet the object before its pad while closing"
+"""Why :func:`sdh_candidate` rejects a grasp whose distal link (its tip below the pad, its
+back, its curved pad's recessed end) meets the seen cloud on the way to the pad's contact:
+a surface nearer below the pad than the pad's own, as a bowl's wall curving in under a
+finger inside it (:meth:`FingerKinematics.distal_hits`); checked, as :data:`CLOSING_HIT`,
+at the contacts and then on the way to them."""
 #: Steps of the pre-shape search: proximal angles tried below the contact angle (rad).
 _OPEN_STEP_RAD = math.radians(3.0)
 
@@ -84,6 +97,14 @@ class SdhHand:
             return float(kinematics.bases_m[turning[0], 0])
         return 0.0
 
+    def distal_pad_m(self) -> tuple[tuple[float, float], float]:
+        """Where the distal pad's taxel rows begin and end, and where its curved tip
+        begins, along the distal link from its joint (m): what
+        :meth:`FingerKinematics.distal_hits` takes."""
+        centre = self.kinematics.distal_pad_centre_m
+        low, high = _distal_taxels(self.pad, 0.0).z_range_m
+        return (centre - high, centre - low), centre + sdh_flat_part_edge_m(self.pad)
+
     def turning_lateral_m(self) -> float:
         """How far the turning fingers' bases lie either side of the palm's x axis (m)."""
         turning = self.kinematics.spread_signs.index(1)
@@ -123,10 +144,11 @@ def sdh_candidate(
     which every finger, the knuckles and the palm descend clear of the cloud
     (:meth:`FingerKinematics.finger_profile`); ``opening_m`` is that pre-shape's opening.
     From there to its contact no finger's knuckle or proximal link may meet the seen cloud
-    (:meth:`FingerKinematics.closing_hits`); at the contact angles that is checked before
-    the pre-shape search, and a grasp rejected there is rejected for its closing
-    (:data:`CLOSING_HIT`) whatever its pre-shape would have been. The hand's shape is
-    ``sdh``'s.
+    (:meth:`FingerKinematics.closing_hits`), nor its distal link anywhere but at its pad's
+    surface (:meth:`FingerKinematics.distal_hits`); at the contact angles that is checked
+    before the pre-shape search, and a grasp rejected there is rejected for its closing
+    (:data:`CLOSING_HIT`, :data:`DISTAL_HIT`) whatever its pre-shape would have been. The
+    hand's shape is ``sdh``'s.
     """
     return sdh_candidates(
         cloud, centre_m, [(angle_rad, direction, height_m)], spread_rad, sdh, settings
@@ -161,11 +183,19 @@ def sdh_candidates(
     spread_rad: float,
     sdh: SdhHand,
     settings: CandidateSettings,
+    touched: CandidateCloud | None = None,
+    beyond_m: float = 0.0,
 ) -> list[Candidate]:
     """:func:`sdh_candidate` at each of ``poses`` (closing angle, direction, pad height),
     with the fingers' pad contacts of every pose at one height predicted together (one
-    pass over the points at the pads' rows, :func:`pad_coverages`)."""
+    pass over the points at the pads' rows, :func:`pad_coverages`).
+
+    A pinch across a wall (:mod:`pipeline.planning.rim`) changes two things: the pads meet
+    the surface of ``touched`` (default ``cloud``: the pinch leaves out the object's far
+    side, which lies behind the finger inside it), and a pad may stop up to ``beyond_m``
+    past ``centre_m`` (the wall's hidden face); every other check is on ``cloud``."""
     s = settings
+    touched = cloud if touched is None else touched
     kinematics, pad = sdh.kinematics, sdh.pad
     centre_offset = sdh.centre_offset_m(spread_rad)
     facings = kinematics.finger_facings(spread_rad)
@@ -207,7 +237,7 @@ def sdh_candidates(
             # Only the points at the pads' rows can touch them.
             found = _fingers_contacts(
                 kinematics,
-                cloud.slab(*taxels.z_range_m),
+                touched.slab(*taxels.z_range_m),
                 [hand.bases for hand in group],
                 [hand.facings for hand in group],
                 taxels,
@@ -227,7 +257,7 @@ def sdh_candidates(
     return [
         hand.verdict
         if hand.verdict is not None
-        else _checked(cloud, centre_m, hand, spread_rad, sdh, s)
+        else _checked(cloud, centre_m, hand, spread_rad, sdh, s, beyond_m)
         for hand in hands
     ]
 
@@ -239,15 +269,17 @@ def _checked(
     spread_rad: float,
     sdh: SdhHand,
     s: CandidateSettings,
+    beyond_m: float,
 ) -> Candidate:
-    """The checks of :func:`sdh_candidate` after the fingers' contacts are found, and the
-    feasible candidate's score and plan."""
+    """The checks of :func:`sdh_candidate` after the fingers' contacts are found (a pad
+    may stop ``beyond_m`` past ``centre_m``), and the feasible candidate's score and
+    plan."""
     angle_rad, height_m, taxels = hand.angle_rad, hand.height_m, hand.taxels
     x_hand, palm_xy, in_band = hand.x_hand, hand.palm_xy, hand.in_band
     bases, facings, contacts, alphas = hand.bases, hand.facings, hand.contacts, hand.alphas
     k = sdh.kinematics
     if not all(
-        contact.stops_before(centre_m, np.append(facing, 0.0))
+        contact.stops_before(centre_m + beyond_m * np.append(facing, 0.0), np.append(facing, 0.0))
         for contact, facing in zip(contacts, facings, strict=True)
     ):
         return Candidate.rejected(angle_rad, height_m, spread_rad, BEYOND_CENTRE)
@@ -267,8 +299,10 @@ def _checked(
     closing = _closing_corridors(k, within, bases, facings, palm_z, s)
     # Every closing ends at the contact angles, whatever the pre-shape: a link that meets
     # the cloud there rejects the grasp before the pre-shape search.
-    if _closing_collides(k, closing, [[alpha] for alpha in alphas], s):
-        return Candidate.rejected(angle_rad, height_m, spread_rad, CLOSING_HIT)
+    distal_pad = sdh.distal_pad_m()
+    hit = _closing_collides(k, closing, [[alpha] for alpha in alphas], s, distal_pad)
+    if hit is not None:
+        return Candidate.rejected(angle_rad, height_m, spread_rad, hit)
     open_alpha = _clear_preshape(k, cloud, bases, facings, palm_z, min(alphas), s)
     if open_alpha is None:
         return Candidate.rejected(
@@ -278,8 +312,9 @@ def _checked(
     if opening > sdh.aperture_m + 1e-9:
         return Candidate.rejected(angle_rad, height_m, spread_rad, "wider than the hand opens")
     on_the_way = [list(np.arange(open_alpha, contact, _OPEN_STEP_RAD)) for contact in alphas]
-    if _closing_collides(k, closing, on_the_way, s):
-        return Candidate.rejected(angle_rad, height_m, spread_rad, CLOSING_HIT)
+    hit = _closing_collides(k, closing, on_the_way, s, distal_pad)
+    if hit is not None:
+        return Candidate.rejected(angle_rad, height_m, spread_rad, hit)
     # Closing from the pre-shape, the fingertips are lowest where the proximal links pass
     # closest to vertical.
     steepest = 0.0 if open_alpha <= 0.0 <= max(alphas) else min(abs(open_alpha), abs(max(alphas)))
@@ -436,8 +471,8 @@ def _closing_corridors(
     s: CandidateSettings,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each finger's corridor (:func:`_corridors`) through the ``visible`` points, grown by
-    the touch tolerance, without the points farther from the proximal joint than its
-    knuckle or proximal link reaches at any angle: what :func:`_closing_collides` tests.
+    the touch tolerance, without the points farther from the proximal joint than any part
+    of the finger reaches at any angle: what :func:`_closing_collides` tests.
     Only seen points count: the mirrored ones are where the plane guesses the back, too
     uncertain to veto a grasp on."""
     corridors = _corridors(
@@ -456,30 +491,46 @@ def _closing_collides(
     corridors: list[tuple[np.ndarray, np.ndarray]],
     alphas: list[list[float]],
     s: CandidateSettings,
-) -> bool:
-    """Whether a finger's knuckle or proximal link meets its corridor's points
-    (:func:`_closing_corridors`) at any of its proximal ``alphas`` (rad, a list per
-    finger): on a tall object a low grasp swings the proximal links into its upper part.
-    A closing is checked every 3 deg from the pre-shape and at the contact."""
-    for (t, d), angles in zip(corridors, alphas, strict=True):
-        if not angles:
-            continue
-        hits = kinematics.closing_hits(t, d, angles, s.touch_tolerance_m)
-        if np.any(np.count_nonzero(hits, axis=1) >= MIN_HITS):
-            return True
-    return False
+    distal_pad_m: tuple[tuple[float, float], float],
+) -> str | None:
+    """Why a finger meets its corridor's points (:func:`_closing_corridors`) at one of its
+    proximal ``alphas`` (rad, a list per finger), or None: its knuckle or proximal link
+    (:data:`CLOSING_HIT`; on a tall object a low grasp swings the proximal links into its
+    upper part), else its distal link short of its pad's contact (:data:`DISTAL_HIT`;
+    ``distal_pad_m``: :meth:`SdhHand.distal_pad_m`). A closing is checked every 3 deg from
+    the pre-shape and at the contact."""
+    rows, curve_start = distal_pad_m
+    # The pad's touch is the middle of the surface layer before each taxel (LAYER_M deep):
+    # the same surface reaches up to half that layer nearer.
+    distal = functools.partial(
+        kinematics.distal_hits,
+        pad_rows_m=rows,
+        curve_start_m=curve_start,
+        front_allowance_m=s.touch_tolerance_m + LAYER_M / 2.0,
+    )
+    for hits, reason in ((kinematics.closing_hits, CLOSING_HIT), (distal, DISTAL_HIT)):
+        for (t, d), angles in zip(corridors, alphas, strict=True):
+            if angles and np.any(
+                np.count_nonzero(hits(t, d, angles, s.touch_tolerance_m), axis=1) >= MIN_HITS
+            ):
+                return reason
+    return None
 
 
 def _closing_reach_m(kinematics: FingerKinematics, clearance_m: float) -> float:
-    """The farthest from the proximal joint a point inside the knuckle or the proximal
-    link with its pad, grown by ``clearance_m`` (:meth:`FingerKinematics.closing_hits`),
-    can lie (m), at any proximal angle."""
+    """The farthest from the proximal joint a point inside the finger, grown by
+    ``clearance_m`` (:meth:`FingerKinematics.closing_hits`,
+    :meth:`FingerKinematics.distal_hits`), can lie (m), at any proximal angle."""
     k, c = kinematics, clearance_m
     thickest = max(abs(k.proximal_back_m - c), abs(k.proximal_pad_offset_m + c))
     link = math.hypot(k.proximal_length_m + c, thickest)
     depth = max(abs(k.base_depth_m - c - k.knuckle_depth_m), c)
     knuckle = math.hypot(k.knuckle_radius_m + c, depth)
-    return max(link, knuckle)
+    # The distal joint lies a proximal length from it; the distal link hangs below.
+    distal = k.proximal_length_m + math.hypot(
+        k.distal_length_m + c, max(abs(k.distal_back_m - c), abs(k.distal_pad_offset_m))
+    )
+    return max(link, knuckle, distal)
 
 
 def _corridors(

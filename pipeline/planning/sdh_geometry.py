@@ -220,8 +220,7 @@ class FingerKinematics:
         """``(K, N)``: which points, at distance ``t_m`` along a finger's facing from its base
         and ``depth_m`` below the palm (both ``(N,)``, within the finger's width), lie inside
         the finger's knuckle or proximal link with pad, grown by ``clearance_m``, at each of the
-        ``K`` proximal angles ``alphas_rad``. The distal link is left out: its pad is where the
-        finger means to touch, and its tip only ever moves toward the surface that pad meets."""
+        ``K`` proximal angles ``alphas_rad``. The distal link is :meth:`distal_hits`'."""
         knuckle = (np.abs(t_m) <= self.knuckle_radius_m + clearance_m) & (
             (depth_m >= self.base_depth_m - clearance_m)
             & (depth_m <= self.knuckle_depth_m + clearance_m)
@@ -238,6 +237,47 @@ class FingerKinematics:
             & (across <= self.proximal_pad_offset_m + clearance_m)
         )
         return knuckle | proximal
+
+    def distal_hits(
+        self,
+        t_m: np.ndarray,
+        depth_m: np.ndarray,
+        alphas_rad: Sequence[float],
+        clearance_m: float,
+        pad_rows_m: tuple[float, float],
+        curve_start_m: float,
+        front_allowance_m: float,
+    ) -> np.ndarray:
+        """``(K, N)``: which points (as in :meth:`closing_hits`) lie inside the finger's
+        distal link, parallel to the palm axis, above or below its pad's taxel rows, at
+        each of the ``K`` proximal angles ``alphas_rad``: behind its front by more than
+        ``front_allowance_m``, within ``clearance_m`` of its back, its joint and its tip.
+
+        ``pad_rows_m`` is where the taxel rows begin and end along the link from the
+        distal joint (m). Between them the pad's predicted contact
+        (:func:`~pipeline.planning.pad_contact.pad_coverage`) says where the finger stops;
+        above them the link's front is the pad's surface; below them, at the tip, it is
+        the pad's surface curving away from the object from ``curve_start_m`` (along the
+        link from the joint) with the pad's radius (:data:`DISTAL_PAD_CURVE_RADIUS_M`).
+        A surface that comes nearer there than the pad's contact, as a bowl's wall curving
+        in under a finger inside it, or flaring out above a finger outside it, meets the
+        link first, and the pad stays short of its contact."""
+        s = np.array([math.sin(alpha) for alpha in alphas_rad])[:, None]
+        c = np.array([math.cos(alpha) for alpha in alphas_rad])[:, None]
+        # Below the distal joint (the proximal link's end) and forward of it.
+        down = depth_m - self.knuckle_depth_m - self.proximal_length_m * c
+        forward = t_m - self.proximal_length_m * s
+        curved = np.clip(down - curve_start_m, 0.0, DISTAL_PAD_CURVE_RADIUS_M)
+        recess = DISTAL_PAD_CURVE_RADIUS_M - np.sqrt(DISTAL_PAD_CURVE_RADIUS_M**2 - curved**2)
+        top, bottom = pad_rows_m
+        return (
+            (
+                (down >= -clearance_m) & (down < top)
+                | (down > bottom) & (down <= self.distal_length_m + clearance_m)
+            )
+            & (forward >= self.distal_back_m - clearance_m)
+            & (forward <= self.distal_pad_offset_m - recess - front_allowance_m)
+        )
 
 
 def _links(finger) -> tuple[float, ...]:

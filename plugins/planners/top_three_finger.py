@@ -30,13 +30,20 @@ from pipeline.api.planning import (
     candidate_frame,
     closing_angles,
     cylindrical_top_grasp,
+    find_rim,
     front_to_back,
     pad_band,
     plan_from_candidates,
+    rim_pinches,
+    rim_sites,
     rotate_z,
     sdh_candidates,
     sdh_flat_part_edge_m,
 )
+
+#: Spacing of the points along an open object's fitted rim the candidates are planned with
+#: (m): the cloud's own spacing at a metre.
+_RIM_STEP_M = 0.002
 
 
 class TopThreeFinger(CandidatePlanner):
@@ -135,6 +142,12 @@ class TopThreeFinger(CandidatePlanner):
             "candidates: least gap between the descending hand and the completed cloud, "
             "whose back is only the mirror plane's guess (m)",
             at_least=0.0,
+        )
+        rim_sites: int = param(
+            12,
+            "candidates: sectors of an open object's rim a pinch across its wall is tried "
+            "in, where no enveloping grasp is feasible (0: none)",
+            at_least=0,
         )
 
     grippers = ("sdh",)
@@ -235,7 +248,13 @@ class TopThreeFinger(CandidatePlanner):
             viewpoint_m=cloud.viewpoint_m,
         )
         centre = frame.completed.mean(axis=0)
-        clouds = CandidateCloud(points, frame.completed)
+        # An open object's rim stands all around its fitted circle, on the side the camera
+        # did not see too: a finger descending around it must clear it there.
+        rim = find_rim(points)
+        completed = frame.completed
+        if rim is not None:
+            completed = np.concatenate([completed, rim.circle_m(_RIM_STEP_M)])
+        clouds = CandidateCloud(points, completed)
         # Which way is front to back depends on the closing angle alone, not on the height.
         directions = [
             (
@@ -266,7 +285,11 @@ class TopThreeFinger(CandidatePlanner):
             ],
         )
         candidates = [c for group in by_spread.values() for c in group] + pinches
-        return candidates
+        if any(c.summary.feasible for c in candidates):
+            return candidates
+        # No hand closes around it: an open object's wall can still be pinched at the rim.
+        sites = rim_sites(rim, p.rim_sites, cloud.viewpoint_m)
+        return candidates + rim_pinches(sites, points, proposal.plane.normal, hand, frame.settings)
 
 
 @hookimpl
