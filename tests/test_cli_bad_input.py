@@ -497,6 +497,21 @@ def test_view_into_a_folder_it_cannot_write_is_one_line(run, tmp_path):
     assert "cannot write in /proc" in one_error_line(err)
 
 
+def test_view_of_a_run_folder_it_cannot_write_is_one_line(run, tmp_path, monkeypatch):
+    # A read-only run folder, which root (these tests' user in CI) cannot make with chmod.
+    import tempfile
+
+    def read_only(*args, dir=None, **kwargs):
+        raise PermissionError(13, "Permission denied", str(dir))
+
+    monkeypatch.setattr(tempfile, "TemporaryFile", read_only)
+    (tmp_path / "result.json").write_text("{}")
+    code, _, err = run("view", tmp_path, "--no-open")
+    assert code == EXIT_BAD_INPUT
+    assert f"cannot write in {tmp_path} (Permission denied)" in one_error_line(err)
+    assert list(tmp_path.iterdir()) == [tmp_path / "result.json"]
+
+
 @pytest.mark.parametrize("kind", ["file", "read-only"])
 def test_a_cache_that_cannot_be_written_names_the_variable(tmp_path, monkeypatch, kind):
     from pipeline.sim.collision import convex_decomposition
