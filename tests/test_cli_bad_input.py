@@ -538,6 +538,17 @@ def test_a_trial_with_an_unwritable_cache_is_exit_2_not_a_plugin_failure(
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("value", ["false", "no", " 0"])
+def test_a_client_reuse_variable_that_is_neither_0_nor_1_names_the_variable(monkeypatch, value):
+    from pipeline.sim import world
+
+    monkeypatch.setenv(world.REUSE_VARIABLE, value)  # each read as "reuse" before
+    with pytest.raises(ConfigError, match=rf"^SYMFUSE_PYBULLET_REUSE={value}: expected 0"):
+        world._reuse_clients()
+    monkeypatch.setenv(world.REUSE_VARIABLE, "")
+    assert world._reuse_clients()
+
+
 def test_contacts_that_say_mm_over_metre_data_are_refused(recording, tmp_path):
     folder, _, _ = recording
     document = json.loads((folder / "contacts.json").read_text())
