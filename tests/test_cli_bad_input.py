@@ -623,3 +623,14 @@ def test_an_interrupted_symmetry_search_leaves_no_file(run, monkeypatch, tmp_pat
     code, _, _ = run("symmetry", "cd_drive", "--out", tmp_path / "s.json")
     assert code == 130
     assert not (tmp_path / "s.json").exists()
+
+
+def test_a_warning_is_wrapped_to_the_terminal_width(run):
+    """A YCB scan's path made its not-watertight warning 113 columns wide."""
+    import logging
+
+    run("config")
+    message = "/work/scans/003_cracker_box/textured.obj: mesh is not watertight; " * 3
+    lines = logging.lastResort.format(logging.makeLogRecord({"msg": message})).splitlines()
+    assert len(lines) == 3 and max(len(line) for line in lines) <= 100
+    assert " ".join(line.strip() for line in lines) == message.strip()
