@@ -654,6 +654,15 @@ def test_a_grasp_already_made_is_made_again_only_when_nothing_else_teaches():
     again = replace(_plan(0.003), score=1.0)
     assert not repeats(_plan(0.0, height_m=0.03), [made], grippers)  # 10 mm lower
     assert not repeats(_plan(-0.03), [made], grippers)
+    # The hand 8 mm further along the closing direction and 3.5 mm aside (the README's
+    # spray bottle's second grasp): the pads close on the same places, the same grasp.
+    along = replace(
+        _plan(0.0035),
+        T_robot_hand=hand_pose(np.array([0.508, 0.0035, 0.165]), made.closing_direction),
+    )
+    assert repeats(along, [made], grippers)
+    assert not repeats(replace(along, T_robot_hand=hand_pose(
+        np.array([0.508, 0.006, 0.165]), made.closing_direction)), [made], grippers)  # fmt: skip
     # The repeat, which the planner rates best, loses to any new grasp that teaches,
     # however the planner rates it (the floor compares the new grasps among themselves) ...
     planner = _Planner([again, replace(_plan(-0.03), score=0.2)])
