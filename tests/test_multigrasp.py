@@ -299,16 +299,19 @@ def test_stop_rule():
     assert stop_reason(known, 1, 3, 0.0015).startswith("uncertainty reached: ")
     assert stop_reason(known, 3, 3, None) == "grasps done: 3 of 3"
     assert stop_reason(known, 3, 3, 0.001) == (
-        "grasps done: 3 of 3, before the uncertainty reached 1 mm: plane offset std 0.80 mm "
-        "and hidden shape std 1.50 mm"
+        "grasps done: 3 of 3, before the uncertainty reached 1 mm: hidden shape std 1.50 mm "
+        "stayed above it (plane offset std 0.80 mm)"
+    )
+    assert stop_reason(known, 3, 3, 0.0005).endswith(
+        "reached 0.5 mm: plane offset std 0.80 mm and hidden shape std 1.50 mm stayed above it"
     )
     unknown = Uncertainty(math.inf, math.inf, math.inf)
     assert stop_reason(unknown, 2, 3, 0.05) == ""
     # Grasps released unfused count against the budget, and the summary says so.
     assert stop_reason(known, 2, 3, None, unfused=1) == ""
     assert stop_reason(known, 3, 3, 0.001, unfused=1) == (
-        "grasps done: 3 of 3 (1 not fused), before the uncertainty reached 1 mm: plane "
-        "offset std 0.80 mm and hidden shape std 1.50 mm"
+        "grasps done: 3 of 3 (1 not fused), before the uncertainty reached 1 mm: hidden shape "
+        "std 1.50 mm stayed above it (plane offset std 0.80 mm)"
     )
 
 

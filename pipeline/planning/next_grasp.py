@@ -192,7 +192,16 @@ def stop_reason(
         made += f" ({unfused} not fused)"
     if until_std_m is None:
         return made
-    return f"{made}, before the uncertainty reached {1e3 * until_std_m:g} mm: {known.stop_stds()}"
+    stds = (
+        ("plane offset std", known.plane_offset_std_m),
+        ("hidden shape std", known.hidden_shape_std_m),
+    )
+    above = " and ".join(f"{name} {1e3 * std:.2f} mm" for name, std in stds if std > until_std_m)
+    met = ", ".join(f"{name} {1e3 * std:.2f} mm" for name, std in stds if std <= until_std_m)
+    return (
+        f"{made}, before the uncertainty reached {1e3 * until_std_m:g} mm: {above} stayed "
+        f"above it" + (f" ({met})" if met else "")
+    )
 
 
 def model_for_planning(
