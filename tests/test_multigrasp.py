@@ -867,3 +867,27 @@ def test_fuse_with_the_depth_image_reproduces_an_estimate_that_needed_the_camera
     blind = json.loads((tmp_path / "blind" / "result.json").read_text())["stages"]
     assert all(stage["consistency"]["checks"] == ["taxels"] for stage in blind)
     assert not any(stage.get("hypothesis") for stage in blind)
+
+
+@pytest.mark.parametrize(
+    ("asked", "hint"),
+    [(("pg70",), "; try --gripper sdh"), (("pg70", "sdh"), "; try another --yaw")],
+)
+def test_a_refused_grasp_says_what_to_try_next(asked, hint):
+    """The catalogue's box, 65 mm thick, refused by the PG-70 (aperture 65 mm) named by
+    --gripper: the SDH-2 holds it. With every hand asked, another pose is what is left."""
+    from pipeline.errors import StageFailure
+    from pipeline.planning.hand_choice import HandChoice, PlannerAnswer
+    from pipeline.run.trial import _take_choice
+
+    refused = replace(_plan(0.0), status="refused", reason="none of 180 grasps is feasible")
+    answers = tuple(PlannerAnswer(hand, f"planner-{hand}", refused) for hand in asked)
+    choice = HandChoice(answers[0], "", answers)
+    trial = SimpleNamespace(
+        world=SimpleNamespace(hands=("pg70", "sdh")), record=SimpleNamespace(choice=lambda c: None)
+    )
+    with pytest.raises(StageFailure) as failure:
+        _take_choice(trial, choice, [])
+    assert str(failure.value) == (
+        f"grasp planner 'planner-pg70' refused: none of 180 grasps is feasible{hint}"
+    )
