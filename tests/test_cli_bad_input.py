@@ -634,3 +634,15 @@ def test_a_warning_is_wrapped_to_the_terminal_width(run):
     lines = logging.lastResort.format(logging.makeLogRecord({"msg": message})).splitlines()
     assert len(lines) == 3 and max(len(line) for line in lines) <= 100
     assert " ".join(line.strip() for line in lines) == message.strip()
+
+
+def test_a_trial_s_progress_lines_fit_100_columns(capsys):
+    """A missed first grasp's progress line was 111-117 columns wide."""
+    from pipeline.cli.trial import _progress
+
+    _progress(
+        "grasp 1 touched one side only (the object moved 5.0 mm and tilted 0.0 deg); not "
+        "fused; grasping again (1 of 2)"
+    )
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2 and max(len(line) for line in lines) <= 100
