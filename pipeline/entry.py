@@ -6,7 +6,7 @@ which then fails with an unrelated error (numpy's ``RuntimeError: Error calling
 __set_name__``, a plugin's ``NameError`` on a half-imported scipy) or leaves a half-built
 module that a later ``except ImportError`` swallows, or is swallowed itself (an
 ``except BaseException`` around an optional import). So :func:`main` installs its own
-handler before importing anything but the standard library: it notes the interrupt and
+handler before anything is imported that Python's start did not load: it notes the interrupt and
 raises KeyboardInterrupt as usual, and whatever error then ends the run, or none, the
 command exits with 130, :data:`~pipeline.errors.EXIT_INTERRUPTED` (:func:`pipeline.cli.main`
 asks :func:`interrupt_received`).
@@ -18,15 +18,17 @@ about 0.3 s of processor time after its last file was written.
 
 from __future__ import annotations
 
-import atexit
-import contextlib
+# The handler is installed before anything else is imported: ``_signal`` is the C module
+# under ``signal`` (which imports enum and functools first), ``os`` and ``sys`` are loaded
+# by Python's start, and the rest is imported where it is used.
+import _signal as signal
 import os
-import signal
 import sys
-from collections.abc import Sequence
-from typing import NoReturn
 
-from pipeline.errors import EXIT_INTERRUPTED
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from typing import NoReturn
 
 _received = False
 
@@ -86,6 +88,9 @@ def leave(code: int) -> NoReturn:
     command writes is closed by then (``with`` blocks), so the teardown only takes apart
     what the process is about to drop anyway. A Ctrl-C from here on changes nothing: the
     command has ended."""
+    import atexit
+    import contextlib
+
     if signal.getsignal(signal.SIGINT) is _on_interrupt:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     atexit._run_exitfuncs()
@@ -99,6 +104,8 @@ def leave(code: int) -> NoReturn:
 def report_interrupt() -> int:
     """Say the command was interrupted and return its exit code, 130. In the console
     script a second Ctrl-C is ignored from here on: the command is ending as asked."""
+    from pipeline.errors import EXIT_INTERRUPTED
+
     if signal.getsignal(signal.SIGINT) is _on_interrupt:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     print("symfuse: interrupted", file=sys.stderr)

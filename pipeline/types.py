@@ -764,6 +764,12 @@ class Consistency:
         free_space_limit: the most such points allowed, None when that check did not run.
         consistent: every check that ran passed.
         reason: which check failed and by how much; empty when consistent.
+        after_view_nis: a fused stage's bias against the after-views (the sum of their
+            normalised innovations, :func:`pipeline.estimation.consistency.after_view_test`),
+            None for Stage 0 (whose bias is no estimate) and without an after-view. It
+            does not enter ``consistent``: the selection weighs it (docs/method.md §9).
+        after_view_threshold: its bound at the configured false-alarm probability, None
+            with it.
     """
 
     checks: tuple[str, ...]
@@ -774,6 +780,32 @@ class Consistency:
     free_space_limit: int | None
     consistent: bool
     reason: str = ""
+    after_view_nis: float | None = None
+    after_view_threshold: float | None = None
+
+    @property
+    def contradicts_after_view(self) -> bool:
+        """The after-views saw the object move otherwise than the stage's bias says."""
+        if self.after_view_nis is None or self.after_view_threshold is None:
+            return False
+        return not self.after_view_nis <= self.after_view_threshold
+
+    @property
+    def supported(self) -> bool:
+        """Consistent, and a fused stage's bias not contradicted by the after-views: what
+        the selection asks of a stage (docs/method.md §9)."""
+        return self.consistent and not self.contradicts_after_view
+
+    @property
+    def contradictions(self) -> str:
+        """Every test the stage fails, the after-views' included; empty when supported."""
+        failed = [self.reason] if self.reason else []
+        if self.contradicts_after_view:
+            failed.append(
+                f"its bias contradicts the after-view (NIS {self.after_view_nis:.1f} > "
+                f"{self.after_view_threshold:.1f})"
+            )
+        return "; ".join(failed)
 
     @property
     def passes_free_space(self) -> bool:
@@ -792,10 +824,14 @@ class Consistency:
 
     @property
     def excess(self) -> float:
-        """The largest ratio of a statistic to its bound (<= 1 when consistent): how far the
-        evidence contradicts the model, comparable between stages."""
+        """The largest ratio of a statistic to its bound, the after-views' included (<= 1
+        when :attr:`supported`): how far the evidence contradicts the model, comparable
+        between stages."""
         taxels = self.nis / self.nis_threshold if np.isfinite(self.nis) else 0.0
-        return float(max(taxels, self.free_space_excess))
+        after_view = 0.0
+        if self.after_view_nis is not None and self.after_view_threshold is not None:
+            after_view = self.after_view_nis / self.after_view_threshold
+        return float(max(taxels, self.free_space_excess, after_view))
 
 
 @dataclass(frozen=True)

@@ -497,6 +497,21 @@ def test_view_into_a_folder_it_cannot_write_is_one_line(run, tmp_path):
     assert "cannot write in /proc" in one_error_line(err)
 
 
+def test_view_of_a_run_folder_it_cannot_write_is_one_line(run, tmp_path, monkeypatch):
+    # A read-only run folder, which root (these tests' user in CI) cannot make with chmod.
+    import tempfile
+
+    def read_only(*args, dir=None, **kwargs):
+        raise PermissionError(13, "Permission denied", str(dir))
+
+    monkeypatch.setattr(tempfile, "TemporaryFile", read_only)
+    (tmp_path / "result.json").write_text("{}")
+    code, _, err = run("view", tmp_path, "--no-open")
+    assert code == EXIT_BAD_INPUT
+    assert f"cannot write in {tmp_path} (Permission denied)" in one_error_line(err)
+    assert list(tmp_path.iterdir()) == [tmp_path / "result.json"]
+
+
 @pytest.mark.parametrize("kind", ["file", "read-only"])
 def test_a_cache_that_cannot_be_written_names_the_variable(tmp_path, monkeypatch, kind):
     from pipeline.sim.collision import convex_decomposition
@@ -521,6 +536,17 @@ def test_a_trial_with_an_unwritable_cache_is_exit_2_not_a_plugin_failure(
     assert code == EXIT_BAD_INPUT
     assert one_error_line(err).startswith(f"symfuse: error: SYMFUSE_CACHE={tmp_path / 'cache'}")
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("value", ["false", "no", " 0"])
+def test_a_client_reuse_variable_that_is_neither_0_nor_1_names_the_variable(monkeypatch, value):
+    from pipeline.sim import world
+
+    monkeypatch.setenv(world.REUSE_VARIABLE, value)  # each read as "reuse" before
+    with pytest.raises(ConfigError, match=rf"^SYMFUSE_PYBULLET_REUSE={value}: expected 0"):
+        world._reuse_clients()
+    monkeypatch.setenv(world.REUSE_VARIABLE, "")
+    assert world._reuse_clients()
 
 
 def test_contacts_that_say_mm_over_metre_data_are_refused(recording, tmp_path):
@@ -597,3 +623,26 @@ def test_an_interrupted_symmetry_search_leaves_no_file(run, monkeypatch, tmp_pat
     code, _, _ = run("symmetry", "cd_drive", "--out", tmp_path / "s.json")
     assert code == 130
     assert not (tmp_path / "s.json").exists()
+
+
+def test_a_warning_is_wrapped_to_the_terminal_width(run):
+    """A YCB scan's path made its not-watertight warning 113 columns wide."""
+    import logging
+
+    run("config")
+    message = "/work/scans/003_cracker_box/textured.obj: mesh is not watertight; " * 3
+    lines = logging.lastResort.format(logging.makeLogRecord({"msg": message})).splitlines()
+    assert len(lines) == 3 and max(len(line) for line in lines) <= 100
+    assert " ".join(line.strip() for line in lines) == message.strip()
+
+
+def test_a_trial_s_progress_lines_fit_100_columns(capsys):
+    """A missed first grasp's progress line was 111-117 columns wide."""
+    from pipeline.cli.trial import _progress
+
+    _progress(
+        "grasp 1 touched one side only (the object moved 5.0 mm and tilted 0.0 deg); not "
+        "fused; grasping again (1 of 2)"
+    )
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2 and max(len(line) for line in lines) <= 100

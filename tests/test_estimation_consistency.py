@@ -10,16 +10,20 @@ import numpy as np
 import pytest
 from estimation_scenes import cylinder_scene, fusion_problem
 
+from pipeline.estimation.after_view_term import AfterViewMeasurement
 from pipeline.estimation.consistency import (
     ConsistencySettings,
+    after_view_test,
     assess,
     free_space_count,
     normalised_innovations,
     pad_test,
     select_stage,
     surface_residuals,
+    with_after_view_test,
 )
 from pipeline.estimation.covariances import normal_ellipsoids
+from pipeline.estimation.iekf import GraspContacts
 from pipeline.experiments.synthetic_study import make_estimator
 from pipeline.metrics import diameter_error
 from pipeline.perception.visibility import free_space_depths, visibility_violations
@@ -231,6 +235,66 @@ def test_a_capped_stage_must_explain_the_taxels_clearly_better_than_a_consistent
     # Stage 0.
     assert select_stage([stage(0, 0.5), stage(1, 0.4), stage(2, 0.3)])[0] == 2
     assert select_stage([stage(0, 9.0), stage(1, 0.4), capped])[0] == 2
+
+
+def grasp_with_view(motion: tuple[float, float, float] | None) -> GraspContacts:
+    """One taxel; with ``motion`` an after-view that measured it with stds 0.01 rad and
+    1 mm, 2 mm."""
+    view = None
+    if motion is not None:
+        noise = np.diag([0.01**2, 0.001**2, 0.002**2])
+        view = AfterViewMeasurement(np.array(motion), noise, gate=20.0, inliers=100)
+    return GraspContacts(
+        positions_m=np.zeros((1, 3)),
+        pads=np.array(["left"]),
+        window=np.eye(3)[None] * 1e-6,
+        noise=np.eye(3)[None] * 1e-6,
+        after_view=view,
+    )
+
+
+def test_the_after_view_test_weighs_the_bias_by_the_view_noise_with_three_dof_per_view():
+    g = np.array([0.02, 0.003, -0.004, 0.001, 0.05, 0.3])
+    # Yaw 1 std off, x 3 stds, y 1 std: 1 + 9 + 1; b_z and the plane are not measured.
+    statistic, bound = after_view_test([grasp_with_view((0.03, 0.0, -0.002))], [g], 0.001)
+    assert statistic == pytest.approx(11.0)
+    assert bound == pytest.approx(16.2662, abs=1e-4)  # chi2.ppf(0.999, 3)
+    # Two views: the statistics add, six degrees of freedom.
+    grasps = [grasp_with_view((0.03, 0.0, -0.002)), grasp_with_view(None)]
+    assert after_view_test(grasps, [g, g], 0.001)[0] == pytest.approx(11.0)
+    twice = [grasp_with_view((0.03, 0.0, -0.002))] * 2
+    statistic, bound = after_view_test(twice, [g, g], 0.01)
+    assert statistic == pytest.approx(22.0) and bound == pytest.approx(16.8119, abs=1e-4)
+    assert after_view_test([grasp_with_view(None)], [g], 0.001) is None
+
+
+def test_a_fused_stage_whose_bias_the_after_view_contradicts_gives_way():
+    grasps = [grasp_with_view((0.0, 0.005, 0.0))]  # the view saw the object move 5 mm
+
+    def at(index: int, excess_nis: float, x_m: float, violations: int = 10) -> StageEstimate:
+        g = np.array([0.0, x_m, 0.0, 0.0, 0.0, 0.0])
+        moved = dataclasses.replace(stage(index, excess_nis, violations), grasp_g=(g,))
+        return with_after_view_test(moved, grasps, 0.001)
+
+    # Stage 0's bias is no estimate: not tested. The fused stages moved the object 1 mm
+    # (4 stds from what the view saw, NIS 16 < 16.27) and 0.5 mm (4.5 stds, 20.25).
+    initial, close, far = at(0, 0.5, 0.0), at(1, 0.2, 0.001), at(2, 0.1, 0.0005)
+    assert initial.consistency.after_view_nis is None
+    assert close.consistency.supported and not far.consistency.supported
+    assert far.consistency.consistent and far.status == "converged"
+    index, reason = select_stage([initial, close, far])
+    assert index == 0 and "contradicts the after-view (NIS 20.3 > 16.3)" in reason
+    # The supported stage that contradicts the evidence least: Stage 1 (0.98 of the
+    # after-view's bound) over a Stage 0 at 0.99 of the taxels'.
+    assert select_stage([at(0, 0.99, 0.0), close, far])[0] == 1
+    # Stage 0 off the taxels (1.9 of the bound) still beats a stage the view puts six
+    # times beyond its bound; the last fails the camera.
+    off = at(0, 1.9, 0.0)
+    slid = at(1, 0.3, -0.005)
+    assert slid.consistency.excess > 6.0
+    assert select_stage([off, slid, at(2, 0.1, 0.005, violations=200)])[0] == 0
+    # A bias the view agrees with stands.
+    assert select_stage([initial, close, at(2, 0.1, 0.0048)])[0] == 2
 
 
 def test_a_last_stage_that_kept_its_prior_gives_way_to_the_last_that_did_not_fail():

@@ -299,16 +299,19 @@ def test_stop_rule():
     assert stop_reason(known, 1, 3, 0.0015).startswith("uncertainty reached: ")
     assert stop_reason(known, 3, 3, None) == "grasps done: 3 of 3"
     assert stop_reason(known, 3, 3, 0.001) == (
-        "grasps done: 3 of 3, before the uncertainty reached 1 mm: plane offset std 0.80 mm "
-        "and hidden shape std 1.50 mm"
+        "grasps done: 3 of 3, before the uncertainty reached 1 mm: hidden shape std 1.50 mm "
+        "stayed above it (plane offset std 0.80 mm)"
+    )
+    assert stop_reason(known, 3, 3, 0.0005).endswith(
+        "reached 0.5 mm: plane offset std 0.80 mm and hidden shape std 1.50 mm stayed above it"
     )
     unknown = Uncertainty(math.inf, math.inf, math.inf)
     assert stop_reason(unknown, 2, 3, 0.05) == ""
     # Grasps released unfused count against the budget, and the summary says so.
     assert stop_reason(known, 2, 3, None, unfused=1) == ""
     assert stop_reason(known, 3, 3, 0.001, unfused=1) == (
-        "grasps done: 3 of 3 (1 not fused), before the uncertainty reached 1 mm: plane "
-        "offset std 0.80 mm and hidden shape std 1.50 mm"
+        "grasps done: 3 of 3 (1 not fused), before the uncertainty reached 1 mm: hidden shape "
+        "std 1.50 mm stayed above it (plane offset std 0.80 mm)"
     )
 
 
@@ -654,6 +657,15 @@ def test_a_grasp_already_made_is_made_again_only_when_nothing_else_teaches():
     again = replace(_plan(0.003), score=1.0)
     assert not repeats(_plan(0.0, height_m=0.03), [made], grippers)  # 10 mm lower
     assert not repeats(_plan(-0.03), [made], grippers)
+    # The hand 8 mm further along the closing direction and 3.5 mm aside (the README's
+    # spray bottle's second grasp): the pads close on the same places, the same grasp.
+    along = replace(
+        _plan(0.0035),
+        T_robot_hand=hand_pose(np.array([0.508, 0.0035, 0.165]), made.closing_direction),
+    )
+    assert repeats(along, [made], grippers)
+    assert not repeats(replace(along, T_robot_hand=hand_pose(
+        np.array([0.508, 0.006, 0.165]), made.closing_direction)), [made], grippers)  # fmt: skip
     # The repeat, which the planner rates best, loses to any new grasp that teaches,
     # however the planner rates it (the floor compares the new grasps among themselves) ...
     planner = _Planner([again, replace(_plan(-0.03), score=0.2)])
@@ -855,3 +867,27 @@ def test_fuse_with_the_depth_image_reproduces_an_estimate_that_needed_the_camera
     blind = json.loads((tmp_path / "blind" / "result.json").read_text())["stages"]
     assert all(stage["consistency"]["checks"] == ["taxels"] for stage in blind)
     assert not any(stage.get("hypothesis") for stage in blind)
+
+
+@pytest.mark.parametrize(
+    ("asked", "hint"),
+    [(("pg70",), "; try --gripper sdh"), (("pg70", "sdh"), "; try another --yaw")],
+)
+def test_a_refused_grasp_says_what_to_try_next(asked, hint):
+    """The catalogue's box, 65 mm thick, refused by the PG-70 (aperture 65 mm) named by
+    --gripper: the SDH-2 holds it. With every hand asked, another pose is what is left."""
+    from pipeline.errors import StageFailure
+    from pipeline.planning.hand_choice import HandChoice, PlannerAnswer
+    from pipeline.run.trial import _take_choice
+
+    refused = replace(_plan(0.0), status="refused", reason="none of 180 grasps is feasible")
+    answers = tuple(PlannerAnswer(hand, f"planner-{hand}", refused) for hand in asked)
+    choice = HandChoice(answers[0], "", answers)
+    trial = SimpleNamespace(
+        world=SimpleNamespace(hands=("pg70", "sdh")), record=SimpleNamespace(choice=lambda c: None)
+    )
+    with pytest.raises(StageFailure) as failure:
+        _take_choice(trial, choice, [])
+    assert str(failure.value) == (
+        f"grasp planner 'planner-pg70' refused: none of 180 grasps is feasible{hint}"
+    )

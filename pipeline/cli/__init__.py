@@ -13,6 +13,7 @@ This module holds the options the verbs share, ``plugins`` and ``config``, the p
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 from collections.abc import Callable, Mapping, Sequence
@@ -22,7 +23,7 @@ from typing import Any, NoReturn
 from pipeline import __version__
 from pipeline.entry import interrupt_received, report_interrupt
 from pipeline.errors import EXIT_BAD_INPUT, EXIT_OK, ConfigError, SymfuseError
-from pipeline.reports.tables import format_table
+from pipeline.reports.tables import WrappedFormatter, format_table
 from pipeline.stages import STAGES
 
 
@@ -333,6 +334,9 @@ def _join_signed_values(argv: Sequence[str]) -> list[str]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; its exit code. Ctrl-C gives 130 whatever error it caused, or none
     (:mod:`pipeline.entry`, the console script, notes it from the first instant)."""
+    if logging.lastResort is not None:
+        # The handler that prints the warnings of a command line without logging set up.
+        logging.lastResort.setFormatter(WrappedFormatter())
     parser = build_parser()
     args, unknown = parser.parse_known_args(
         _join_signed_values(sys.argv[1:] if argv is None else argv)

@@ -260,7 +260,7 @@ def grasp_line(document: dict) -> str:
 
 def _progress(message: str) -> None:
     stop_if_interrupted()
-    print(f"... {message}", flush=True)
+    print(wrapped(f"... {message}"), flush=True)
 
 
 def run(args: argparse.Namespace) -> int:

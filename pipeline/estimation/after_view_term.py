@@ -199,6 +199,13 @@ def innovation(measurement: AfterViewMeasurement, g: np.ndarray) -> np.ndarray:
     return difference
 
 
+def normalised_innovation(measurement: AfterViewMeasurement, g: np.ndarray) -> float:
+    """``v^T N^-1 v``: the innovation ``v`` at ``g`` against the measurement's own noise ``N``
+    (chi-square with 3 degrees of freedom when ``g``'s bias is the motion the view saw)."""
+    v = innovation(measurement, g)
+    return float(v @ np.linalg.solve(measurement.noise, v))
+
+
 def linearisation(measurement: AfterViewMeasurement, g: np.ndarray) -> Linearisation:
     """The measurement in the form the covariance models take (no point columns)."""
     return Linearisation(

@@ -29,7 +29,7 @@ The kernels are pure: arrays in, numbers out.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -39,6 +39,7 @@ from scipy.spatial import cKDTree
 from scipy.special import gammaincinv, ndtri
 
 from pipeline.errors import FELL_BACK_STATUSES, estimate_failed
+from pipeline.estimation.after_view_term import MEASURED, normalised_innovation
 from pipeline.estimation.geometry import invert_side, mirror, side_linear_part
 from pipeline.estimation.iekf import GraspContacts
 from pipeline.perception.visibility import free_space_depths
@@ -209,6 +210,31 @@ def pad_test(nis: np.ndarray, groups: np.ndarray, alpha: float) -> tuple[float, 
     return float(means.mean()), float(2.0 * gammaincinv(pads / 2, 1.0 - alpha) / pads)
 
 
+def after_view_test(
+    grasps: Sequence[GraspContacts], grasp_g: Sequence[np.ndarray], alpha: float
+) -> tuple[float, float] | None:
+    """The after-views' agreement with a stage's bias: the sum over the grasps with an
+    after-view measurement of its normalised innovation at the state ``grasp_g[k]`` the
+    grasp's taxels are compared under (:func:`~.after_view_term.normalised_innovation`),
+    and its ``1 - alpha`` bound, chi-square with three degrees of freedom per view; None
+    when no grasp has one.
+
+    Like the taxel test it weighs the residual by the measurement's own noise, not by the
+    stage's uncertainty: the question is whether the bias the touch settled on is a motion
+    the camera could have seen.
+    """
+    views = [
+        (contacts.after_view, g_k)
+        for contacts, g_k in zip(grasps, grasp_g, strict=True)
+        if contacts.after_view is not None
+    ]
+    if not views:
+        return None
+    statistic = sum(normalised_innovation(view, g_k) for view, g_k in views)
+    dof = len(MEASURED) * len(views)
+    return float(statistic), float(2.0 * gammaincinv(dof / 2, 1.0 - alpha))
+
+
 def free_space_count(depths_m: np.ndarray, tolerance_m: float) -> int:
     """Points further than ``tolerance_m`` in front of the measured surface (see
     :func:`pipeline.perception.visibility.free_space_depths`)."""
@@ -288,6 +314,22 @@ def assess(
     )
 
 
+def with_after_view_test(
+    stage: StageEstimate, grasps: Sequence[GraspContacts], alpha: float
+) -> StageEstimate:
+    """``stage`` with :func:`after_view_test`'s statistic and bound in its consistency: a
+    fused stage's only (Stage 0's bias is the initialiser's, not an estimate), when it was
+    assessed and some grasp has an after-view."""
+    if stage.stage == 0 or stage.consistency is None or len(stage.grasp_g) != len(grasps):
+        return stage
+    test = after_view_test(grasps, stage.grasp_g, alpha)
+    if test is None:
+        return stage
+    statistic, bound = test
+    checked = replace(stage.consistency, after_view_nis=statistic, after_view_threshold=bound)
+    return replace(stage, consistency=checked)
+
+
 def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
     """The stage the evidence supports best, and why (docs/method.md §9).
 
@@ -299,7 +341,11 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
     iteration cap (``max_iterations``) while Stage 0 is consistent and it removed less than
     half of Stage 0's taxel misfit (:data:`CAPPED_NIS_SHARE`): an iteration that did not
     settle claims only what it explains, and a touch it explains barely better than the
-    initialiser's model does not support giving that model up. When it is inconsistent,
+    initialiser's model does not support giving that model up. When it is inconsistent, or
+    its bias contradicts the after-views (not
+    :attr:`~pipeline.types.Consistency.supported`: the touch and the camera's second look
+    disagree on how the object moved, so the bias that fits the pads misplaces the object
+    away from them; the after-views' statistic counts in the excess, Stage 0 has none),
     the camera ranks first: a model that puts matter where the camera saw
     none is wrong in its shape whatever the taxels say, while taxels off a model the camera
     accepts may be the object's motion between seeing and touching, or the camera's pose
@@ -327,7 +373,7 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
     final = stages[last].consistency
     if final is None:
         return last, "not assessed: the last stage"
-    if final.consistent:
+    if final.supported:
         initial, hypothesis = stages[0].consistency, stages[last].hypothesis
         if (
             hypothesis is not None
@@ -368,15 +414,15 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
         )
     if best.stage == last:
         return last, f"no stage is consistent; Stage {last} contradicts the evidence least"
-    if best.consistency.consistent:
+    if best.consistency.supported:
         return best.stage, (
-            f"Stage {last} contradicts the evidence ({final.reason}); Stage {best.stage} is "
-            "consistent with it"
+            f"Stage {last} contradicts the evidence ({final.contradictions}); Stage "
+            f"{best.stage} is consistent with it"
         )
     if seen_right and not final.passes_free_space:
         return best.stage, (
-            f"Stage {last} contradicts the camera ({final.reason}); Stage {best.stage} is the "
-            f"stage the camera accepts that contradicts the taxels least "
+            f"Stage {last} contradicts the camera ({final.contradictions}); Stage {best.stage} "
+            "is the stage the camera accepts that contradicts the taxels least "
             f"({best.consistency.excess:.2f} of the bound)"
         )
     if not seen_right:
@@ -386,7 +432,7 @@ def select_stage(stages: Sequence[StageEstimate]) -> tuple[int, str]:
             f"{final.free_space_excess:.2f} for Stage {last})"
         )
     return best.stage, (
-        f"Stage {last} contradicts the evidence ({final.reason}); Stage {best.stage} "
+        f"Stage {last} contradicts the evidence ({final.contradictions}); Stage {best.stage} "
         f"contradicts it least ({best.consistency.excess:.2f} of the bound vs "
         f"{final.excess:.2f})"
     )

@@ -238,7 +238,7 @@ def estimate_result(
     # One tree over the unfused points serves every stage: Stage 1 holds them fixed and
     # Stage 2 moves them by millimetres, so their nearest neighbours by index barely change
     # (the patches take the stage's own coordinates). It is the filter's own tree.
-    from pipeline.estimation.consistency import assess, select_stage
+    from pipeline.estimation.consistency import assess, select_stage, with_after_view_test
     from pipeline.estimation.free_space_conditioning import condition
     from pipeline.estimation.hypotheses import holdable
 
@@ -276,6 +276,7 @@ def estimate_result(
         diagnosed = earlier_shape_stages(fusion, diagnosed, refuse, view, consistency, tree)
         diagnosed = revise(fusion, diagnosed, refuse, view, consistency, tree)
         diagnosed = outlier_pad_stages(fusion, diagnosed, refuse, view, consistency, tree)
+    diagnosed = [with_after_view_test(s, fusion.grasps, consistency.alpha) for s in diagnosed]
     selected, reason = select_stage(diagnosed)
     return EstimateResult(stages=tuple(diagnosed), selected_stage=selected, selection_reason=reason)
 

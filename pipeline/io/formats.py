@@ -608,7 +608,8 @@ def hypothesis_to_json(hypothesis: Hypothesis | None) -> dict[str, Any] | None:
 def consistency_to_json(consistency: Consistency | None) -> dict[str, Any] | None:
     """A stage's self-diagnosis (None when it was not assessed): the checks that ran, the
     taxels' RMS distance from the model (mm) and NIS with its bound, the model points in
-    seen free space with their limit (None when no camera image was given), the verdict."""
+    seen free space with their limit (None when no camera image was given), the verdict, and
+    a fused stage's bias against the after-views with its bound (None without them)."""
     if consistency is None:
         return None
     return _jsonable(
@@ -621,18 +622,23 @@ def consistency_to_json(consistency: Consistency | None) -> dict[str, Any] | Non
             "free_space_limit": consistency.free_space_limit,
             "consistent": consistency.consistent,
             "reason": consistency.reason,
+            "after_view_nis": consistency.after_view_nis,
+            "after_view_threshold": consistency.after_view_threshold,
         }
     )
 
 
 def consistency_fields(prefix: str, consistency_json: dict[str, Any] | None) -> dict[str, Any]:
     """A stage's self-diagnosis as flat sweep-row fields ``{prefix}_consistent``,
-    ``{prefix}_taxel_rms_mm``, ``{prefix}_nis``, ``{prefix}_free_space_violations`` (empty
-    when it was not assessed)."""
+    ``{prefix}_taxel_rms_mm``, ``{prefix}_nis``, ``{prefix}_free_space_violations``,
+    ``{prefix}_after_view_nis`` (empty when it was not assessed; the last empty too in a
+    ``result.json`` written before it was recorded)."""
     if consistency_json is None:
         return {}
     names = ("consistent", "taxel_rms_mm", "nis", "free_space_violations")
-    return {f"{prefix}_{name}": consistency_json[name] for name in names}
+    fields = {f"{prefix}_{name}": consistency_json[name] for name in names}
+    fields[f"{prefix}_after_view_nis"] = consistency_json.get("after_view_nis")
+    return fields
 
 
 def hypothesis_field(prefix: str, hypothesis_json: dict[str, Any] | None) -> dict[str, str]:

@@ -72,8 +72,10 @@ SAME_PLACE_M = 0.005
 #: A plan repeats an earlier one of the same hand when its closing direction is within this
 #: angle of the earlier one's (half the planners' 15 deg step between directions; either
 #: way for a parallel gripper, whose jaws swap) and its hand within :data:`SAME_PLACE_M`
-#: (half their 10 mm step between pad heights, and more than the object moves between
-#: grasps): the planner's same grid cell on the object, found again.
+#: of the earlier one's across that direction (half their 10 mm step between pad heights,
+#: and more than the object moves between grasps): the planner's same grid cell on the
+#: object, found again. Along the closing direction the hand's place does not count: the
+#: pads close along it until they meet the sides, the same places wherever they start.
 SAME_DIRECTION_RAD = math.radians(7.5)
 
 #: ``information`` chooses among the alternatives whose :func:`delivery` is at least this
@@ -196,7 +198,16 @@ def stop_reason(
         made += f" ({unfused} not fused)"
     if until_std_m is None:
         return made
-    return f"{made}, before the uncertainty reached {1e3 * until_std_m:g} mm: {known.stop_stds()}"
+    stds = (
+        ("plane offset std", known.plane_offset_std_m),
+        ("hidden shape std", known.hidden_shape_std_m),
+    )
+    above = " and ".join(f"{name} {1e3 * std:.2f} mm" for name, std in stds if std > until_std_m)
+    met = ", ".join(f"{name} {1e3 * std:.2f} mm" for name, std in stds if std <= until_std_m)
+    return (
+        f"{made}, before the uncertainty reached {1e3 * until_std_m:g} mm: {above} stayed "
+        f"above it" + (f" ({met})" if met else "")
+    )
 
 
 def model_for_planning(
@@ -412,18 +423,21 @@ def repeats(
     plan: GraspPlan, earlier: Sequence[GraspPlan], grippers: Mapping[str, GripperSpec]
 ) -> bool:
     """Whether ``plan`` is a grasp already made, one of ``earlier`` again
-    (:data:`SAME_DIRECTION_RAD`, :data:`SAME_PLACE_M`): its taxels would press where that
-    grasp's pressed, whose error they repeat rather than average out (:func:`new_places`).
+    (:data:`SAME_DIRECTION_RAD`, :data:`SAME_PLACE_M` across the earlier closing
+    direction): its taxels would press where that grasp's pressed, whose error they repeat
+    rather than average out (:func:`new_places`).
     """
     direction = np.asarray(plan.closing_direction, dtype=float)
     position = np.asarray(plan.T_robot_hand, dtype=float)[:3, 3]
     for before in earlier:
         if before.gripper != plan.gripper:
             continue
-        cosine = float(direction @ np.asarray(before.closing_direction, dtype=float))
+        closing = np.asarray(before.closing_direction, dtype=float)
+        cosine = float(direction @ closing)
         if grippers[plan.gripper].fingers == 2:
             cosine = abs(cosine)
-        moved = np.linalg.norm(position - np.asarray(before.T_robot_hand, dtype=float)[:3, 3])
+        offset = position - np.asarray(before.T_robot_hand, dtype=float)[:3, 3]
+        moved = np.linalg.norm(offset - (offset @ closing) * closing)
         if cosine >= math.cos(SAME_DIRECTION_RAD) and moved <= SAME_PLACE_M:
             return True
     return False

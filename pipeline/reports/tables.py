@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import textwrap
 from collections.abc import Collection, Sequence
 
@@ -43,3 +44,11 @@ def wrapped(text: str) -> str:
         break_long_words=False,
         break_on_hyphens=False,
     )
+
+
+class WrappedFormatter(logging.Formatter):
+    """A log record's message :func:`wrapped` to the terminal's width, as the tables are:
+    the warnings name a file first, and a path alone can fill a line."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return wrapped(super().format(record))

@@ -530,7 +530,13 @@ def _take_choice(trial: Trial, choice: HandChoice, missed: list[MissedGrasp]) ->
     if plan.status != "ok":
         if not choice.answer.planner:
             raise StageFailure(plan.reason)
-        raise StageFailure(f"grasp planner '{choice.answer.planner}' refused: {plan.reason}")
+        # A hand no planner was asked for (a named --gripper) is the next thing to try.
+        asked = {answer.gripper for answer in choice.answers}
+        untried = tuple(hand for hand in world.hands if hand not in asked)
+        raise StageFailure(
+            f"grasp planner '{choice.answer.planner}' refused: {plan.reason}"
+            f"{next_try(untried, plan.gripper)}"
+        )
     with trial.phase("grasp"):
         if world.gripper is not None and world.gripper.name != plan.gripper:
             world.remove_hand()

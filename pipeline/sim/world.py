@@ -36,7 +36,19 @@ _idle_clients: list[int] = []
 
 
 def _reuse_clients() -> bool:
-    return os.environ.get(REUSE_VARIABLE, "1") != "0"
+    """Whether closed worlds' clients are kept (:data:`REUSE_VARIABLE` unset, empty or
+    ``1``) or disconnected (``0``).
+
+    Raises:
+        ConfigError: any other value (``false``, ``no``), which would otherwise mean reuse.
+    """
+    value = os.environ.get(REUSE_VARIABLE) or "1"
+    if value not in ("0", "1"):
+        raise ConfigError(
+            f"{REUSE_VARIABLE}={value}: expected 0 (a new PyBullet client for every world) "
+            "or 1 (keep one for the next world, the default)"
+        )
+    return value == "1"
 
 
 def _empty_client() -> int | None:
