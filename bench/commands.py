@@ -14,6 +14,7 @@ import statistics
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 from summary import record
 
@@ -21,11 +22,14 @@ TARGET_S = 0.5
 COMMANDS = (["--help"], ["plugins"], ["config"])
 
 
-def run_process(arguments: list[str]) -> tuple[float, float]:
-    """Wall and CPU (user + system) seconds of one run of ``arguments`` as a new process."""
+def run_process(
+    arguments: list[str], env: dict[str, str] | None = None, cwd: Path | None = None
+) -> tuple[float, float]:
+    """Wall and CPU (user + system) seconds of one run of ``arguments`` as a new process
+    (in ``cwd`` with the environment ``env``, by default this process's)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
-    subprocess.run(arguments, check=True, capture_output=True)
+    subprocess.run(arguments, check=True, capture_output=True, env=env, cwd=cwd)
     wall = time.perf_counter() - started
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)

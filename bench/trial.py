@@ -19,7 +19,12 @@ tree with another revision (unpacked with ``git archive`` as ``sweep_speed.py`` 
 the default and the SDH-2 trial: each tree's warm trials in a new process of its own, the
 two trees alternating for ``--rounds`` rounds, every phase's processor time the median
 over the rounds of each process's median; the last trials' ``result.json`` are compared
-but for their times (the phases' and each stage's).
+but for their times (the phases' and each stage's). In the same rounds each tree's default
+trial also runs as a new ``symfuse trial`` process, printed against its warm trial.
+
+A new process is measured after one unmeasured run, with the bytecode of the modules it
+imports kept in a temporary folder (``PYTHONPYCACHEPREFIX``) as an installed package has
+it, even where ``PYTHONDONTWRITEBYTECODE`` is set.
 
 Targets (issue 41), in processor time: the default trial at most 2.0 s, its planner 0.4 s,
 segmenter 0.3 s and evaluation 0.3 s, the pictures 0.4 s; in wall time, the new process at
@@ -103,13 +108,36 @@ def in_process(repeats: int, overrides: list[str], last_result: Path | None = No
     )
 
 
-def whole_command(repeats: int, arguments: list[str]) -> tuple[float, float]:
-    """Median wall and CPU seconds of ``symfuse ARGUMENTS --out DIR`` as a new process."""
+def with_bytecode(folder: Path, tree: Path | None = None) -> dict[str, str]:
+    """This process's environment for a new ``symfuse`` process that keeps the compiled
+    bytecode of the modules it imports under ``folder`` (``PYTHONPYCACHEPREFIX``, whatever
+    ``PYTHONDONTWRITEBYTECODE`` says), with ``tree`` first on the import path if given.
+
+    An installed package has its bytecode: without it every new process of an editable
+    install in an environment that writes none compiles symfuse's modules again (about
+    0.3 s of processor time for a trial), which no user waits for twice.
+    """
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPYCACHEPREFIX"] = str(folder / "bytecode")
+    if tree is not None:
+        env["PYTHONPATH"] = str(tree)
+    return env
+
+
+def whole_command(
+    repeats: int, arguments: list[str], tree: Path | None = None
+) -> tuple[float, float]:
+    """Median wall and CPU seconds of ``symfuse ARGUMENTS --out DIR`` as a new process
+    (``tree``'s code if given), after one run unmeasured: the files in the page cache and
+    the bytecode written (:func:`with_bytecode`)."""
     runs = []
-    with tempfile.TemporaryDirectory() as folder:
-        for k in range(repeats):
+    with tempfile.TemporaryDirectory() as name:
+        folder = Path(name)
+        env = with_bytecode(folder, tree)
+        for k in range(repeats + 1):
             command = [sys.executable, "-m", "pipeline.cli", *arguments, "--out", f"{folder}/{k}"]
-            runs.append(run_process(command))
+            runs.append(run_process(command, env=env, cwd=tree))
+    runs = runs[1:]
     return statistics.median(w for w, _ in runs), statistics.median(c for _, c in runs)
 
 
@@ -162,12 +190,20 @@ def compare(revision: str, rounds: int, repeats: int) -> None:
     trials = {"default": off, "sdh": [*off, "trial.gripper=sdh"]}
     with tempfile.TemporaryDirectory(prefix="symfuse-trial-") as folder:
         trees = {"baseline": unpack(revision, Path(folder)), "this tree": ROOT}
+        envs = {label: with_bytecode(Path(folder), tree) for label, tree in trees.items()}
+        command = [sys.executable, "-m", "pipeline.cli", "trial", "--set", *off, "--out"]
+        for label, tree in trees.items():  # unmeasured: the bytecode written, files cached
+            run_process([*command, f"{folder}/first-{label}"], envs[label], tree)
+        fresh: dict[str, list[tuple[float, float]]] = {label: [] for label in trees}
         for name, overrides in trials.items():
             runs: dict[str, list[Measured]] = {label: [] for label in trees}
             results = {label: Path(folder) / f"{name}-{k}.json" for k, label in enumerate(trees)}
-            for _ in range(rounds):
+            for r in range(rounds):
                 for label, tree in trees.items():
                     runs[label].append(tree_trial(tree, repeats, overrides, results[label]))
+                    if name == "default":
+                        out = f"{folder}/new-{label}-{r}"
+                        fresh[label].append(run_process([*command, out], envs[label], tree))
             phases = list(dict.fromkeys(p for m in runs["this tree"] for p in m.cpu))
             print(f"{name} trial, processor time (s): median of {rounds} processes' medians")
             print(f"{'phase':<12} {'baseline':>9} {'this tree':>9}")
@@ -180,6 +216,26 @@ def compare(revision: str, rounds: int, repeats: int) -> None:
             for where, _ in found[:10]:
                 print(f"    {where}")
             print()
+            if name == "default":
+                print_new_process(fresh, runs, rounds)
+
+
+def print_new_process(
+    fresh: dict[str, list[tuple[float, float]]], warm: dict[str, list[Measured]], rounds: int
+) -> None:
+    """Each tree's ``symfuse trial`` as a new process against its warm trial (medians of
+    ``rounds``; target: at most :data:`PROCESS_EXTRA_TARGET_S` longer, wall)."""
+    print(f"default trial as a new process less warm (s): median of {rounds} rounds")
+    print(f"{'tree':<10} {'new wall':>9} {'warm wall':>9} {'extra':>6} {'new cpu':>8} ", end="")
+    print(f"{'warm cpu':>8} {'extra':>6}")
+    for label, runs in fresh.items():
+        wall = statistics.median(w for w, _ in runs)
+        cpu = statistics.median(c for _, c in runs)
+        warm_wall = statistics.median(m.total_wall for m in warm[label])
+        warm_cpu = statistics.median(m.total_cpu for m in warm[label])
+        print(f"{label:<10} {wall:>9.2f} {warm_wall:>9.2f} {wall - warm_wall:>6.2f} ", end="")
+        print(f"{cpu:>8.2f} {warm_cpu:>8.2f} {cpu - warm_cpu:>6.2f}")
+    print()
 
 
 def main() -> None:

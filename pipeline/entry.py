@@ -66,6 +66,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _on_interrupt)
     try:
+        if argv is None:
+            from pipeline import lean_imports
+
+            lean_imports.install()
         from pipeline.cli import main as run
 
         code = run(argv)

@@ -93,3 +93,58 @@ def test_the_grasps_picture_is_drawn_without_matplotlib(tmp_path):
     )
     assert loaded_after(code, ("matplotlib",)) == []
     assert (tmp_path / "grasps.png").stat().st_size > 0
+
+
+def printed_under_the_hook(code: str) -> list[str]:
+    """The words a fresh interpreter prints running ``code`` after
+    :func:`pipeline.lean_imports.install`."""
+    hooked = f"from pipeline import lean_imports\nlean_imports.install()\n{code}"
+    done = subprocess.run(
+        [sys.executable, "-c", hooked], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    return done.stdout.split()
+
+
+def test_the_lean_import_hook_skips_numpys_test_tools_and_scipys_docstring_notes():
+    """With :mod:`pipeline.lean_imports` installed, scipy imports without numpy's
+    ``f2py`` and ``testing`` and leaves its functions' docstrings as written; both numpy
+    modules still import when used, and scipy's functions and capabilities table are
+    there as without the hook."""
+    code = (
+        "import sys\nimport numpy as np, scipy.spatial, scipy.special\n"
+        "from scipy._lib._array_api import xp_capabilities_table\n"
+        "from scipy._lib.array_api_compat import numpy as xp\n"
+        "skipped = [m for m in ('numpy.f2py', 'numpy.testing') if m not in sys.modules]\n"
+        "np.testing.assert_allclose(scipy.special.logsumexp([0.0, 0.0]), np.log(2.0))\n"
+        "doc = scipy.special.logsumexp.__doc__\n"
+        "print(skipped == ['numpy.f2py', 'numpy.testing'], len(xp_capabilities_table) > 100,\n"
+        "      'Array API Standard' in doc, doc.lstrip().startswith('Compute the log'),\n"
+        "      xp.testing.assert_allclose is np.testing.assert_allclose)"
+    )
+    assert printed_under_the_hook(code) == ["True", "True", "False", "True", "True"]
+
+
+def test_trimesh_imports_without_networkx_and_scipy_optimize_under_the_hook():
+    """Under :mod:`pipeline.lean_imports`, trimesh loads neither module at its import; its
+    functions that use them (a sphere fit, a vertex graph) work and get the real modules,
+    as another importer does."""
+    code = (
+        "import sys\nimport numpy as np, trimesh\n"
+        "deferred = [m for m in ('networkx', 'scipy.optimize') if m not in sys.modules]\n"
+        "centre, radius, _ = trimesh.nsphere.fit_nsphere(trimesh.creation.icosphere().vertices)\n"
+        "graph = trimesh.creation.box().vertex_adjacency_graph\n"
+        "import networkx, scipy.optimize\n"
+        "print(deferred == ['networkx', 'scipy.optimize'], abs(radius - 1.0) < 1e-9,\n"
+        "      isinstance(graph, networkx.Graph), graph.number_of_nodes() == 8,\n"
+        "      trimesh.bounds.optimize.minimize is scipy.optimize.minimize)"
+    )
+    assert printed_under_the_hook(code) == ["True"] * 5
+
+
+@pytest.mark.slow
+def test_a_sweeps_fork_server_imports_the_trial_under_the_hook():
+    """The fork server's imports (:mod:`pipeline.experiments.trial_worker`) install the
+    hook first: the trial's modules load without numpy's test tools or networkx."""
+    code = "import pipeline.experiments.trial_worker"
+    assert loaded_after(code, ("numpy.f2py", "numpy.testing", "networkx")) == []

@@ -10,14 +10,27 @@ the worker as usual: the list is for speed, never for correctness.
 
 from __future__ import annotations
 
-import pipeline.estimation.iekf
-import pipeline.experiments.paper_trial
-import pipeline.run.trial
-import pipeline.sim.grasping
-import pipeline.sim.hand_models
-import pipeline.sim.world  # noqa: F401  (the imports are this module's purpose)
-from pipeline.experiments.common import plugin_registry
-from pipeline.io.open3d_loader import open3d
+import importlib
+
+from pipeline import lean_imports
+
+#: The trial's modules the server imports (after :func:`pipeline.lean_imports.install`,
+#: as the ``symfuse`` command does, so that scipy loads without the work it skips).
+TRIAL_MODULES = (
+    "pipeline.estimation.iekf",
+    "pipeline.experiments.paper_trial",
+    "pipeline.run.trial",
+    "pipeline.sim.grasping",
+    "pipeline.sim.hand_models",
+    "pipeline.sim.world",
+)
+
+lean_imports.install()
+for _module in TRIAL_MODULES:
+    importlib.import_module(_module)
+
+from pipeline.experiments.common import plugin_registry  # noqa: E402  (after the hook)
+from pipeline.io.open3d_loader import open3d  # noqa: E402
 
 plugin_registry()
 open3d()

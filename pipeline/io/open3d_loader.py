@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import ctypes.util
 import functools
 import importlib
 import importlib.util
@@ -26,21 +25,42 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
 
+#: The libusb open3d's library links against, and the file ``libusb-package`` ships.
+LIBUSB_SONAME = "libusb-1.0.so.0"
+LIBUSB_PACKAGED = "libusb-1.0.so"
 #: The open3d module that imports plotly and dash when loaded.
 PLOTLY_MODULE = "open3d.visualization.draw_plotly"
 
 
 def preload_libusb() -> str | None:
-    """Load a libusb-1.0 globally if the system has none; return the path loaded, if any."""
-    if ctypes.util.find_library("usb-1.0"):
-        return None
+    """Load a libusb-1.0 globally if the system has none; return the path loaded, if any.
+
+    The system's is looked for by the name open3d links against (the dynamic linker's
+    own search: ``ctypes.util.find_library`` would run ``ldconfig`` and a compiler), the
+    wheel's in its package folder (importing ``libusb_package`` would import
+    ``importlib_resources`` to find the same file).
+    """
     if not sys.platform.startswith("linux"):
         return None
-    import libusb_package
-
-    path = str(libusb_package.get_library_path())
+    try:
+        ctypes.CDLL(LIBUSB_SONAME)
+        return None
+    except OSError:
+        pass
+    path = _packaged_libusb()
     ctypes.CDLL(path, mode=ctypes.RTLD_GLOBAL)
     return path
+
+
+def _packaged_libusb() -> str:
+    """The path of the libusb-1.0 the ``libusb-package`` wheel ships."""
+    spec = importlib.util.find_spec("libusb_package")
+    for folder in (spec.submodule_search_locations or []) if spec is not None else []:
+        if (path := Path(folder) / LIBUSB_PACKAGED).is_file():
+            return str(path)
+    import libusb_package  # installed in a form without a plain folder (a zip)
+
+    return str(libusb_package.get_library_path())
 
 
 def _real_plotly_module() -> ModuleType:

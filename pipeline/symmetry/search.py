@@ -19,7 +19,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize
 from scipy.spatial import cKDTree
 
 from pipeline.metrics import sample_surface
@@ -202,6 +201,10 @@ def local_minima(directions: np.ndarray, scores: np.ndarray) -> np.ndarray:
 def _refined(start: Symmetry, samples: np.ndarray, tree: cKDTree, cap_m: float) -> Symmetry:
     """``start`` moved to the nearest minimum of its capped residual (Nelder-Mead over the
     direction's angles and the plane's offset or the axis' two across coordinates)."""
+    # Imported here: every trial's evaluation imports this module for the search's version
+    # (its results are cached) and never runs the search.
+    from scipy.optimize import minimize
+
     azimuth, elevation = angles_of(start.direction)
     u, v = start.across_axes()
 
