@@ -30,6 +30,9 @@ from pipeline.geometry.poses import rotation_z
 
 BIAS_PLANE_PARAMETERS = ("b_theta", "b_x", "b_y", "b_z", "m_r", "m_theta")
 """Parameter names of the 6x6 bias-and-plane covariance, in order."""
+GENERAL_PLANE_PARAMETERS = (*BIAS_PLANE_PARAMETERS, "m_phi")
+"""Parameter names of the 7x7 covariance when the estimator fuses a leaning plane: its
+normal's azimuth ``m_theta`` and elevation ``m_phi`` (docs/symmetry.md)."""
 
 EstimateStatus = Literal[
     "initial", "converged", "max_iterations", "no_correspondence", "diverged", "inconsistent"
@@ -330,6 +333,15 @@ class Bias:
         """Move ``(N, 3)`` robot-frame points by the bias."""
         rotation = rotation_z(self.yaw_rad)
         return (points - self.pivot_m) @ rotation.T + self.pivot_m + self.translation_m
+
+    @property
+    def transform(self) -> np.ndarray:
+        """The bias as a 4x4 rigid motion of robot-frame points."""
+        rotation = rotation_z(self.yaw_rad)
+        matrix = np.eye(4)
+        matrix[:3, :3] = rotation
+        matrix[:3, 3] = self.pivot_m + self.translation_m - rotation @ self.pivot_m
+        return matrix
 
 
 @dataclass(frozen=True)
@@ -687,9 +699,9 @@ class SymmetryInit:
         reason: explanation for a rejection, else empty.
         symmetry: the symmetry the initialiser found when it looks beyond the vertical
             plane (:mod:`pipeline.symmetry`); None: the ``"vertical-plane"`` ``plane``.
-            The estimator fuses ``plane``; an ``"axis"`` or ``"plane"`` here is what the
-            view alone supports, and its completion is
-            :func:`pipeline.symmetry.kinds.complete`'s.
+            A ``"plane"`` here (a leaning one) is what the built-in estimators fuse, in
+            the seven-parameter state; for an ``"axis"`` they fuse ``plane`` (through the
+            axis), and the axis' own completion is :func:`pipeline.symmetry.kinds.complete`'s.
         kind_scores: the evidence each kind of symmetry had when the initialiser chose
             between them (kind -> penalised violation score, lower is better); empty when
             it did not choose.
@@ -849,6 +861,13 @@ class StageEstimate:
             ended with, when it differs from ``covariance`` (the built-in IEKF's, which also
             counts the taxels across their normals); a later grasp is fused from it. None:
             ``covariance``.
+        symmetry: the mirror plane of any orientation the stage estimated (kind
+            ``"plane"``, in the unbiased frame R like ``plane``, with the covariance of its
+            ``(m_r, m_azimuth, m_elevation)``), when the estimator fused a leaning plane;
+            then ``g``, ``covariance`` and ``grasp_g`` have seven parameters, the plane's
+            elevation ``m_phi`` last (:data:`GENERAL_PLANE_PARAMETERS`), and ``plane`` is
+            the vertical plane with the same azimuth through the point of the leaning plane
+            nearest the origin. None: the paper's vertical ``plane``.
     """
 
     stage: int
@@ -866,6 +885,16 @@ class StageEstimate:
     hypothesis: Hypothesis | None = None
     grasp_g: tuple[np.ndarray, ...] = ()
     filter_covariance: np.ndarray | None = None
+    symmetry: Symmetry | None = None
+
+    @property
+    def estimated_symmetry(self) -> Symmetry:
+        """The stage's mirror plane as a symmetry (frame R, before the bias): the leaning
+        :attr:`symmetry`, else the vertical :attr:`plane` with the ``(m_r, m_theta)`` block
+        of :attr:`covariance`."""
+        if self.symmetry is not None:
+            return self.symmetry
+        return Symmetry.from_plane(self.plane, np.asarray(self.covariance)[4:, 4:])
 
 
 @dataclass(frozen=True)

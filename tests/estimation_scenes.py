@@ -1,5 +1,6 @@
 """Tiny synthetic scenes for the estimator tests: a cylinder seen from one side and
-grasped by two opposed 6 x 14 taxel pads (helper module, not a test file)."""
+grasped by two opposed 6 x 14 taxel pads, and a box on its edge whose mirror plane leans
+(helper module, not a test file)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.estimation.covariances import normal_ellipsoids
-from pipeline.estimation.geometry import apply_bias
+from pipeline.estimation.geometry import apply_bias, invert_bias
 from pipeline.estimation.iekf import FusionProblem, GraspContacts
+from pipeline.geometry.poses import rotation_z
 
 RADIUS_M = 0.04
 HEIGHT_M = 0.10
@@ -81,7 +83,7 @@ def cylinder_scene(
 
 
 def fusion_problem(
-    scene: CylinderScene,
+    scene: CylinderScene | LeaningBoxScene,
     g_init: np.ndarray,
     prior_std: tuple[float, ...] = (0.05, 0.01, 0.01, 0.01, 0.0325, 0.17),
     point_std_m: float = 0.002,
@@ -90,6 +92,7 @@ def fusion_problem(
     grasps: int = 1,
     reported_across_m: float | None = None,
     reported_pad_m: float | None = None,
+    facing: bool = False,
 ) -> FusionProblem:
     """A :class:`FusionProblem` for the scene; ``grasps`` repeats the same contacts. With
     ``reported_across_m`` the reported covariance counts the taxels with that std across
@@ -105,10 +108,11 @@ def fusion_problem(
         pads=scene.pads,
         window=normal_ellipsoids(scene.normals, *window_std_m),
         noise=normal_ellipsoids(scene.normals, *noise_std_m),
+        normals=scene.normals if facing else None,
         reported_noise=reported_noise,
         pad_errors_m=pad_errors,
     )
-    q = np.zeros((6, 6))
+    q = np.zeros((len(g_init), len(g_init)))
     q[[0, 1, 2, 3], [0, 1, 2, 3]] = [0.01**2, 0.002**2, 0.002**2, 0.002**2]
     return FusionProblem(
         points_m=scene.points_m,
@@ -118,4 +122,98 @@ def fusion_problem(
         point_variance_m2=np.full(len(scene.points_m), point_std_m**2),
         grasps=(contacts,) * grasps,
         regrasp_noise=q,
+    )
+
+
+BOX_HALF_M = (0.03, 0.05, 0.04)
+#: The leaning box's pads: (box axis, side, name). The front and back pads sit on the faces
+#: parallel to the mirror plane, the others straddle it.
+BOX_PADS = (
+    (0, -1.0, "front"),
+    (0, 1.0, "back"),
+    (1, -1.0, "left"),
+    (1, 1.0, "right"),
+    (2, 1.0, "top"),
+)
+
+
+@dataclass(frozen=True)
+class LeaningBoxScene:
+    """A box on its edge: its mirror plane across its first axis leans, its unit normal
+    ``(cos tilt, 0, sin tilt)`` (elevation ``tilt``) through the box's centre. The camera's
+    cloud is the half on the normal's negative side; the hand touched the box after it
+    moved by ``g_true``'s bias about ``pivot_m``, with one pad on each face of
+    :data:`BOX_PADS` (the back face is the mirror image of the front one)."""
+
+    points_m: np.ndarray
+    pivot_m: np.ndarray
+    g_true: np.ndarray
+    rotation: np.ndarray
+    centre_m: np.ndarray
+    taxels_m: np.ndarray
+    normals: np.ndarray
+    pads: np.ndarray
+
+    def surface_distance(self, world_points: np.ndarray) -> np.ndarray:
+        """Distance (m) of points in the hand's frame from the true box's surface."""
+        unbiased = invert_bias(world_points, self.g_true, self.pivot_m)
+        local = np.abs((unbiased - self.centre_m) @ self.rotation) - np.array(BOX_HALF_M)
+        outside = np.linalg.norm(np.maximum(local, 0.0), axis=1)
+        return outside + np.abs(np.minimum(local.max(axis=1), 0.0))
+
+
+def leaning_box_scene(
+    n_points: int,
+    tilt_rad: float,
+    bias: tuple[float, float, float, float] = (0.03, 0.003, -0.002, 0.001),
+    noise_m: float = 0.0005,
+    seed: int = 0,
+) -> LeaningBoxScene:
+    """The front half of the box's surface, sampled uniformly by area, and 5 x 5 pads."""
+    rng = np.random.default_rng(seed)
+    half = np.array(BOX_HALF_M)
+    c, s = np.cos(tilt_rad), np.sin(tilt_rad)
+    rotation = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])  # box axes as columns
+    centre = np.array([0.5, 0.02, 0.06])
+    # Faces of the half x < 0: (axis, sign, extent along x).
+    faces = [(0, -1.0, 1.0), (1, -1.0, 0.5), (1, 1.0, 0.5), (2, -1.0, 0.5), (2, 1.0, 0.5)]
+    areas = []
+    for axis, _, x_share in faces:
+        others = [k for k in range(3) if k != axis]
+        extents = [2 * half[k] * (x_share if k == 0 else 1.0) for k in others]
+        areas.append(extents[0] * extents[1])
+    counts = rng.multinomial(n_points, np.array(areas) / sum(areas))
+    local = []
+    for (axis, sign, _), count in zip(faces, counts, strict=True):
+        sample = rng.uniform(-half, half, (count, 3))
+        sample[:, 0] = -np.abs(sample[:, 0])
+        sample[:, axis] = sign * half[axis]
+        local.append(sample)
+    points = np.concatenate(local) @ rotation.T + centre
+    points += rng.normal(0.0, noise_m, points.shape)
+    pivot = points.mean(axis=0)
+    normal = rotation[:, 0]
+    g_true = np.array([*bias, float(normal @ centre), 0.0, tilt_rad])
+    grid = (np.arange(5) - 2.0) * PITCH_M
+    u, v = (a.ravel() for a in np.meshgrid(grid, grid))
+    taxels, normals, pads = [], [], []
+    for axis, sign, pad in BOX_PADS:
+        patch = np.zeros((len(u), 3))
+        patch[:, axis] = sign * half[axis]
+        others = [k for k in range(3) if k != axis]
+        patch[:, others[0]], patch[:, others[1]] = u, v
+        inward = np.zeros(3)
+        inward[axis] = -sign
+        taxels.append(apply_bias(patch @ rotation.T + centre, g_true, pivot))
+        normals.append(np.tile(rotation_z(bias[0]) @ rotation @ inward, (len(u), 1)))
+        pads.append(np.full(len(u), pad))
+    return LeaningBoxScene(
+        points_m=points,
+        pivot_m=pivot,
+        g_true=g_true,
+        rotation=rotation,
+        centre_m=centre,
+        taxels_m=np.concatenate(taxels),
+        normals=np.concatenate(normals),
+        pads=np.concatenate(pads),
     )

@@ -91,7 +91,22 @@ def test_voxel_edges_keep_every_gate_wider_than_the_ratio():
     assert np.linalg.eigvalsh(scaled * np.exp2(-0.5))[:, 0].min() < 4.0
 
 
-@pytest.mark.parametrize("stds_mm", [(12.0, 8.0, 3.0), (30.0, 10.0, 2.6), (5.0, 4.0, 3.0)])
+def test_voxel_edges_follow_each_axis_of_long_thin_gates():
+    # Gates long and thin across random horizontal directions (a back gate under a broad
+    # plane prior) bound the horizontal edges; the vertical std alone bounds the vertical
+    # edge, to within the quarter-octave rounding.
+    rng = np.random.default_rng(5)
+    _, covariances = _gates(rng, 30, np.array([0.07, 0.01, 0.0026]))
+    edges = np.exp2(voxel_exponents(covariances, ratio=0.5) / 4.0)
+    scaled = np.einsum("i,tij,j->tij", 1.0 / edges, covariances, 1.0 / edges)
+    assert np.linalg.eigvalsh(scaled)[:, 0].min() >= 4.0 - 1e-9
+    assert edges[2] >= 0.5 * 0.0026 * np.exp2(-0.25)
+    assert edges[:2].max() <= 0.5 * 0.01
+
+
+@pytest.mark.parametrize(
+    "stds_mm", [(12.0, 8.0, 3.0), (30.0, 10.0, 2.6), (70.0, 10.0, 2.6), (5.0, 4.0, 3.0)]
+)
 def test_aggregated_sums_match_the_exact_sums(stds_mm):
     rng = np.random.default_rng(3)
     points = _cylinder_cloud(20000, seed=4)

@@ -12,7 +12,8 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from pipeline.config import load_config
-from pipeline.metrics.evaluation import BIAS_NEES_BOUND, bias_errors
+from pipeline.experiments.paper_report import BIAS_NEES_BOUND, chi_square_4_quantile
+from pipeline.metrics.evaluation import bias_errors
 from pipeline.run.trial import run_trial
 from pipeline.testing import AnalyticWorld, registry_with
 from pipeline.types import Bias, SymmetryPlane
@@ -85,6 +86,11 @@ def test_the_nees_of_errors_drawn_from_the_covariance_is_chi_square_with_four_do
     assert np.mean(nees) == pytest.approx(4.0, rel=0.05)
     assert np.mean(np.array(nees) > BIAS_NEES_BOUND) == pytest.approx(0.01, abs=0.006)
     assert chi2.ppf(0.99, 4) == pytest.approx(BIAS_NEES_BOUND)
+
+
+@pytest.mark.parametrize("probability", [1e-6, 0.01, 0.5, 0.9, 0.99, 0.999, 1.0 - 1e-12])
+def test_the_closed_form_chi_square_quantile_is_scipys(probability):
+    assert chi_square_4_quantile(probability) == pytest.approx(chi2.ppf(probability, 4), rel=1e-12)
 
 
 def test_a_covariance_that_claims_a_wrong_component_exactly_known_scores_inf():

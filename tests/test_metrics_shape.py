@@ -9,12 +9,15 @@ import pytest
 import trimesh
 
 from pipeline.metrics import (
+    MeshSurface,
+    grid_order,
     hull_iou,
     mesh_occupancy,
     nearest_distances,
     point_to_mesh_distances,
     sample_surface,
     solid_grid,
+    solid_share_inside,
     support_faces,
     surface_scores,
 )
@@ -200,3 +203,53 @@ def test_solid_and_iou_match_the_per_cell_inside_test(mesh):
     expected = intersection / (hull.volume + solid.volume_m3 - intersection)
     assert 0.2 < expected < 0.95
     assert hull_iou(model, solid) == pytest.approx(expected, abs=1e-4)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_share_of_a_solid_inside_a_mesh_matches_the_per_cell_inside_test(seed):
+    """The column spans of :func:`solid_share_inside` count the solid's cells that testing
+    every cell centre on its own (:func:`mesh_occupancy`) finds inside a non-convex mesh."""
+    truth = _tilted(trimesh.creation.box(extents=(0.12, 0.1, 0.06)), seed)
+    ring = _tilted(trimesh.creation.annulus(r_min=0.02, r_max=0.05, height=0.07), seed + 10)
+    ring.apply_translation(truth.centroid - ring.centroid)
+    solid = solid_grid(truth.vertices, truth.faces, max_cells=100_000)
+    inside = mesh_occupancy(solid.cells, ring.vertices, ring.faces)
+    share = solid_share_inside(MeshSurface(ring.vertices, ring.faces), solid, ring.bounds[0, 2])
+    assert 0.1 < share < 0.9
+    assert share == pytest.approx(np.mean(inside), abs=1e-4)
+
+
+def test_share_inside_tests_the_cells_of_an_odd_column_one_by_one():
+    """Rays up through a box open at the top cross it once: each such column's cells are
+    tested on their own, so the share is the per-cell test's, not the parity's 0."""
+    solid = solid_grid(*_box_arrays((0.04, 0.04, 0.02)), max_cells=20_000)
+    cup = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    open_top = cup.faces[cup.triangles_center[:, 2] < 0.049]
+    share = solid_share_inside(MeshSurface(cup.vertices, open_top), solid, -0.05)
+    inside = mesh_occupancy(solid.cells, cup.vertices, open_top)
+    assert share == np.mean(inside)
+    assert share > 0.0
+
+
+def _box_arrays(extents: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    box = trimesh.creation.box(extents=extents)
+    return np.asarray(box.vertices), np.asarray(box.faces)
+
+
+def test_sample_distances_asked_in_grid_order_are_each_samples_own():
+    """:meth:`GroundTruth.sample_distances` asks in :func:`grid_order` (a permutation that
+    keeps neighbours together) and returns every sample's value in the samples' order."""
+    from pipeline.metrics.evaluation import GroundTruth
+
+    box = _tilted(trimesh.creation.box(extents=(0.08, 0.05, 0.1)), 4)
+    truth = GroundTruth(np.asarray(box.vertices), np.asarray(box.faces), "none", None, np.zeros(2))
+    samples = truth.surface_samples
+    order = grid_order(samples)
+    np.testing.assert_array_equal(np.sort(order), np.arange(len(samples)))
+    steps = np.linalg.norm(np.diff(samples[order], axis=0), axis=1)
+    assert np.median(steps) < 0.25 * np.median(np.linalg.norm(np.diff(samples, axis=0), axis=1))
+    model = np.random.default_rng(3).uniform(-0.05, 0.05, (500, 3)) + box.centroid
+    np.testing.assert_array_equal(
+        truth.sample_distances(lambda queries: nearest_distances(queries, model)),
+        nearest_distances(samples, model),
+    )

@@ -99,9 +99,9 @@ class AfterViewMeasurement:
     gate: float
     inliers: int
 
-    def jacobian(self) -> np.ndarray:
-        """``(3, 6)``: the rows of ``g`` measured."""
-        return np.eye(6)[MEASURED]
+    def jacobian(self, state_dim: int) -> np.ndarray:
+        """``(3, state_dim)``: the rows of ``g`` measured."""
+        return np.eye(state_dim)[MEASURED]
 
 
 def compose(
@@ -203,15 +203,15 @@ def linearisation(measurement: AfterViewMeasurement, g: np.ndarray) -> Linearisa
     """The measurement in the form the covariance models take (no point columns)."""
     return Linearisation(
         prediction=g[MEASURED].copy(),
-        bias_plane_jacobian=measurement.jacobian(),
+        bias_plane_jacobian=measurement.jacobian(len(g)),
         point_jacobian=None,
     )
 
 
 def passes_gate(measurement: AfterViewMeasurement, g: np.ndarray, covariance: np.ndarray) -> bool:
-    """Whether the innovation at ``g`` with the ``(6, 6)`` covariance of ``g`` is inside
-    the chi-square gate."""
-    h = measurement.jacobian()
+    """Whether the innovation at ``g`` with the covariance of ``g`` is inside the
+    chi-square gate."""
+    h = measurement.jacobian(len(g))
     v = innovation(measurement, g)
     s = h @ covariance @ h.T + measurement.noise
     return bool(v @ np.linalg.solve(s, v) <= measurement.gate)

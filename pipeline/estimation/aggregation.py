@@ -41,6 +41,11 @@ VOXEL_RATIO = 0.5
 #: The entries of a lower-triangular 3 x 3 matrix and the off-diagonal ones of a symmetric one.
 _LOWER = ((0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2))
 _OFF = ((0, 1), (0, 2), (1, 2))
+#: Rounds of per-axis growth of the voxel edges (:func:`voxel_exponents`); the second
+#: takes what the first left, further rounds change the edges by well under a quarter octave.
+_AXIS_ROUNDS = 2
+#: Relative margin that keeps ``C - D`` positive definite against rounding.
+_INSIDE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -62,13 +67,16 @@ class VoxelMoments:
     voxel_of_point: np.ndarray
     size_m: np.ndarray
     label: np.ndarray
-    _tree: list = field(default_factory=list, repr=False, compare=False)
+    _trees: dict = field(default_factory=dict, repr=False, compare=False)
 
-    def tree(self) -> cKDTree:
-        """KD-tree over the centroids in voxel units (``centroid / size_m``), built once."""
-        if not self._tree:
-            self._tree.append(cKDTree(self.centroid / self.size_m))
-        return self._tree[0]
+    def tree(self, units_m: np.ndarray | None = None) -> cKDTree:
+        """KD-tree over the centroids in voxel units (``centroid / size_m``), or in the axes'
+        ``units_m`` (3,) (m), built once per units."""
+        units = self.size_m if units_m is None else units_m
+        key = tuple(float(u) for u in units)
+        if key not in self._trees:
+            self._trees[key] = cKDTree(self.centroid / units)
+        return self._trees[key]
 
 
 def voxel_moments(
@@ -125,12 +133,69 @@ def voxel_moments(
 def voxel_exponents(covariances: np.ndarray, ratio: float = VOXEL_RATIO) -> np.ndarray:
     """Exponents ``e`` of voxel edges ``h = 2^(e / 4)`` (m) with ``||H C^-1 H|| <= ratio^2``
     for every covariance in ``covariances`` (T, 3, 3), rounded down to quarter octaves so
-    that nearby gates share one grid."""
+    that nearby gates share one grid.
+
+    The bound is ``H^2 <= ratio^2 C`` (Loewner order) for every gate. The edges start from
+    the axes' smallest stds scaled by one common factor until some gate is met, then each
+    axis in turn grows as far as every gate allows: a gate long and thin across a
+    horizontal diagonal (the back's gates under a broad plane prior) limits the horizontal
+    edges but not the vertical one, which a common factor alone would shrink with them.
+    """
     scale = np.sqrt(np.min(np.diagonal(covariances, axis1=1, axis2=2), axis=0))
     normalised = covariances / np.outer(scale, scale)[None]
     smallest = float(np.min(np.linalg.eigvalsh(normalised)[:, 0]))
-    edges_m = ratio * np.sqrt(smallest) * scale
+    # Just inside every gate, so that C - D stays invertible.
+    variances = (1.0 - _INSIDE) * smallest * scale**2
+    for _ in range(_AXIS_ROUNDS):
+        for k in range(3):
+            # The largest d with S - d e_k e_k^T >= 0 (S = C - D) is the Schur complement
+            # of the other two axes' block R in S: S_kk - b^T R^-1 b, with b = S[rest, k].
+            slack = covariances - np.diag(variances)[None]
+            i, j = (axis for axis in range(3) if axis != k)
+            minor = slack[:, i, i] * slack[:, j, j] - slack[:, i, j] ** 2
+            b_i, b_j = slack[:, i, k], slack[:, j, k]
+            coupled = (
+                b_i**2 * slack[:, j, j] - 2.0 * b_i * b_j * slack[:, i, j] + b_j**2 * slack[:, i, i]
+            )
+            # Where rounding leaves the other block no minor, axis k keeps its room only
+            # when it is uncoupled from that block.
+            safe = np.where(minor > 0.0, minor, 1.0)
+            room = np.where(
+                minor > 0.0,
+                slack[:, k, k] - coupled / safe,
+                np.where(coupled > 0.0, 0.0, slack[:, k, k]),
+            )
+            variances[k] += (1.0 - _INSIDE) * max(float(np.min(room)), 0.0)
+    edges_m = ratio * np.sqrt(variances)
     return np.floor(4.0 * np.log2(edges_m)).astype(np.int64)
+
+
+def _candidate_pairs(
+    moments: VoxelMoments, centres: np.ndarray, covariances: np.ndarray
+) -> np.ndarray:
+    """(centre, voxel) pairs whose centroid may lie inside the centre's gate: a superset of
+    the gates' voxels, from one tree-to-tree query over the centroids.
+
+    The query is a ball in voxel units (where the gates are about equally wide along every
+    axis) whose radius is the longest semi-axis of any gate there, or, when it is smaller,
+    a box that holds every gate's bounding box (a Chebyshev ball in units of the box's
+    half-widths rounded up to quarter octaves, so that the next iterations' gates reuse
+    its tree): for gates long and thin across a diagonal, the ball's radius is the long
+    axis along every axis while the box keeps each axis's own extent.
+    """
+    in_voxel_units = covariances / np.outer(moments.size_m, moments.size_m)[None]
+    longest = np.max(np.linalg.eigvalsh(in_voxel_units)[:, -1], initial=0.0)
+    radius = float(np.sqrt(GATE_CHI2_3DOF_95 * longest))
+    ball_volume = 4.0 / 3.0 * np.pi * radius**3 * float(np.prod(moments.size_m))
+    half_m = np.sqrt(GATE_CHI2_3DOF_95 * np.max(np.diagonal(covariances, axis1=1, axis2=2), axis=0))
+    box_m = np.exp2(np.ceil(4.0 * np.log2(half_m)) / 4.0)
+    if np.prod(2.0 * box_m) < ball_volume:
+        return cKDTree(centres / box_m).sparse_distance_matrix(
+            moments.tree(box_m), 1.0, p=np.inf, output_type="ndarray"
+        )
+    return cKDTree(centres / moments.size_m).sparse_distance_matrix(
+        moments.tree(), radius, output_type="ndarray"
+    )
 
 
 def gaussian_sums(
@@ -142,10 +207,8 @@ def gaussian_sums(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Gated mass and weighted sum of every centre over the aggregated cloud.
 
-    Candidate voxels come from KD-trees over the centroids and the centres in voxel units
-    (where the gates are about equally wide along every axis), in one tree-to-tree query
-    whose radius is the longest semi-axis of any gate there; every candidate is then tested
-    exactly on its centroid.
+    Candidate voxels come from one tree-to-tree query (:func:`_candidate_pairs`); every
+    candidate is then tested exactly on its centroid.
 
     Each pair's arithmetic is written out on the six distinct entries of the centre's
     ``L^-1`` (``C = L L^T``) and of the voxel's scatter, gathered one column at a time from
@@ -166,12 +229,7 @@ def gaussian_sums(
         voxels inside some gate.
     """
     count = len(centres)
-    in_voxel_units = covariances / np.outer(moments.size_m, moments.size_m)[None]
-    longest = np.max(np.linalg.eigvalsh(in_voxel_units)[:, -1], initial=0.0)
-    radius = float(np.sqrt(GATE_CHI2_3DOF_95 * longest))
-    pairs = cKDTree(centres / moments.size_m).sparse_distance_matrix(
-        moments.tree(), radius, output_type="ndarray"
-    )
+    pairs = _candidate_pairs(moments, centres, covariances)
     taxel, voxel = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
     # Whitened offsets y = L^-1 (c - t): D2 = |y|^2 and C^-1 (c - t) = L^-T y.
     lower = np.linalg.inv(np.linalg.cholesky(covariances))

@@ -12,8 +12,9 @@ the first grasp's Stage 1 the estimator scores a grid of states and starts the i
 
 * the horizontal translation on a square grid of :attr:`SearchSettings.step_m` inside the
   prior's ellipse of :attr:`SearchSettings.translation_sigmas` standard deviations;
-* the plane's angle at ``0, +-1, +-2`` prior stds and its distance from the pivot at
-  ``0, +-1/2, +-1`` of its prior std (the IEKF corrects the plane well from a zero bias,
+* the plane's angle (its normal's azimuth; a leaning normal keeps its elevation) at
+  ``0, +-1, +-2`` prior stds and its distance from the pivot at ``0, +-1/2, +-1`` of its
+  prior std (the IEKF corrects the plane well from a zero bias,
   Figs. 8 and 9; the grid only has to put the back within its reach);
 * the yaw and the vertical translation at Stage 0's (both have narrow priors).
 
@@ -42,6 +43,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.special import gammaincinv
 
+from pipeline.estimation.geometry import normal_derivatives, state_normal
 from pipeline.geometry.poses import rotation_z
 
 if TYPE_CHECKING:
@@ -195,7 +197,8 @@ def translation_grid(covariance_xy: np.ndarray, sigmas: float, step_m: float) ->
 
 
 def search_start(problem: FusionProblem, settings: SearchSettings) -> np.ndarray:
-    """The best-scoring state of the grid (see the module docstring), ``(6,)``; Stage 0's
+    """The best-scoring state of the grid (see the module docstring), shaped as
+    ``problem.g_init``; Stage 0's
     own state when no grasp has taxels or no state scores better."""
     g0 = np.asarray(problem.g_init, dtype=float)
     if not problem.grasps or len(problem.grasps[0].positions_m) == 0:
@@ -224,8 +227,8 @@ def search_start(problem: FusionProblem, settings: SearchSettings) -> np.ndarray
 
     front = truncated(pre)
     std_theta = np.sqrt(covariance[5, 5])
-    offset_std = _offset_std(covariance, g0[5], pivot)
-    offset0 = g0[4] - _normal(g0[5]) @ pivot
+    offset_std = _offset_std(covariance, g0, pivot)
+    offset0 = g0[4] - state_normal(g0) @ pivot
     planes = [
         (g0[5] + a * std_theta, offset0 + o * offset_std)
         for a in ANGLE_SIGMAS
@@ -233,8 +236,10 @@ def search_start(problem: FusionProblem, settings: SearchSettings) -> np.ndarray
     ]
     information = np.linalg.pinv(covariance[np.ix_(_SEARCHED, _SEARCHED)])
     best_score, best, stage_zero_score = np.inf, g0, None
+    candidate = g0.copy()
     for theta, offset in planes:
-        n = _normal(theta)
+        candidate[5] = theta
+        n = state_normal(candidate)
         m_r = offset + n @ pivot
         back = truncated(pre - 2.0 * ((pre @ n) - m_r)[..., None] * n)
         nearest = np.minimum(front, back) / settings.distance_std_m
@@ -261,13 +266,9 @@ def search_start(problem: FusionProblem, settings: SearchSettings) -> np.ndarray
     return best
 
 
-def _normal(theta_rad: float) -> np.ndarray:
-    return np.array([np.cos(theta_rad), np.sin(theta_rad), 0.0])
-
-
-def _offset_std(covariance: np.ndarray, m_theta_rad: float, pivot_m: np.ndarray) -> float:
-    """Prior std of the plane's distance from the pivot, ``m_r - n(m_theta) . c``."""
-    jacobian = np.zeros(6)
+def _offset_std(covariance: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> float:
+    """Prior std of the plane's distance from the pivot, ``m_r - n . c``, at ``g``."""
+    jacobian = np.zeros(len(g))
     jacobian[4] = 1.0
-    jacobian[5] = -np.array([-np.sin(m_theta_rad), np.cos(m_theta_rad), 0.0]) @ pivot_m
+    jacobian[5:] = -(normal_derivatives(g) @ pivot_m)
     return float(np.sqrt(jacobian @ covariance @ jacobian))

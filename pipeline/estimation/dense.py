@@ -1,11 +1,12 @@
 """Textbook dense IEKF covariance: the reference for tests and the benchmark baseline.
 
-Holds the full ``(6 + 3N)^2`` covariance ``P`` and builds a dense ``H`` of shape
-``(rows, 6 + 3N)``; the gain is ``K = P H^T S^-1`` (``S`` solved with a Cholesky
-factorisation, never inverted) and the update the textbook ``P+ = (I - K H) P-``. It plugs
-into the same iteration loop as :class:`~pipeline.estimation.structured.StructuredCovariance`
-(see :func:`pipeline.estimation.iekf.fuse`), so the two differ only in how the covariance is
-stored and updated. Memory is ``8 (6 + 3N)^2`` bytes: use it for N up to a few thousand.
+Holds the full ``(G + 3N)^2`` covariance ``P`` (``G`` the length of ``g``: 6, or 7 for a
+plane of any orientation) and builds a dense ``H`` of shape ``(rows, G + 3N)``; the gain
+is ``K = P H^T S^-1`` (``S`` solved with a Cholesky factorisation, never inverted) and the
+update the textbook ``P+ = (I - K H) P-``. It plugs into the same iteration loop as
+:class:`~pipeline.estimation.structured.StructuredCovariance` (see
+:func:`pipeline.estimation.iekf.fuse`), so the two differ only in how the covariance is
+stored and updated. Memory is ``8 (G + 3N)^2`` bytes: use it for N up to a few thousand.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from pipeline.estimation.geometry import BIAS_PLANE_DIM
 from pipeline.estimation.measurement import Linearisation
 from pipeline.estimation.structured import noise_matrix
 
@@ -24,12 +24,12 @@ class DenseGain:
     def __init__(
         self, covariance: DenseCovariance, linearisation: Linearisation, noise: np.ndarray
     ) -> None:
-        n_points = covariance.n_points
+        n_points, dim = covariance.n_points, covariance.dim
         rows = len(linearisation.bias_plane_jacobian)
-        jacobian = np.zeros((rows, BIAS_PLANE_DIM + 3 * n_points))
-        jacobian[:, :BIAS_PLANE_DIM] = linearisation.bias_plane_jacobian
+        jacobian = np.zeros((rows, dim + 3 * n_points))
+        jacobian[:, :dim] = linearisation.bias_plane_jacobian
         if linearisation.point_jacobian is not None:
-            jacobian[:, BIAS_PLANE_DIM:] = linearisation.point_jacobian.dense(n_points)
+            jacobian[:, dim:] = linearisation.point_jacobian.dense(n_points)
         prior = covariance.matrix
         innovation = jacobian @ prior @ jacobian.T + noise_matrix(noise)
         cholesky = scipy.linalg.cho_factor(innovation, lower=True)
@@ -38,10 +38,11 @@ class DenseGain:
         self._covariance = covariance
 
     def step(self, innovation: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``K v`` as ``(6,)`` increment of ``g``, point indices and ``(N, 3)`` increments."""
+        """``K v`` as ``(G,)`` increment of ``g``, point indices and ``(N, 3)`` increments."""
         delta = self.gain @ innovation
         points = np.arange(self._covariance.n_points)
-        return delta[:BIAS_PLANE_DIM], points, delta[BIAS_PLANE_DIM:].reshape(-1, 3)
+        dim = self._covariance.dim
+        return delta[:dim], points, delta[dim:].reshape(-1, 3)
 
     def posterior(self) -> np.ndarray:
         """``(I - K H) P-``."""
@@ -49,34 +50,35 @@ class DenseGain:
         return prior - self.gain @ (self.jacobian @ prior)
 
     def bias_plane_posterior(self) -> np.ndarray:
-        """The (6, 6) block of ``(I - K H) P-``."""
-        prior = self._covariance.matrix
-        correction = self.gain[:BIAS_PLANE_DIM] @ (self.jacobian @ prior[:, :BIAS_PLANE_DIM])
-        return prior[:BIAS_PLANE_DIM, :BIAS_PLANE_DIM] - correction
+        """The (G, G) block of ``(I - K H) P-``."""
+        prior, dim = self._covariance.matrix, self._covariance.dim
+        correction = self.gain[:dim] @ (self.jacobian @ prior[:, :dim])
+        return prior[:dim, :dim] - correction
 
 
 class DenseCovariance:
     """The full covariance of ``(g, p_1 .. p_N)`` as one dense matrix.
 
     Args:
-        bias_plane: ``(6, 6)`` prior covariance of ``g``.
+        bias_plane: ``(G, G)`` prior covariance of ``g`` (its size sets the state's).
         point_variance: ``(N,)`` isotropic prior variance of each point (m^2).
     """
 
     def __init__(self, bias_plane: np.ndarray, point_variance: np.ndarray) -> None:
         point_variance = np.asarray(point_variance, dtype=float)
         self.n_points = len(point_variance)
-        size = BIAS_PLANE_DIM + 3 * self.n_points
+        self.dim = len(bias_plane)
+        size = self.dim + 3 * self.n_points
         self.matrix = np.zeros((size, size))
-        self.matrix[:BIAS_PLANE_DIM, :BIAS_PLANE_DIM] = bias_plane
-        diagonal = np.arange(BIAS_PLANE_DIM, size)
+        self.matrix[: self.dim, : self.dim] = bias_plane
+        diagonal = np.arange(self.dim, size)
         self.matrix[diagonal, diagonal] = np.repeat(point_variance, 3)
 
     def bias_plane(self) -> np.ndarray:
-        return self.matrix[:BIAS_PLANE_DIM, :BIAS_PLANE_DIM].copy()
+        return self.matrix[: self.dim, : self.dim].copy()
 
     def add_bias_plane_noise(self, noise: np.ndarray) -> None:
-        self.matrix[:BIAS_PLANE_DIM, :BIAS_PLANE_DIM] += noise
+        self.matrix[: self.dim, : self.dim] += noise
 
     def gain(self, linearisation: Linearisation, noise: np.ndarray) -> DenseGain:
         return DenseGain(self, linearisation, noise)

@@ -2,14 +2,24 @@
 
 All functions are pure and work on robot-frame arrays in metres and radians.
 
-The six bias-and-plane parameters are packed in one vector ``g`` in the order of
-:data:`pipeline.types.BIAS_PLANE_PARAMETERS`: ``(b_theta, b_x, b_y, b_z, m_r, m_theta)``.
+The bias-and-plane parameters are packed in one vector ``g``. The paper's six, for a
+vertical plane, in the order of :data:`pipeline.types.BIAS_PLANE_PARAMETERS`:
+``(b_theta, b_x, b_y, b_z, m_r, m_theta)``; a plane of any orientation adds its normal's
+elevation, ``(b_theta, b_x, b_y, b_z, m_r, m_theta, m_phi)``
+(:data:`pipeline.types.GENERAL_PLANE_PARAMETERS`). Every function here takes either: the
+length of ``g`` says which.
 
 * Bias: ``f_b(p) = R_z(b_theta) (p - c) + c + (b_x, b_y, b_z)`` with a fixed pivot ``c``.
-* Mirror: ``f_m(p) = p - 2 (n.p - m_r) n`` with the horizontal unit normal
-  ``n = (cos m_theta, sin m_theta, 0)`` (``m_theta`` is the *normal's* angle, as in
+* Mirror: ``f_m(p) = p - 2 (n.p - m_r) n`` with the unit normal
+  ``n = (cos m_phi cos m_theta, cos m_phi sin m_theta, sin m_phi)``, ``m_phi = 0`` (a
+  horizontal normal) in the paper's state (``m_theta`` is the *normal's* azimuth, as in
   :class:`pipeline.types.SymmetryPlane`).
 * Mirror then bias: ``f_mb(p) = f_b(f_m(p))``.
+
+The azimuth and elevation are a chart of the sphere of normals whose poles are the vertical
+normals (a level mirror plane): there ``m_theta`` stops moving the normal. The planes an
+object shows the camera from above and that the paper's state cannot hold lean at most
+tens of degrees from vertical, far from those poles (docs/symmetry.md).
 
 Both maps are isometries, so distances between a point and a taxel are the same before and
 after inverting them; the correspondence search relies on that.
@@ -21,11 +31,13 @@ import numpy as np
 
 from pipeline.geometry.poses import rotation_z
 
-#: Length of the bias-and-plane block of the state.
+#: Length of the paper's bias-and-plane state (a vertical plane).
 BIAS_PLANE_DIM = 6
-#: Slices into ``g``.
+#: Length of the state with a plane of any orientation.
+GENERAL_PLANE_DIM = 7
+#: Slices into ``g``: the bias, and the plane (two or three parameters).
 BIAS = slice(0, 4)
-PLANE = slice(4, 6)
+PLANE = slice(4, None)
 
 
 def rotation_z_derivative(theta_rad: float) -> np.ndarray:
@@ -44,10 +56,32 @@ def plane_tangent(m_theta_rad: float) -> np.ndarray:
     return np.array([-np.sin(m_theta_rad), np.cos(m_theta_rad), 0.0])
 
 
-def reflection_matrix(m_theta_rad: float) -> np.ndarray:
-    """Linear part ``I - 2 n n^T`` of the mirroring, (3, 3)."""
-    n = plane_normal(m_theta_rad)
-    return np.eye(3) - 2.0 * np.outer(n, n)
+def state_normal(g: np.ndarray) -> np.ndarray:
+    """The mirror plane's unit normal of the state ``g`` (six or seven parameters)."""
+    if len(g) == BIAS_PLANE_DIM:
+        return plane_normal(g[5])
+    azimuth, elevation = g[5], g[6]
+    return np.array(
+        [
+            np.cos(elevation) * np.cos(azimuth),
+            np.cos(elevation) * np.sin(azimuth),
+            np.sin(elevation),
+        ]
+    )
+
+
+def normal_derivatives(g: np.ndarray) -> np.ndarray:
+    """``dn / d(m_theta[, m_phi])`` of :func:`state_normal`, one row per angle, (1 or 2, 3)."""
+    if len(g) == BIAS_PLANE_DIM:
+        return plane_tangent(g[5])[None, :]
+    azimuth, elevation = g[5], g[6]
+    c_az, s_az, c_el, s_el = np.cos(azimuth), np.sin(azimuth), np.cos(elevation), np.sin(elevation)
+    return np.array([[-c_el * s_az, c_el * c_az, 0.0], [-s_el * c_az, -s_el * s_az, c_el]])
+
+
+def normal_reflection(normal: np.ndarray) -> np.ndarray:
+    """Linear part ``I - 2 n n^T`` of the mirroring across a plane with unit normal ``n``."""
+    return np.eye(3) - 2.0 * np.outer(normal, normal)
 
 
 def apply_bias(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
@@ -57,8 +91,8 @@ def apply_bias(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.nda
 
 
 def mirror(points: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """``f_m`` applied to ``(N, 3)`` points (uses ``g[4:6] = (m_r, m_theta)``)."""
-    n = plane_normal(g[5])
+    """``f_m`` applied to ``(N, 3)`` points (uses ``g[4:] = (m_r, m_theta[, m_phi])``)."""
+    n = state_normal(g)
     return points - 2.0 * (points @ n - g[4])[:, None] * n[None, :]
 
 
@@ -82,8 +116,9 @@ def completed_model(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> n
     front, back = completed[:count], completed[count:]
     np.matmul(points, rotation.T, out=front)
     front += offset
-    np.matmul(points, (rotation @ reflection_matrix(g[5])).T, out=back)
-    back += offset + 2.0 * g[4] * (rotation @ plane_normal(g[5]))
+    normal = state_normal(g)
+    np.matmul(points, (rotation @ normal_reflection(normal)).T, out=back)
+    back += offset + 2.0 * g[4] * (rotation @ normal)
     return completed
 
 
@@ -107,7 +142,7 @@ def invert_side(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray, back: bo
 def side_linear_part(g: np.ndarray, back: bool) -> np.ndarray:
     """``d f / d p`` (constant in ``p``): ``R_z`` for the front, ``R_z (I - 2 n n^T)`` back."""
     rotation = rotation_z(g[0])
-    return rotation @ reflection_matrix(g[5]) if back else rotation
+    return rotation @ normal_reflection(state_normal(g)) if back else rotation
 
 
 def bias_jacobian(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
@@ -119,27 +154,30 @@ def bias_jacobian(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.
 
 
 def mirror_plane_jacobian(points: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """``d f_m(p) / d (m_r, m_theta)``, shape (N, 3, 2).
+    """``d f_m(p) / d (m_r, m_theta[, m_phi])``, shape (N, 3, 2 or 3).
 
-    With ``n' = dn/dm_theta = (-sin, cos, 0)``:
-    ``df_m/dm_r = 2 n`` and ``df_m/dm_theta = -2 ((n'.p) n + (n.p - m_r) n')``.
+    ``df_m/dm_r = 2 n`` and, for each angle ``a`` with ``n' = dn/da``
+    (:func:`normal_derivatives`), ``df_m/da = -2 ((n'.p) n + (n.p - m_r) n')``.
     """
-    n = plane_normal(g[5])
-    n_prime = plane_tangent(g[5])
-    jacobian = np.empty((len(points), 3, 2))
+    n = state_normal(g)
+    derivatives = normal_derivatives(g)
+    jacobian = np.empty((len(points), 3, 1 + len(derivatives)))
     jacobian[:, :, 0] = 2.0 * n
-    jacobian[:, :, 1] = -2.0 * (
-        (points @ n_prime)[:, None] * n[None, :] + (points @ n - g[4])[:, None] * n_prime[None, :]
-    )
+    height = points @ n - g[4]
+    for column, n_prime in enumerate(derivatives, start=1):
+        jacobian[:, :, column] = -2.0 * (
+            (points @ n_prime)[:, None] * n[None, :] + height[:, None] * n_prime[None, :]
+        )
     return jacobian
 
 
 def side_jacobian(points: np.ndarray, g: np.ndarray, pivot_m: np.ndarray, back: bool) -> np.ndarray:
-    """``d f / d g`` of ``f_b`` (front) or ``f_mb`` (back) at the points, shape (N, 3, 6).
+    """``d f / d g`` of ``f_b`` (front) or ``f_mb`` (back) at the points, shape
+    (N, 3, len(g)).
 
-    The front does not depend on the plane, so its last two columns are zero.
+    The front does not depend on the plane, so its plane columns are zero.
     """
-    jacobian = np.zeros((len(points), 3, BIAS_PLANE_DIM))
+    jacobian = np.zeros((len(points), 3, len(g)))
     if back:
         mirrored = mirror(points, g)
         jacobian[:, :, BIAS] = bias_jacobian(mirrored, g, pivot_m)
@@ -172,7 +210,7 @@ def image_step_bound(
     so its norm is convex and its maximum over a convex polytope is reached at a vertex; a
     point ``q = p + d`` with ``|d| <= margin_m`` moves at most ``||D||_2 margin_m`` more. It
     turns angular steps into metres through the real lever arm (about the pivot for
-    ``b_theta``, about the plane for ``m_theta``).
+    ``b_theta``, about the plane for its angles).
     """
     bounds = []
     for back in (False, True):

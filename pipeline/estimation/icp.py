@@ -24,13 +24,7 @@ import numpy as np
 import scipy.optimize
 from scipy.spatial import cKDTree
 
-from pipeline.estimation.geometry import (
-    BIAS_PLANE_DIM,
-    apply_side,
-    invert_side,
-    side_jacobian,
-    side_linear_part,
-)
+from pipeline.estimation.geometry import apply_side, invert_side, side_jacobian, side_linear_part
 from pipeline.estimation.iekf import FusionProblem, GraspContacts, StageOutcome, worst_status
 
 
@@ -69,11 +63,12 @@ def _solve(
     # Eleven parameters: a numeric kernel given the prior, the matches and the weights as arrays.
     """Least-squares MAP solve with fixed matches; returns g, moved points, cov of g."""
     unique, slot = np.unique(n, return_inverse=True) if move_points else (n[:0], None)
+    dim = len(g_prior)  # six parameters, or seven with a leaning plane
     prior_whiten = np.linalg.inv(np.linalg.cholesky(covariance))
     point_scale = 1.0 / np.sqrt(variance[unique])
 
     def split(z):
-        return z[:BIAS_PLANE_DIM], z[BIAS_PLANE_DIM:].reshape(-1, 3)
+        return z[:dim], z[dim:].reshape(-1, 3)
 
     def current_points(moved):
         return moved[slot] if move_points else points_prior[n]
@@ -93,32 +88,28 @@ def _solve(
         g, moved = split(z)
         matched = current_points(moved)
         rows = 3 * len(n)
-        result = np.zeros((rows + BIAS_PLANE_DIM + 3 * len(unique), len(z)))
-        taxel_jac = np.empty((len(n), 3, BIAS_PLANE_DIM))
+        result = np.zeros((rows + dim + 3 * len(unique), len(z)))
+        taxel_jac = np.empty((len(n), 3, dim))
         linear = np.empty((len(n), 3, 3))
         for side in (False, True):
             taxel_jac[back == side] = side_jacobian(matched[back == side], g, pivot_m, side)
             linear[back == side] = side_linear_part(g, side)
-        result[:rows, :BIAS_PLANE_DIM] = -np.einsum("mij,mjk->mik", whiten, taxel_jac).reshape(
-            rows, BIAS_PLANE_DIM
-        )
+        result[:rows, :dim] = -np.einsum("mij,mjk->mik", whiten, taxel_jac).reshape(rows, dim)
         if move_points:
             blocks = -np.einsum("mij,mjk->mik", whiten, linear)
             for m in range(len(n)):
-                column = BIAS_PLANE_DIM + 3 * slot[m]
+                column = dim + 3 * slot[m]
                 result[3 * m : 3 * m + 3, column : column + 3] = blocks[m]
-        result[rows : rows + BIAS_PLANE_DIM, :BIAS_PLANE_DIM] = prior_whiten
+        result[rows : rows + dim, :dim] = prior_whiten
         diagonal = np.arange(3 * len(unique))
-        result[rows + BIAS_PLANE_DIM + diagonal, BIAS_PLANE_DIM + diagonal] = np.repeat(
-            point_scale, 3
-        )
+        result[rows + dim + diagonal, dim + diagonal] = np.repeat(point_scale, 3)
         return result
 
     z0 = np.concatenate([g_start, points_prior[unique].ravel()])
     solution = scipy.optimize.least_squares(residuals, z0, jac=jacobian, method="lm")
     information = solution.jac.T @ solution.jac
     g, moved = split(solution.x)
-    g_covariance = np.linalg.inv(information)[:BIAS_PLANE_DIM, :BIAS_PLANE_DIM]
+    g_covariance = np.linalg.inv(information)[:dim, :dim]
     return g, unique, moved, g_covariance
 
 

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from pipeline.estimation.geometry import BIAS_PLANE_DIM
 from pipeline.estimation.problem import (
     bias_plane_covariance,
     checked_points,
@@ -135,7 +136,10 @@ def fusion_problem(
     noise = (p.noise_along_normal_m, p.noise_across_normal_m)
     xy = p.prior_b_xy_m
     g_init = initial_state(problem, pivot)
-    stds = (p.prior_b_theta_rad, xy, xy, p.prior_b_z_m, p.prior_m_r_m, p.prior_m_theta_rad)
+    # A leaning plane's elevation has the azimuth's prior std: the initialiser measures both
+    # angles of its normal alike.
+    angles = (p.prior_m_theta_rad,) * (len(g_init) - 5)
+    stds = (p.prior_b_theta_rad, xy, xy, p.prior_b_z_m, p.prior_m_r_m, *angles)
     grasps = [grasp_contacts(c, window_std_m, noise, facing_filter) for c in problem.grasps]
     if after_view is not None:
         from pipeline.estimation.after_view_term import after_view_measurement
@@ -149,19 +153,21 @@ def fusion_problem(
         points_m=points,
         pivot_m=pivot,
         g_init=g_init,
-        covariance_init=bias_plane_covariance(stds, g_init[5], pivot),
+        covariance_init=bias_plane_covariance(stds, g_init, pivot),
         point_variance_m2=np.full(len(points), p.point_std_m**2),
         grasps=tuple(grasps),
-        regrasp_noise=regrasp_noise(p),
+        regrasp_noise=regrasp_noise(p, len(g_init)),
     )
 
 
-def regrasp_noise(params: MapParams) -> np.ndarray:
-    """``Q``, the ``(6, 6)`` covariance over ``g`` the object's motion adds before every
-    grasp after the first: the bias' yaw and translation, not the plane."""
+def regrasp_noise(params: MapParams, state_dim: int = BIAS_PLANE_DIM) -> np.ndarray:
+    """``Q``, the covariance over ``g`` (``state_dim`` parameters: six, or seven with a
+    leaning plane) the object's motion adds before every grasp after the first: the bias'
+    yaw and translation, not the plane."""
     p = params
     q_xy, q_z = p.regrasp_b_xy_m, p.regrasp_b_z_m
-    return diagonal_covariance((p.regrasp_b_theta_rad, q_xy, q_xy, q_z, 0.0, 0.0))
+    plane = (0.0,) * (state_dim - 4)
+    return diagonal_covariance((p.regrasp_b_theta_rad, q_xy, q_xy, q_z, *plane))
 
 
 def consistency_settings(params: MapParams) -> ConsistencySettings:

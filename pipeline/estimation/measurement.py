@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse
 
 from pipeline.estimation.correspondences import Correspondences
-from pipeline.estimation.geometry import BIAS_PLANE_DIM, apply_side, side_jacobian, side_linear_part
+from pipeline.estimation.geometry import apply_side, side_jacobian, side_linear_part
 from pipeline.estimation.indexsets import positions, union
 
 
@@ -233,7 +233,7 @@ class Linearisation:
 
     Attributes:
         prediction: ``(3B,)`` ``h(x_i)``.
-        bias_plane_jacobian: ``(3B, 6)`` columns of ``g``.
+        bias_plane_jacobian: ``(3B, len(g))`` columns of ``g``.
         point_jacobian: point columns, or None when the points are held fixed (Stage 1).
     """
 
@@ -257,7 +257,7 @@ def linearise(
     """
     means = weighted_means(measurement, points) if with_points else measurement.means_m
     predicted = np.empty_like(means)
-    jacobian_g = np.empty((measurement.n_blocks, 3, BIAS_PLANE_DIM))
+    jacobian_g = np.empty((measurement.n_blocks, 3, len(g)))
     block_matrix = np.empty((measurement.n_blocks, 3, 3))
     for back in (False, True):
         rows = measurement.back == back
@@ -275,6 +275,6 @@ def linearise(
         )
     return Linearisation(
         prediction=(scale[:, None] * predicted).ravel(),
-        bias_plane_jacobian=(scale[:, None, None] * jacobian_g).reshape(-1, BIAS_PLANE_DIM),
+        bias_plane_jacobian=(scale[:, None, None] * jacobian_g).reshape(-1, len(g)),
         point_jacobian=point_jacobian,
     )

@@ -11,7 +11,13 @@ import numpy as np
 
 from pipeline.errors import StageFailure
 from pipeline.estimation.covariances import NO_INFORMATION_M, normal_ellipsoids, unit_normals
-from pipeline.estimation.geometry import completed_model, rebase_bias_translation
+from pipeline.estimation.geometry import (
+    BIAS_PLANE_DIM,
+    completed_model,
+    normal_derivatives,
+    rebase_bias_translation,
+    state_normal,
+)
 from pipeline.types import (
     Bias,
     Contacts,
@@ -21,6 +27,7 @@ from pipeline.types import (
     EstimationProblem,
     IterationState,
     StageEstimate,
+    Symmetry,
     SymmetryPlane,
 )
 
@@ -40,10 +47,15 @@ def checked_points(problem: EstimationProblem, estimator: str) -> np.ndarray:
 
 def initial_state(problem: EstimationProblem, pivot_m: np.ndarray) -> np.ndarray:
     """Stage-0 ``g = (b_theta, b_x, b_y, b_z, m_r, m_theta)`` with the bias re-expressed
-    about ``pivot_m`` (the same rigid motion as the initialiser's bias about its own pivot)."""
-    bias, plane = problem.init.bias, problem.init.plane
+    about ``pivot_m`` (the same rigid motion as the initialiser's bias about its own pivot);
+    when the initialiser proposes a leaning plane (kind ``"plane"``) the state is that plane,
+    ``(b_theta, b_x, b_y, b_z, m_r, m_theta, m_phi)`` (its offset, azimuth and elevation)."""
+    init = problem.init
+    bias = init.bias
     translation = rebase_bias_translation(bias.yaw_rad, bias.translation_m, bias.pivot_m, pivot_m)
-    return np.array([bias.yaw_rad, *translation, plane.offset_m, plane.theta_rad])
+    if init.kind == "plane":
+        return np.array([bias.yaw_rad, *translation, *init.symmetry.values])
+    return np.array([bias.yaw_rad, *translation, init.plane.offset_m, init.plane.theta_rad])
 
 
 def grasp_contacts(
@@ -93,6 +105,7 @@ def stage_estimate(
     return StageEstimate(
         stage=stage,
         plane=_plane(g),
+        symmetry=general_plane(g, covariance),
         bias=_bias(g, pivot_m),
         covariance=np.array(covariance, dtype=float),
         points=points,
@@ -141,7 +154,30 @@ def outcome_estimate(
 
 
 def _plane(g: np.ndarray) -> SymmetryPlane:
-    return SymmetryPlane(theta_rad=float(g[5]), offset_m=float(g[4]))
+    """The vertical plane of ``g``; of a leaning plane, the vertical plane with its normal's
+    azimuth through its point nearest the robot origin (what the paper's consumers read)."""
+    if len(g) == BIAS_PLANE_DIM:
+        return SymmetryPlane(theta_rad=float(g[5]), offset_m=float(g[4]))
+    return SymmetryPlane(theta_rad=float(g[5]), offset_m=float(g[4] * np.cos(g[6])))
+
+
+def general_plane(g: np.ndarray, covariance: np.ndarray) -> Symmetry | None:
+    """A leaning plane's state (seven parameters) as a ``"plane"`` symmetry with the
+    ``(m_r, m_azimuth, m_elevation)`` block of ``covariance``; None for the paper's state.
+
+    The symmetry's parameters name the normal with a non-negative elevation; the state may
+    hold its opposite, whose offset is ``-m_r``, azimuth ``m_theta + pi`` and elevation
+    ``-m_phi``: the covariance's offset and elevation rows and columns then change sign."""
+    if len(g) == BIAS_PLANE_DIM:
+        return None
+    normal = state_normal(g)
+    block = np.array(covariance, dtype=float)[4:, 4:]
+    x, y, z = normal
+    if z < 0.0 or (z == 0.0 and (x < 0.0 or (x == 0.0 and y < 0.0))):
+        # Symmetry.values names the opposite normal: m_r and the elevation change sign.
+        flip = np.diag([-1.0, 1.0, -1.0])
+        block = flip @ block @ flip
+    return Symmetry("plane", normal, g[4] * normal, block)
 
 
 def _bias(g: np.ndarray, pivot_m: np.ndarray) -> Bias:
@@ -167,9 +203,10 @@ def estimate_result(
     With ``consistency`` every stage is diagnosed against the taxels (and ``view``, when
     given), a fused stage whose model contradicts the evidence gets the status
     ``inconsistent`` (unless it already failed), and the best-supported stage is selected.
-    With ``refuse`` (the estimator's fusion, run on another problem) and ``view``, a fused
-    stage that only the free-space test flags is first conditioned on free space
-    (:mod:`.free_space_conditioning`); an inconsistent fused stage may then be replaced by
+    With ``refuse`` (the estimator's fusion, run on another problem; the paper's
+    six-parameter state only) and ``view``, a fused stage that only the free-space test
+    flags is first conditioned on free space (:mod:`.free_space_conditioning`); an
+    inconsistent fused stage may then be replaced by
     an alternative that passes every test: the fusion again from Stage 0 when the searched
     start's failed (:mod:`.paper_start`), with several grasps the earlier grasps' shape
     located by the last (:mod:`.later_grasps`), then a hypothesis with part of the plane
@@ -194,6 +231,10 @@ def estimate_result(
     ]
     if consistency is None:
         return EstimateResult(stages=(initial, *fused))
+    if len(fusion.g_init) != BIAS_PLANE_DIM:
+        # The conditioning and the alternatives hold or search the paper's two plane
+        # parameters; a leaning plane's stages are diagnosed and selected, not replaced.
+        refuse = None
     # One tree over the unfused points serves every stage: Stage 1 holds them fixed and
     # Stage 2 moves them by millimetres, so their nearest neighbours by index barely change
     # (the patches take the stage's own coordinates). It is the filter's own tree.
@@ -245,19 +286,20 @@ def diagonal_covariance(stds: tuple[float, ...]) -> np.ndarray:
 
 
 def bias_plane_covariance(
-    stds: tuple[float, ...], m_theta_rad: float, pivot_m: np.ndarray
+    stds: tuple[float, ...], g: np.ndarray, pivot_m: np.ndarray
 ) -> np.ndarray:
     """Prior covariance of ``g`` with the plane's offset uncertainty stated at the object.
 
-    ``stds`` are ``(b_theta, b_x, b_y, b_z, offset, m_theta)`` with ``offset`` the std of the
-    plane's distance from ``pivot_m``, independent of ``m_theta``. ``m_r`` is measured from
-    the robot origin, so ``m_r = offset + n(m_theta) . pivot`` and turning the normal moves
-    ``m_r`` by ``n' . pivot`` per radian: with the object half a metre away a diagonal prior
-    on ``(m_r, m_theta)`` would put the plane hundreds of millimetres off the object for a
-    few tens of degrees of ``m_theta``. The result is ``J diag(stds^2) J^T`` with
-    ``J = d(m_r, m_theta) / d(offset, m_theta)``.
+    ``stds`` are ``(b_theta, b_x, b_y, b_z, offset, m_theta[, m_phi])`` with ``offset`` the
+    std of the plane's distance from ``pivot_m``, independent of the normal's angles.
+    ``m_r`` is measured from the robot origin, so ``m_r = offset + n . pivot`` and turning
+    the normal moves ``m_r`` by ``n' . pivot`` per radian: with the object half a metre away
+    a diagonal prior on ``(m_r, m_theta)`` would put the plane hundreds of millimetres off
+    the object for a few tens of degrees of ``m_theta``. The result is
+    ``J diag(stds^2) J^T`` with ``J = d(m_r, angles) / d(offset, angles)`` at ``g``.
     """
-    jacobian = np.eye(6)
-    n_prime = np.array([-np.sin(m_theta_rad), np.cos(m_theta_rad), 0.0])
-    jacobian[4, 5] = float(n_prime @ np.asarray(pivot_m, dtype=float))
+    jacobian = np.eye(len(g))
+    pivot = np.asarray(pivot_m, dtype=float)
+    for column, n_prime in enumerate(normal_derivatives(g), start=5):
+        jacobian[4, column] = float(n_prime @ pivot)
     return jacobian @ diagonal_covariance(stds) @ jacobian.T

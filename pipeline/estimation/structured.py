@@ -4,7 +4,8 @@
 
     P = B - sum_k V_k^T V_k
 
-* ``B``: block diagonal, a dense (6, 6) block for ``g = (b, m)`` (the prior plus every
+* ``B``: block diagonal, a dense (G, G) block for ``g = (b, m)`` (G = 6, or 7 for a plane
+  of any orientation: :mod:`.geometry`; the prior plus every
   re-grasp noise ``Q``) and ``sigma_n^2 I_3`` for each point (the sensor noise);
 * one downdate ``V_k = L_k^-1 H_k P_k^-`` per committed grasp (``S_k = L_k L_k^T`` the
   innovation covariance, Cholesky), whose columns cover only ``g`` and the points that grasp
@@ -30,7 +31,6 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse
 
-from pipeline.estimation.geometry import BIAS_PLANE_DIM
 from pipeline.estimation.indexsets import union
 from pipeline.estimation.measurement import Linearisation
 
@@ -57,7 +57,7 @@ def columns3(positions: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Downdate:
-    """``V`` (rows x (6 + 3 |points|)) and the sorted point indices of its point columns;
+    """``V`` (rows x (G + 3 |points|)) and the sorted point indices of its point columns;
     ``points is None`` when only the (b, m) columns were kept."""
 
     factor: np.ndarray
@@ -89,8 +89,9 @@ class StructuredGain:
             innovation += self._point_jacobian.weighted_gram(self._local, self._local_variance)
         self._cross = []  # W_k = H V_k^T, (rows, rows_k)
         coupled = [self._local]
+        dim = covariance.dim
         for downdate in covariance.downdates:
-            cross = self._h_g @ downdate.factor[:, :BIAS_PLANE_DIM].T
+            cross = self._h_g @ downdate.factor[:, :dim].T
             if downdate.points is None:
                 if self._local.size:
                     raise RuntimeError("a grasp's point covariance was not kept but is needed")
@@ -100,7 +101,7 @@ class StructuredGain:
                     self._local, downdate.points, assume_unique=True, return_indices=True
                 )
                 if common.size:
-                    block = downdate.factor[:, BIAS_PLANE_DIM + columns3(in_downdate)]
+                    block = downdate.factor[:, dim + columns3(in_downdate)]
                     cross = cross + self._point_columns()[:, columns3(in_local)] @ block.T
             innovation -= cross @ cross.T
             self._cross.append(cross)
@@ -125,7 +126,7 @@ class StructuredGain:
         """``P- H^T S^-1 v`` split into its (b, m) part and its point part.
 
         Returns:
-            ``(6,)`` increment of ``g``, the sorted indices of the points it moves and their
+            ``(G,)`` increment of ``g``, the sorted indices of the points it moves and their
             ``(U, 3)`` increments (metres).
         """
         alpha = scipy.linalg.cho_solve(self._cholesky, innovation)
@@ -134,23 +135,24 @@ class StructuredGain:
         if self._point_jacobian is not None:
             moved = self._point_jacobian.transpose_times(self._local, alpha)
             self._scatter(delta_p, self._local, (self._local_variance[:, None] * moved).ravel())
+        dim = self._covariance.dim
         for downdate, cross in self._pairs():
             coefficients = cross.T @ alpha
-            delta_g -= downdate.factor[:, :BIAS_PLANE_DIM].T @ coefficients
+            delta_g -= downdate.factor[:, :dim].T @ coefficients
             if downdate.points is not None:
-                values = downdate.factor[:, BIAS_PLANE_DIM:].T @ coefficients
+                values = downdate.factor[:, dim:].T @ coefficients
                 self._scatter(delta_p, downdate.points, -values)
         return delta_g, self.points, delta_p.reshape(-1, 3)
 
     def _whitened_bias_plane(self) -> np.ndarray:
-        """``L^-1 (H P-)[:, g]``, (rows, 6)."""
+        """``L^-1 (H P-)[:, g]``, (rows, G)."""
         product = self._h_g @ self._covariance.base_bias_plane
         for downdate, cross in self._pairs():
-            product -= cross @ downdate.factor[:, :BIAS_PLANE_DIM]
+            product -= cross @ downdate.factor[:, : self._covariance.dim]
         return scipy.linalg.solve_triangular(self._cholesky[0], product, lower=True)
 
     def bias_plane_posterior(self) -> np.ndarray:
-        """The (6, 6) block of ``(I - K H) P-``."""
+        """The (G, G) block of ``(I - K H) P-``."""
         whitened = self._whitened_bias_plane()
         return self._covariance.bias_plane() - whitened.T @ whitened
 
@@ -162,15 +164,16 @@ class StructuredGain:
             return _Downdate(self._whitened_bias_plane(), None)
         if any(d.points is None for d in self._covariance.downdates):
             raise RuntimeError("a grasp's point covariance was not kept but is needed")
-        product = np.zeros((len(self._h_g), BIAS_PLANE_DIM + 3 * len(self.points)))
-        product[:, :BIAS_PLANE_DIM] = self._h_g @ self._covariance.base_bias_plane
-        point_part = product[:, BIAS_PLANE_DIM:]
+        dim = self._covariance.dim
+        product = np.zeros((len(self._h_g), dim + 3 * len(self.points)))
+        product[:, :dim] = self._h_g @ self._covariance.base_bias_plane
+        point_part = product[:, dim:]
         if self._local.size:
             variance = np.repeat(self._local_variance, 3)
             self._scatter(point_part, self._local, self._point_columns().toarray() * variance)
         for downdate, cross in self._pairs():
-            product[:, :BIAS_PLANE_DIM] -= cross @ downdate.factor[:, :BIAS_PLANE_DIM]
-            self._scatter(point_part, downdate.points, -cross @ downdate.factor[:, BIAS_PLANE_DIM:])
+            product[:, :dim] -= cross @ downdate.factor[:, :dim]
+            self._scatter(point_part, downdate.points, -cross @ downdate.factor[:, dim:])
         factor = scipy.linalg.solve_triangular(self._cholesky[0], product, lower=True)
         return _Downdate(factor, self.points)
 
@@ -179,20 +182,22 @@ class StructuredCovariance:
     """Covariance of ``(g, p_1 .. p_N)`` as block-diagonal prior minus low-rank downdates.
 
     Args:
-        bias_plane: ``(6, 6)`` prior covariance of ``g``.
+        bias_plane: ``(G, G)`` prior covariance of ``g`` (its size sets the state's).
         point_variance: ``(N,)`` isotropic prior variance of each point (m^2).
     """
 
     def __init__(self, bias_plane: np.ndarray, point_variance: np.ndarray) -> None:
         self.base_bias_plane = np.array(bias_plane, dtype=float)
+        #: The length ``G`` of ``g``.
+        self.dim = len(self.base_bias_plane)
         self.point_variance = np.asarray(point_variance, dtype=float)
         self.downdates: list[_Downdate] = []
 
     def bias_plane(self) -> np.ndarray:
-        """The current (6, 6) covariance of ``g``."""
+        """The current (G, G) covariance of ``g``."""
         result = self.base_bias_plane.copy()
         for downdate in self.downdates:
-            block = downdate.factor[:, :BIAS_PLANE_DIM]
+            block = downdate.factor[:, : self.dim]
             result -= block.T @ block
         return result
 
@@ -213,17 +218,15 @@ class StructuredCovariance:
         self.downdates.append(gain.downdate(with_points))
 
     def dense(self) -> np.ndarray:
-        """The full ``(6 + 3N)^2`` matrix (small problems and tests only)."""
-        size = BIAS_PLANE_DIM + 3 * len(self.point_variance)
+        """The full ``(G + 3N)^2`` matrix (small problems and tests only)."""
+        size = self.dim + 3 * len(self.point_variance)
         result = np.zeros((size, size))
-        result[:BIAS_PLANE_DIM, :BIAS_PLANE_DIM] = self.base_bias_plane
-        diagonal = np.arange(BIAS_PLANE_DIM, size)
+        result[: self.dim, : self.dim] = self.base_bias_plane
+        diagonal = np.arange(self.dim, size)
         result[diagonal, diagonal] = np.repeat(self.point_variance, 3)
         for downdate in self.downdates:
             if downdate.points is None:
                 raise RuntimeError("a grasp's point covariance was not kept")
-            columns = np.concatenate(
-                [np.arange(BIAS_PLANE_DIM), BIAS_PLANE_DIM + columns3(downdate.points)]
-            )
+            columns = np.concatenate([np.arange(self.dim), self.dim + columns3(downdate.points)])
             result[np.ix_(columns, columns)] -= downdate.factor.T @ downdate.factor
         return result

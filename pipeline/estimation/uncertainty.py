@@ -51,7 +51,7 @@ import numpy as np
 import scipy.linalg
 
 from pipeline.estimation.correspondences import PointIndex, exclusive_sides, find_correspondences
-from pipeline.estimation.geometry import BIAS_PLANE_DIM, side_jacobian
+from pipeline.estimation.geometry import PLANE, normal_derivatives, side_jacobian
 from pipeline.estimation.iekf import GraspContacts
 from pipeline.estimation.measurement import freeze, linearise
 
@@ -59,7 +59,7 @@ from pipeline.estimation.measurement import freeze, linearise
 def hidden_side_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
     """``M = mean_n J_n^T J_n`` over the mirror images of ``points_m`` (``(N, 3)``, unbiased
     frame R) at the state ``g``: ``tr(P M)`` is the hidden side's mean squared positional
-    std under a covariance ``P`` of ``g``. Shape (6, 6)."""
+    std under a covariance ``P`` of ``g``. Shape (G, G), ``G = len(g)``."""
     jacobians = side_jacobian(np.asarray(points_m, dtype=float), g, pivot_m, back=True)
     return np.einsum("nki,nkj->ij", jacobians, jacobians) / len(jacobians)
 
@@ -68,7 +68,7 @@ def model_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.n
     """``M_m = mean J_n^T J_n`` over the visible side (``points_m`` moved by the bias) and
     its mirror image together (``(N, 3)``, unbiased frame R) at the state ``g``:
     ``tr(P M_m)`` is the completed model's mean squared positional std under a covariance
-    ``P`` of ``g``. Shape (6, 6)."""
+    ``P`` of ``g``. Shape (G, G), ``G = len(g)``."""
     points = np.asarray(points_m, dtype=float)
     jacobians = np.concatenate(
         [side_jacobian(points, g, pivot_m, back=back) for back in (False, True)]
@@ -77,29 +77,28 @@ def model_gram(points_m: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> np.n
 
 
 def hidden_side_std_m(covariance: np.ndarray, gram: np.ndarray) -> float:
-    """RMS positional std of the hidden side (m) from the ``(6, 6)`` covariance of ``g`` and
+    """RMS positional std of the hidden side (m) from the covariance of ``g`` and
     :func:`hidden_side_gram`."""
     return float(np.sqrt(max(np.trace(covariance @ gram), 0.0)))
 
 
 def hidden_shape_std_m(covariance: np.ndarray, gram: np.ndarray) -> float:
     """RMS positional std (m) of the hidden side against the visible side, the completed
-    model's shape: :func:`hidden_side_std_m` from the plane's block of the ``(6, 6)``
+    model's shape: :func:`hidden_side_std_m` from the plane's block of the
     covariance of ``g`` alone, the bias moving both sides together (it rotates the plane's
     columns of ``J_n``, which leaves their gram unchanged). The re-grasp noise ``Q`` grows
     the bias only, so this is the part of the hidden side's uncertainty that more grasps
     reduce; the object's place, where the bias puts it, each re-grasp unsettles again."""
-    plane = slice(4, BIAS_PLANE_DIM)
+    plane = PLANE
     return float(np.sqrt(max(np.trace(covariance[plane, plane] @ gram[plane, plane]), 0.0)))
 
 
 def plane_offset_std_m(covariance: np.ndarray, g: np.ndarray, pivot_m: np.ndarray) -> float:
-    """Std (m) of the symmetry plane's distance from ``pivot_m``, ``m_r - n(m_theta) . c``,
-    from the ``(6, 6)`` covariance of ``g``."""
-    theta = float(g[5])
-    gradient = np.zeros(BIAS_PLANE_DIM)
+    """Std (m) of the symmetry plane's distance from ``pivot_m``, ``m_r - n . c``, from the
+    covariance of ``g`` (six parameters, or seven with a leaning plane)."""
+    gradient = np.zeros(len(g))
     gradient[4] = 1.0
-    gradient[5] = -float(np.array([-np.sin(theta), np.cos(theta)]) @ np.asarray(pivot_m)[:2])
+    gradient[5:] = -(normal_derivatives(g) @ np.asarray(pivot_m, dtype=float))
     return float(np.sqrt(max(gradient @ covariance @ gradient, 0.0)))
 
 
@@ -164,7 +163,7 @@ def predicted_measurement(
     )
     found = exclusive_sides(found)
     if not found.supported_taxels().any():
-        return np.zeros((0, BIAS_PLANE_DIM)), np.zeros((0, 0))
+        return np.zeros((0, len(g))), np.zeros((0, 0))
     measurement = freeze(found, contacts.positions_m, contacts.noise)
     linearisation = linearise(measurement, g, points_m, pivot_m, with_points=True)
     points = linearisation.point_jacobian

@@ -3,6 +3,7 @@ box plots."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -17,11 +18,32 @@ from pipeline.experiments.rows import (
     mean_five_numbers,
     mean_value,
 )
-from pipeline.metrics.evaluation import BIAS_NEES_BOUND
 from pipeline.reports.figures import BoxPanel, box_plot_figure
 
 #: The paper's average deviation after fusion "when the method's conditions hold" (mm).
 DEVIATION_TARGET_MM = 5.0
+
+
+def chi_square_4_quantile(probability: float) -> float:
+    """The ``probability`` quantile (0 < probability < 1) of the chi-square distribution
+    with 4 degrees of freedom, from its tail beyond ``x = 2 y`` in closed form,
+    ``exp(-y) (1 + y)``: Newton's method on the tail's logarithm, concave and falling in
+    ``y``, from ``2 - 2 log(tail)`` above the root, so every step stays above it and the
+    steps shrink to the root (no scipy import for a report)."""
+    log_tail = math.log1p(-probability)
+    y = 2.0 - 2.0 * log_tail
+    for _ in range(100):
+        step = (math.log1p(y) - y - log_tail) * (1.0 + y) / y
+        y += step
+        if -step <= 1e-15 * y:
+            break
+    return 2.0 * y
+
+
+#: The 99 % quantile of the chi-square distribution with 4 degrees of freedom: the bound a
+#: truthful covariance keeps a stage's ``bias_nees`` (the normalised error of the four bias
+#: components, :func:`pipeline.metrics.evaluation.bias_errors`) under 99 % of the time.
+BIAS_NEES_BOUND = chi_square_4_quantile(0.99)
 
 
 #: The shape scores the reports show per stage: (row field after ``stage{k}_``, column

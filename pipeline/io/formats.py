@@ -569,11 +569,9 @@ def stage_to_json(stage: StageEstimate) -> dict[str, Any]:
     return {
         "stage": stage.stage,
         "plane": plane_to_json(stage.plane),
-        # The estimator's state is the paper's: its plane as a symmetry of that kind, with
-        # the (m_r, m_theta) block of the covariance.
-        "symmetry": symmetry_to_json(
-            Symmetry.from_plane(stage.plane, np.asarray(stage.covariance)[4:, 4:])
-        ),
+        # The estimator's plane: the paper's vertical one with the (m_r, m_theta) block of
+        # the covariance, or the leaning one it fused with its three parameters' block.
+        "symmetry": symmetry_to_json(stage.estimated_symmetry),
         "bias": bias_to_json(stage.bias),
         "covariance": np.asarray(stage.covariance).tolist(),
         "status": stage.status,

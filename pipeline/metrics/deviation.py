@@ -105,6 +105,18 @@ class MeshSurface:
         query = _queries(points, self._origin)
         return self._scene.compute_occupancy(query, nsamples=rays).numpy().astype(bool)
 
+    def crossings_up(self, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where vertical rays cross the surface: for rays from the ``(N, 3)`` points
+        ``starts`` along +z, every crossing's ray index and height above its start (m),
+        ordered by ray and, within a ray, upward."""
+        query = np.asarray(starts, dtype=np.float64) - self._origin
+        rays = np.hstack([query, np.tile([0.0, 0.0, 1.0], (len(query), 1))])
+        hits = self._scene.list_intersections(_tensor(rays))
+        ray = hits["ray_ids"].numpy().astype(np.int64)
+        height = hits["t_hit"].numpy().astype(np.float64)
+        order = np.lexsort((height, ray))
+        return ray[order], height[order]
+
 
 def point_to_mesh_distances(
     points: np.ndarray, vertices: np.ndarray, faces: np.ndarray

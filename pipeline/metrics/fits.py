@@ -131,6 +131,21 @@ class LineFit:
         return (np.asarray(points_xy)[:, :2] - self.point_m) @ self.normal
 
 
+def _median(values: np.ndarray) -> np.ndarray:
+    """``np.median(values, axis=0)`` bit for bit, for finite values, from one partition.
+
+    numpy's median partitions at the two middle ranks and the last (its NaN check); the
+    lower middle value is also the largest of the values below the upper one, so one
+    partition at the upper rank and a maximum find it, at a third of the cost on the robust
+    line fit's ``(2000, 200)`` residuals.
+    """
+    half = len(values) // 2
+    part = np.partition(values, half, axis=0)
+    if len(values) % 2:
+        return part[half]
+    return (part[:half].max(axis=0) + part[half]) / 2.0
+
+
 def _weighted_orthogonal_fit(xy: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Total-least-squares line through weighted points: (centroid, unit direction)."""
     total = weights.sum()
@@ -162,7 +177,7 @@ def _least_median_start(xy: np.ndarray, candidates: int) -> tuple[np.ndarray, np
     normals = np.column_stack([-directions[:, 1], directions[:, 0]])
     sample = xy[rng.permutation(len(xy))[:_MEDIAN_SAMPLE]]
     residuals = sample @ normals.T - np.einsum("kj,kj->k", anchors, normals)
-    best = int(np.argmin(np.median(residuals**2, axis=0)))
+    best = int(np.argmin(_median(residuals**2)))
     return anchors[best], directions[best]
 
 
@@ -205,7 +220,7 @@ def fit_line_irls(
         iterations = iteration
         normal = np.array([-direction[1], direction[0]])
         residuals = (xy - point) @ normal
-        scale = max(MAD_TO_SIGMA * float(np.median(np.abs(residuals))), min_scale_m)
+        scale = max(MAD_TO_SIGMA * float(_median(np.abs(residuals))), min_scale_m)
         u = residuals / (tuning * scale)
         weights = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
         if np.count_nonzero(weights) < 2:

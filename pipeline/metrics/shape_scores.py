@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from pipeline.metrics.deviation import _raycasting_scene, _tensor
+from pipeline.metrics.deviation import MeshSurface, _raycasting_scene, _tensor
 
 #: Distance thresholds of the F-score (m): 2 and 5 mm, the values shape-completion papers
 #: report for objects of hand size.
@@ -26,6 +26,14 @@ def nearest_distances(queries: np.ndarray, points: np.ndarray) -> np.ndarray:
         raise ValueError("nearest distances need at least one reference point")
     distances, _ = cKDTree(points).query(np.asarray(queries, dtype=np.float64))
     return np.asarray(distances, dtype=np.float64)
+
+
+def grid_order(points: np.ndarray, cell_m: float = 0.004) -> np.ndarray:
+    """``(N,)`` indices that visit ``(N, 3)`` points cell by cell of a grid of ``cell_m``
+    cubes (rows of cells along z, then y, then x): neighbours in space become neighbours in
+    the order, so queries asked in it walk a search tree along paths just taken."""
+    cells = np.floor((points - points.min(axis=0)) / cell_m).astype(np.int64)
+    return np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0]))
 
 
 def threshold_label(threshold_m: float) -> str:
@@ -148,11 +156,12 @@ class SolidGrid:
         return counts
 
 
-def _crossings_below(
+def _odd_crossings_below(
     scene, origin: np.ndarray, centres: list[np.ndarray], pitch: float, axis: int
 ) -> np.ndarray:
-    """``(nx, ny, nz)`` int: how often a ray along ``+axis`` from outside the grid crosses the
-    mesh of ``scene`` before each cell centre, one ray per line of cells."""
+    """``(nx, ny, nz)`` uint8: 1 where a ray along ``+axis`` from outside the grid crosses
+    the mesh of ``scene`` an odd number of times before the cell centre, one ray per line of
+    cells."""
     across = [i for i in range(3) if i != axis]
     grid = np.meshgrid(centres[across[0]], centres[across[1]], indexing="ij")
     starts = np.empty((grid[0].size, 3))
@@ -168,7 +177,9 @@ def _crossings_below(
     n = len(centres[axis])
     beyond = np.clip(np.floor(hits["t_hit"].numpy() / pitch), 0, n).astype(np.int64)
     counts = np.bincount(line * (n + 1) + beyond, minlength=len(starts) * (n + 1))
-    below = np.cumsum(counts.reshape(len(starts), n + 1)[:, :n], axis=1)
+    # Only the parity matters: a running count modulo 256 keeps it, in a byte per cell.
+    below = np.cumsum(counts.reshape(len(starts), n + 1)[:, :n], axis=1, dtype=np.uint8)
+    below &= 1
     return np.moveaxis(below.reshape(len(grid[0]), len(grid[0][0]), n), 2, axis)
 
 
@@ -194,8 +205,53 @@ def solid_grid(vertices: np.ndarray, faces: np.ndarray, max_cells: int = 1_000_0
     counts = np.ceil(extent / pitch).astype(int)
     centres = [low[i] + pitch * (np.arange(counts[i]) + 0.5) for i in range(3)]
     scene, origin = _raycasting_scene(vertices, faces)
-    votes = sum(_crossings_below(scene, origin, centres, pitch, axis) % 2 for axis in range(3))
+    votes = _odd_crossings_below(scene, origin, centres, pitch, 0)
+    for axis in (1, 2):
+        votes += _odd_crossings_below(scene, origin, centres, pitch, axis)
     return SolidGrid(votes >= 2, low + 0.5 * pitch, pitch)
+
+
+def solid_share_inside(surface: MeshSurface, solid: SolidGrid, low_z_m: float) -> float:
+    """The share of a solid's cells (:class:`SolidGrid`) whose centres lie inside the closed
+    mesh of ``surface`` (0 for an empty solid).
+
+    One ray goes up each column of cells from below the grid and the mesh (``low_z_m``: the
+    mesh's lowest height, m); its crossings of the mesh pair up, entering and leaving, and
+    the solid's cells between each pair are counted from the column's running count
+    (:attr:`SolidGrid.column_counts`). A ray that crosses the surface an odd number of times
+    grazed an edge or a vertex (or the mesh is open there): that column's solid cells are
+    tested one by one (:meth:`MeshSurface.occupancy`, a majority of three rays) instead.
+    """
+    nx, ny, nz = solid.inside.shape
+    running = solid.column_counts.reshape(nx * ny, nz + 1)
+    total = int(running[:, -1].sum())
+    if total == 0:
+        return 0.0
+    x, y = np.meshgrid(
+        solid.origin_m[0] + solid.pitch_m * np.arange(nx),
+        solid.origin_m[1] + solid.pitch_m * np.arange(ny),
+        indexing="ij",
+    )
+    bottom = min(solid.origin_m[2], low_z_m) - solid.pitch_m
+    column, height = surface.crossings_up(
+        np.column_stack([x.ravel(), y.ravel(), np.full(x.size, bottom)])
+    )
+    odd = np.bincount(column, minlength=nx * ny) % 2 == 1
+    paired = ~odd[column]
+    column, height = column[paired], height[paired]
+    # Cell index (fractional) of every crossing along its column; within a column with an
+    # even count the crossings alternate entering and leaving.
+    k = (bottom + height - solid.origin_m[2]) / solid.pitch_m
+    lo = np.clip(np.ceil(k[0::2]), 0, nz).astype(np.int64)
+    hi = np.clip(np.floor(k[1::2]) + 1, 0, nz).astype(np.int64)
+    spans = column[0::2]
+    inside = int(np.maximum(running[spans, hi] - running[spans, lo], 0).sum())
+    if np.any(odd):
+        i, j = np.divmod(np.flatnonzero(odd), ny)
+        rows, levels = np.nonzero(solid.inside[i, j])
+        cells = np.column_stack([i[rows], j[rows], levels])
+        inside += int(np.count_nonzero(surface.occupancy(solid.origin_m + solid.pitch_m * cells)))
+    return inside / total
 
 
 def hull_iou(points: np.ndarray, solid: SolidGrid) -> float:

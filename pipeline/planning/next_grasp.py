@@ -135,9 +135,15 @@ class Uncertainty:
 
 
 def state_vector(stage: StageEstimate) -> np.ndarray:
-    """``g = (b_theta, b_x, b_y, b_z, m_r, m_theta)`` of a stage (about its bias pivot)."""
+    """``g = (b_theta, b_x, b_y, b_z, m_r, m_theta)`` of a stage (about its bias pivot),
+    with the elevation ``m_phi`` last when the stage estimated a leaning plane."""
     bias, plane = stage.bias, stage.plane
-    return np.array([bias.yaw_rad, *bias.translation_m, plane.offset_m, plane.theta_rad])
+    if stage.symmetry is None:
+        return np.array([bias.yaw_rad, *bias.translation_m, plane.offset_m, plane.theta_rad])
+    # The symmetry keeps the state's own normal (its sign too): the covariance's frame.
+    n = stage.symmetry.direction
+    angles = (np.arctan2(n[1], n[0]), np.arcsin(np.clip(n[2], -1.0, 1.0)))
+    return np.array([bias.yaw_rad, *bias.translation_m, stage.symmetry.offset_m, *angles])
 
 
 def uncertainty(stage: StageEstimate) -> Uncertainty:
@@ -370,7 +376,9 @@ def information_scores(
     from pipeline.estimation.problem import grasp_contacts
     from pipeline.estimation.uncertainty import expected_gain_m2, model_gram, predicted_measurement
 
-    covariance = np.asarray(stage.covariance, dtype=float) + model.regrasp_noise
+    covariance = np.asarray(stage.covariance, dtype=float).copy()
+    size = len(model.regrasp_noise)  # on the bias: a leaning plane's elevation gets none
+    covariance[:size, :size] += model.regrasp_noise
     if not np.all(np.isfinite(covariance)):
         return [0.0] * len(plans)  # an estimator without a covariance: nothing to rank by
     g, pivot, points = state_vector(stage), stage.bias.pivot_m, stage.points

@@ -42,10 +42,10 @@ def start_document(command: str, **fields: Any) -> dict[str, Any]:
 
 
 #: What ``init.completion`` says when the initialiser chose a leaning mirror plane.
-UNFUSED_PLANE = (
-    "mirror-only: the chosen plane leans, and the estimator fuses vertical planes only; its "
-    "stages fuse the vertical plane in 'plane', and the leaning plane's completion (the view "
-    "and its mirror image) is not fused"
+LEANING_PLANE = (
+    "leaning plane: the built-in estimators fuse the chosen plane (init.symmetry) in a "
+    "seven-parameter state, each stage's 'symmetry' its estimate; 'plane' is the best "
+    "vertical plane, for estimators that take vertical planes only"
 )
 
 
@@ -66,7 +66,7 @@ def init_to_json(
         "bias": bias_to_json(init.bias),
     }
     if init.kind == "plane":
-        entry["completion"] = UNFUSED_PLANE
+        entry["completion"] = LEANING_PLANE
     if status:
         entry["status"] = init.status
     if hypotheses:

@@ -47,10 +47,10 @@ class KindChoice:
     Attributes:
         symmetry: the chosen symmetry (``"vertical-plane"``, ``"axis"`` or ``"plane"``),
             frame R.
-        plane: the vertical plane the estimator fuses: the chosen one, for an axis the
-            one through it facing the camera (:func:`plane_through_axis`), for a leaning
-            plane the vertical one :attr:`level` chose (the estimator fuses vertical
-            planes only).
+        plane: the vertical plane: the chosen one, for an axis the one through it facing
+            the camera (:func:`plane_through_axis`; the estimator fuses it), for a leaning
+            plane the vertical one :attr:`level` chose (the estimator fuses the leaning
+            one; estimators that take vertical planes only take this).
         scores: kind -> share of its completion in seen free space or below the table (inf
             for an axis that does not fit); lower is better.
         axis_fit: the axis fit, None when the view had too few slices.

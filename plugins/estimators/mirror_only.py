@@ -31,7 +31,7 @@ class MirrorOnlyEstimator(Estimator):
         )
         prior_m_r_m: float = param(0.0325, "reported std of the plane offset m_r (m)", above=0.0)
         prior_m_theta_rad: float = param(
-            0.17, "reported std of the plane normal angle (rad)", above=0.0
+            0.17, "reported std of each angle of the plane normal (rad)", above=0.0
         )
 
     def estimate(self, problem: EstimationProblem) -> EstimateResult:
@@ -40,6 +40,8 @@ class MirrorOnlyEstimator(Estimator):
         points = checked_points(problem, self.name)
         pivot = points.mean(axis=0)
         g = initial_state(problem, pivot)
+        # A leaning plane (seven parameters) has its elevation's std the azimuth's.
+        angles = (p.prior_m_theta_rad,) * (len(g) - 5)
         covariance = diagonal_covariance(
             (
                 p.prior_b_theta_rad,
@@ -47,7 +49,7 @@ class MirrorOnlyEstimator(Estimator):
                 p.prior_b_xyz_m,
                 p.prior_b_xyz_m,
                 p.prior_m_r_m,
-                p.prior_m_theta_rad,
+                *angles,
             )
         )
         seconds = time.perf_counter() - started

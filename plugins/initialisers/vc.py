@@ -53,9 +53,10 @@ class VcInitialiser(SymmetryInitialiser):
     handle) proposes the plane through the axis and that part instead of the best plane,
     when the camera accepts it as well. It also searches mirror planes of any orientation
     and proposes a leaning one when the view supports it better by more than
-    ``plane_margin``; the estimator still fuses the best vertical plane, and the leaning
-    plane completes the view alone (mirror only, not fused). When no vertical plane passes
-    (``"rejected"``) but a leaning one does, the rejection carries it and says so.
+    ``plane_margin``: the estimator fuses it (``init.symmetry``, kind ``"plane"``), and
+    ``init.plane`` stays the best vertical plane. When no vertical plane passes but a
+    leaning one does (its mirrored sample within the same bar), the leaning one is
+    proposed; when it fails the bar as well, the rejection carries it and says so.
     """
 
     name = "vc"
@@ -189,10 +190,21 @@ class VcInitialiser(SymmetryInitialiser):
                 "the viewing direction"
             )
             leaning = choice is not None and choice.symmetry.kind == "plane"
+            if leaning and choice.plane_fit.violation_share <= limit:
+                # The leaning plane passes the bar the vertical ones failed: the
+                # estimator fuses it (its vertical plane stays VC's best, for estimators
+                # that take vertical planes only).
+                return SymmetryInit(
+                    best.plane,
+                    bias,
+                    hypotheses,
+                    symmetry=choice.symmetry,
+                    kind_scores=choice.scores,
+                )
             if leaning:
                 reason += (
-                    "; a leaning mirror plane is supported (init.symmetry), which the "
-                    "estimator cannot fuse (it fuses vertical planes only)"
+                    f"; a leaning mirror plane is supported (init.symmetry) but "
+                    f"{choice.plane_fit.violation_share:.0%} of its mirrored sample violates"
                 )
             return SymmetryInit(
                 plane=best.plane,
