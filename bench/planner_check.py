@@ -1,12 +1,14 @@
-"""SDH-2 planner against a baseline: the same plans and candidate tables, and its speed.
+"""A hand's planner against a baseline: the same plans and candidate tables, and its speed.
 
-Run: ``python bench/planner_check.py [--baseline REV] [--yaws 0,35,70] [--objects A,B]``.
+Run: ``python bench/planner_check.py [--baseline REV] [--yaws 0,35,70] [--objects A,B]
+[--hand sdh|pg70]``.
 The planner's inputs are made once, by this tree, for every catalogue object (or those
 named) at each yaw: the default trial's scene, simulated camera, segmenter and initialiser
 (seed 0), as the trial's planner phase receives them. Then this tree and the baseline
 revision (default: where this branch left ``main``, unpacked with ``git archive`` as
-``sweep_speed.py`` does) each plan on the same inputs with the ``top-three-finger``
-planner as the default config sets it up, in a new process of their own, and the table
+``sweep_speed.py`` does) each plan on the same inputs with the hand's planner (the SDH-2's
+``top-three-finger``, by default, or the PG-70's ``top-parallel``) as the default config
+sets it up, in a new process of their own, and the table
 compares them: every candidate's summary (closing angle, height, spread, width, contact
 coverages, tipping ratio, score, feasibility and reason) and the chosen plan (status,
 palm pose, opening, spread, score, predicted contacts) must be equal, bit for bit; any
@@ -33,7 +35,8 @@ from pathlib import Path
 import numpy as np
 from sweep_speed import ROOT, default_baseline, unpack
 
-PLANNER = "top-three-finger"
+#: Each hand's planner.
+PLANNERS = {"sdh": "top-three-finger", "pg70": "top-parallel"}
 
 
 def make_inputs(objects: list[str], yaws: list[float], path: Path) -> list[str]:
@@ -71,9 +74,9 @@ def make_inputs(objects: list[str], yaws: list[float], path: Path) -> list[str]:
     return cases
 
 
-def plan_cases(inputs: Path, out: Path) -> None:
-    """Plan every case of ``inputs`` with the code on the import path; write the tables
-    and the processor time to ``out`` (JSON)."""
+def plan_cases(inputs: Path, out: Path, hand: str = "sdh") -> None:
+    """Plan every case of ``inputs`` for ``hand`` with the code on the import path; write
+    the tables and the processor time to ``out`` (JSON)."""
     from pipeline.config import load_config
     from pipeline.planning.hand_choice import create_planner
     from pipeline.registry import load_registry
@@ -81,16 +84,16 @@ def plan_cases(inputs: Path, out: Path) -> None:
     from pipeline.types import Bias, PointCloud, SymmetryInit, SymmetryPlane
 
     registry = load_registry()
-    planner = create_planner(load_config(registry), registry, PLANNER)
+    planner = create_planner(load_config(registry), registry, PLANNERS[hand])
     data = np.load(inputs)
     found, seconds = {}, 0.0
     for case in data["cases"]:
         cloud = PointCloud(data[f"{case}:points"], viewpoint_m=data[f"{case}:viewpoint"])
         theta, offset = data[f"{case}:plane"]
         proposal = SymmetryInit(plane=SymmetryPlane(float(theta), float(offset)), bias=Bias())
-        planner.plan(cloud, proposal, GRIPPERS["sdh"])  # warm: caches as a trial has them
+        planner.plan(cloud, proposal, GRIPPERS[hand])  # warm: caches as a trial has them
         started = time.process_time()
-        plan = planner.plan(cloud, proposal, GRIPPERS["sdh"])
+        plan = planner.plan(cloud, proposal, GRIPPERS[hand])
         seconds += time.process_time() - started
         found[str(case)] = {
             "plan": {
@@ -138,11 +141,12 @@ def differences(base: object, new: object, where: str = "") -> list[tuple[str, f
     return [] if base == new else [(where, math.nan)]
 
 
-def run_tree(tree: Path, inputs: Path, out: Path) -> dict:
+def run_tree(tree: Path, inputs: Path, out: Path, hand: str) -> dict:
     """:func:`plan_cases` in a new process with ``tree``'s code first on the path."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tree), str(ROOT / "bench")])}
     command = [sys.executable, str(ROOT / "bench/planner_check.py")]
-    subprocess.run([*command, "--plan", str(inputs), str(out)], env=env, cwd=tree, check=True)
+    command += ["--plan", str(inputs), str(out), "--hand", hand]
+    subprocess.run(command, env=env, cwd=tree, check=True)
     return json.loads(out.read_text())
 
 
@@ -151,10 +155,11 @@ def main() -> None:
     parser.add_argument("--baseline", help="git revision to compare with (default: merge base)")
     parser.add_argument("--yaws", default="0,35,70", help="object yaws (deg), comma-separated")
     parser.add_argument("--objects", default="", help="catalogue objects (default: all)")
+    parser.add_argument("--hand", choices=sorted(PLANNERS), default="sdh", help="hand planned for")
     parser.add_argument("--plan", nargs=2, type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.plan:
-        plan_cases(*args.plan)
+        plan_cases(*args.plan, args.hand)
         return
     revision = args.baseline or default_baseline()
     yaws = [float(y) for y in args.yaws.split(",")]
@@ -162,9 +167,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="symfuse-planner-check-") as folder:
         inputs = Path(folder) / "inputs.npz"
         cases = make_inputs(objects, yaws, inputs)
-        base = run_tree(unpack(revision, Path(folder)), inputs, Path(folder) / "base.json")
-        new = run_tree(ROOT, inputs, Path(folder) / "new.json")
-    print(f"{PLANNER} on {len(cases)} cases, baseline {revision[:10]}")
+        base = run_tree(
+            unpack(revision, Path(folder)), inputs, Path(folder) / "base.json", args.hand
+        )
+        new = run_tree(ROOT, inputs, Path(folder) / "new.json", args.hand)
+    print(f"{PLANNERS[args.hand]} on {len(cases)} cases, baseline {revision[:10]}")
     print(f"{'case':<26} {'candidates':>10} {'feasible':>8} {'plan':>8}  same")
     unequal = 0
     for case in cases:

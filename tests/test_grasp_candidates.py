@@ -437,7 +437,10 @@ def test_a_top_edge_behind_the_distal_link_is_found(top_m, edge):
     direction = np.array([1.0, 0.0, 0.0])
     contact = pad_coverage(wall, np.zeros(3), direction, taxels, 0.003)
     assert contact.touch_m == pytest.approx(0.05)
-    found = sdh_candidates._top_edge_above_pad(SDH, wall, np.zeros(3), direction, taxels, contact)
+    pad_top, joint = sdh_candidates._pad_top_and_joint(SDH, taxels)
+    found = sdh_candidates._top_edge_above_pad(
+        SDH, wall, np.zeros(3), direction, pad_top, joint, contact
+    )
     assert found is edge
 
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from pipeline.params import param
 from pipeline.planning.grasp_geometry import front_to_back
+from pipeline.planning.order_statistics import percentiles
 from pipeline.types import GraspCandidate, PadLayout, SymmetryPlane
 
 #: Fewest cloud points inside a part of the hand that make a collision: fewer are taken
@@ -83,8 +84,8 @@ def candidate_score(
 
 def footprint_half_m(completed_robot: np.ndarray, direction: np.ndarray) -> float:
     """Half the object's extent along ``direction`` (2nd to 98th percentile), m."""
-    low, high = np.percentile(completed_robot @ direction, [2.0, 98.0])
-    return max(float(high - low) / 2.0, 1e-3)
+    low, high = percentiles(completed_robot @ direction, (2.0, 98.0))
+    return max((high - low) / 2.0, 1e-3)
 
 
 def height_grid(low_m: float, high_m: float, step_m: float) -> np.ndarray:

@@ -27,20 +27,19 @@ class PadContact:
         touch_m: position of the pad's flat surface along its motion when it stops (m).
         coverage: fraction of its taxels within the tolerance of the surface then.
         points: ``(K, 3)`` surface points under those taxels.
-        surface_fit: what the surface's slopes are fitted to (:func:`_slopes`'s arguments:
-            the seen taxels' column offsets and row heights, the surface in front of each,
-            the touch and the tolerance, m), when first asked for: a candidate rejected
-            before its score needs none. Empty: a surface facing the pad.
+        surface_fit: what the surface's slopes are fitted to (:class:`SurfaceCells`),
+            fitted when first asked for: a candidate rejected before its score needs none.
+            None: a surface facing the pad.
     """
 
     touch_m: float
     coverage: float
     points: np.ndarray
-    surface_fit: tuple = field(default=(), repr=False, compare=False)
+    surface_fit: SurfaceCells | None = field(default=None, repr=False, compare=False)
 
     @functools.cached_property
     def _slopes(self) -> tuple[float, float]:
-        return _slopes(*self.surface_fit) if self.surface_fit else (0.0, 0.0)
+        return self.surface_fit.slopes() if self.surface_fit is not None else (0.0, 0.0)
 
     @property
     def inclination_rad(self) -> float:
@@ -65,6 +64,37 @@ class PadContact:
         stops before reaching ``point_m`` (frame R): past the object's centre, the surface
         it found is the far side, met from inside a hole in the model."""
         return self.touch_m < float(np.asarray(point_m) @ np.asarray(direction))
+
+
+@dataclass(frozen=True)
+class SurfaceCells:
+    """The cells one pad of a :func:`pad_coverages` call sees, as that call found them
+    for every pad (the arrays are shared by its contacts, ``cells`` picks this pad's):
+    each seen cell's taxel index within its pad (``local``), the surface in front of it
+    and whether it senses (``fits``); the touch and the tolerance (m). Kept as found, the
+    taxels' offsets and heights are picked only for a contact whose slopes are asked
+    for."""
+
+    taxels: PadTaxels
+    local: np.ndarray
+    surface: np.ndarray
+    fits: np.ndarray
+    cells: slice
+    touch_m: float
+    tolerance_m: float
+
+    def slopes(self) -> tuple[float, float]:
+        """:func:`_slopes` over the pad's sensing cells (its bare cells left out)."""
+        fits = self.fits[self.cells]
+        local = self.local[self.cells][fits]
+        cols = len(self.taxels.col_u)
+        return _slopes(
+            self.taxels.col_u[local % cols],
+            self.taxels.row_z[local // cols],
+            self.surface[self.cells][fits],
+            self.touch_m,
+            self.tolerance_m,
+        )
 
 
 #: Fewest taxel rows a pad must touch for its contact to be a side of the object.
@@ -174,26 +204,28 @@ def pad_coverages(
     z = points_robot[:, 2]
     # Offsets across each pad's motion, (Q, N): the z-range test first, on the points alone.
     at_rows = np.flatnonzero((z >= z_low) & (z <= z_high))
+    # Every point's nearest row, and whether it lies within half a pitch of it (between
+    # curved rows it may not): the same for every pad, so found once per point.
+    z = z[at_rows]
+    order = np.argsort(taxels.row_z)
+    sorted_z = taxels.row_z[order]
+    point_row = order[np.searchsorted((sorted_z[1:] + sorted_z[:-1]) / 2.0, z)]
+    point_inside = np.abs(z - taxels.row_z[point_row]) <= half
     starts = np.sum(origins_m[:, :2] * laterals, axis=1)
     u = laterals @ points_robot[at_rows, :2].T - starts[:, None]
     query, index = np.nonzero((u >= taxels.col_u.min() - half) & (u <= taxels.col_u.max() + half))
+    inside = point_inside[index]
+    query, index = query[inside], index[inside]
+    if len(query) == 0:
+        return [None] * len(origins_m)
     u = u[query, index]
     source = at_rows[index]
-    z = points_robot[source, 2]
     cols = len(taxels.col_u)
     per_pad = len(taxels.row_z) * cols
     col = np.clip(np.round((u - taxels.col_u[0]) / taxels.pitch_m).astype(int), 0, cols - 1)
-    order = np.argsort(taxels.row_z)
-    sorted_z = taxels.row_z[order]
-    row = order[np.searchsorted((sorted_z[1:] + sorted_z[:-1]) / 2.0, z)]
-    inside = np.abs(z - taxels.row_z[row]) <= half
-    query = query[inside]
-    if len(query) == 0:
-        return [None] * len(origins_m)
-    source = source[inside]
     kept = points_robot[source]
     # Each pad's taxels numbered apart: taxel // per_pad is the pad.
-    taxel = query * per_pad + (row * cols + col)[inside]
+    taxel = query * per_pad + (point_row[index] * cols + col)
     # Depths along each pad's motion as one pad alone computes them (the same rounding).
     bounds = np.searchsorted(query, np.arange(len(origins_m) + 1))
     depth = np.concatenate(
@@ -209,7 +241,14 @@ def pad_coverages(
     np.minimum.at(nearest, taxel, depth)
     layer = depth <= nearest[taxel] + LAYER_M
     taxel, depth, source = taxel[layer], depth[layer], source[layer]
-    by_taxel = np.lexsort((depth, taxel))
+    # By taxel, and by depth within one: ``np.lexsort((depth, taxel))``, as two stable
+    # sorts, the second by the taxels' numbers as 16-bit integers where they fit (sorted
+    # in one pass of counting).
+    by_depth = np.argsort(depth, kind="stable")
+    numbers = taxel[by_depth]
+    if len(nearest) <= np.iinfo(np.uint16).max:
+        numbers = numbers.astype(np.uint16)
+    by_taxel = by_depth[np.argsort(numbers, kind="stable")]
     # The points' indices follow the sort; the points themselves are taken for the
     # contacts alone.
     taxel, depth, source = taxel[by_taxel], depth[by_taxel], source[by_taxel]
@@ -236,23 +275,23 @@ def pad_coverages(
     row_counts = np.count_nonzero(touched_rows, axis=1)
     touching = np.add.reduceat(touches, pad_first)
     sensing = per_pad if senses is None else int(np.count_nonzero(senses))
-    under_touching = np.repeat(touches, counts)  # the points of the touching taxels
+    # The points of the touching taxels, every pad's gathered at once: each pad's run
+    # follows the one before, so a contact's points are a slice of them.
+    under_touching = np.repeat(touches, counts)
+    touched = points_robot[source[under_touching]]
+    touched_ends = np.cumsum(np.add.reduceat(np.where(touches, counts, 0), pad_first)).tolist()
     contacts: list[PadContact | None] = [None] * len(origins_m)
-    for k in np.flatnonzero(row_counts >= _MIN_CONTACT_ROWS):  # else an edge or a top
-        cells = slice(pad_first[k], pad_first[k] + pad_cells[k])
-        pad = pads[k]
-        in_pad = slice(first[cells.start], first[cells.stop - 1] + counts[cells.stop - 1])
+    for k in np.flatnonzero(row_counts >= _MIN_CONTACT_ROWS).tolist():  # else an edge or a top
+        cells = slice(int(pad_first[k]), int(pad_first[k] + pad_cells[k]))
+        pad = int(pads[k])
+        start = touched_ends[k - 1] if k else 0
         contacts[pad] = PadContact(
             touch_m=float(touch[k]) + float(origins_m[pad] @ directions[pad]),
             coverage=int(touching[k]) / sensing,
-            points=points_robot[source[in_pad][under_touching[in_pad]]],
+            points=touched[start : touched_ends[k]],
             # The surface's slopes from the taxels' cells alone, as without bare cells.
-            surface_fit=(
-                taxels.col_u[local[cells][fits[cells]] % cols],
-                taxels.row_z[rows[cells][fits[cells]]],
-                surface[cells][fits[cells]],
-                float(touch[k]),
-                tolerance_m,
+            surface_fit=SurfaceCells(
+                taxels, local, surface, fits, cells, float(touch[k]), tolerance_m
             ),
         )
     return contacts

@@ -20,6 +20,7 @@ from pipeline.planning.candidate import (
     candidate_score,
 )
 from pipeline.planning.grasp_geometry import hand_pose
+from pipeline.planning.order_statistics import percentile
 from pipeline.planning.pad_contact import PadTaxels, flat_pad_taxels, pad_coverage
 from pipeline.types import GraspCandidate, GripperSpec, PadLayout
 
@@ -170,8 +171,8 @@ def parallel_candidate(
     front_points, all_points = column(visible=True), column(visible=False)
     if len(front_points) == 0:
         return Candidate.rejected(angle_rad, height_m, 0.0, "no visible surface between the jaws")
-    front = float(np.percentile(front_points @ direction, 2.0))
-    back = float(np.percentile(all_points @ direction, 98.0))
+    front = percentile(front_points @ direction, 2.0)
+    back = percentile(all_points @ direction, 98.0)
     if not front < centre_m @ direction < back:
         # Where the completed model has a gap (a thin-walled object's unseen side), the
         # column may hold one wall only: the jaws would pinch it, not close around the object.

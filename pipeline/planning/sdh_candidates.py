@@ -21,6 +21,7 @@ from pipeline.planning.candidate import (
     candidate_score,
 )
 from pipeline.planning.grasp_geometry import hand_pose
+from pipeline.planning.order_statistics import percentile, percentiles
 from pipeline.planning.pad_contact import (
     LAYER_M,
     PadContact,
@@ -221,7 +222,8 @@ def sdh_candidates(
             # line: the object must be wide enough there for both their pads.
             across = hand.in_band @ y_hand
             span = sdh.turning_lateral_m() + pad.cols * pad.pitch_m / 2.0
-            if len(across) == 0 or np.ptp(np.percentile(across, [2.0, 98.0])) < 2.0 * span:
+            low, high = percentiles(across, (2.0, 98.0))
+            if len(across) == 0 or max(low, high) - min(low, high) < 2.0 * span:
                 hand.verdict = Candidate.rejected(angle_rad, height_m, spread_rad, TOO_NARROW)
     # Fingers meet an object off the palm axis inclined, so the palm is moved once, onto
     # the centre of the contacts predicted from the first guess.
@@ -328,9 +330,12 @@ def _checked(
     coverages = tuple(c.quality for c in contacts)
     tipping = (height_m - s.table_height_m) / cloud.footprint_half_m(x_hand)
     score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
-    above_pads = cloud.above(float(taxels.row_z.max()) + taxels.pitch_m / 2.0)
+    pad_top, joint = _pad_top_and_joint(k, taxels)
+    above_pads = cloud.above(pad_top)
     if any(
-        _top_edge_above_pad(k, above_pads, np.append(base, 0.0), np.append(facing, 0.0), taxels, c)
+        _top_edge_above_pad(
+            k, above_pads, np.append(base, 0.0), np.append(facing, 0.0), pad_top, joint, c
+        )
         for base, facing, c in zip(bases, facings, contacts, strict=True)
     ):
         score *= _EDGE_PENALTY
@@ -654,31 +659,38 @@ def _distal_taxels(pad: PadLayout, height_m: float) -> PadTaxels:
     return sdh_distal_taxels(pad, height_m)
 
 
+def _pad_top_and_joint(kinematics: FingerKinematics, taxels: PadTaxels) -> tuple[float, float]:
+    """The height of a distal pad's top row's upper edge and of its distal joint (m),
+    the pad on a vertical distal link (for :func:`_top_edge_above_pad`)."""
+    pad_top = float(taxels.row_z.max()) + taxels.pitch_m / 2.0
+    joint = float(np.median(taxels.row_z)) + kinematics.distal_pad_centre_m  # the middle row
+    return pad_top, joint
+
+
 def _top_edge_above_pad(
     kinematics: FingerKinematics,
     points: np.ndarray,
     origin_m: np.ndarray,
     direction: np.ndarray,
-    taxels: PadTaxels,
+    pad_top_m: float,
+    joint_m: float,
     contact: PadContact,
 ) -> bool:
     """Whether the top edge of the side a distal pad closes on lies between the pad's top
-    row and the distal joint, where the link stands 1 mm behind the pad's surface. A rim,
-    lip or lid there is often a millimetre or two proud of the side below it, more than
-    the link's recess and less than the cloud can show, and stops the finger on its
-    link with the pad short of the side (a mug's rim, a coffee tin's lid)."""
-    half = taxels.pitch_m / 2.0
-    pad_top = float(taxels.row_z.max()) + half
-    joint = float(np.median(taxels.row_z)) + kinematics.distal_pad_centre_m  # the middle row
+    row's upper edge (``pad_top_m``) and the distal joint (``joint_m``), where the link
+    stands 1 mm behind the pad's surface. A rim, lip or lid there is often a millimetre or
+    two proud of the side below it, more than the link's recess and less than the cloud
+    can show, and stops the finger on its link with the pad short of the side (a mug's
+    rim, a coffee tin's lid). ``points`` are the cloud's above ``pad_top_m``."""
     lateral = np.array([-direction[1], direction[0], 0.0])
     relative = points - origin_m
     depth = relative @ direction - (contact.touch_m - origin_m @ direction)
     side = (
         (np.abs(relative @ lateral) <= kinematics.finger_half_width_m)
         & (depth <= _EDGE_DEPTH_M)
-        & (points[:, 2] > pad_top)
+        & (points[:, 2] > pad_top_m)
     )
     if np.count_nonzero(side) < MIN_HITS:
         return False  # the side ends below the pad's top row: the pad reaches over it
-    top = float(np.percentile(points[side, 2], 98.0))
-    return top < joint
+    top = percentile(points[side, 2], 98.0)
+    return top < joint_m

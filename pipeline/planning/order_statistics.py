@@ -1,0 +1,46 @@
+"""Percentiles of small 1-D samples at the cost of one partial sort.
+
+The grasp planners take a few percentiles of a few hundred values for every candidate
+(a jaw column's front and back, a band's extent across the closing line, a side's top
+edge); ``np.percentile``'s general machinery (axes, methods, weights, NaN checks) then
+costs several times the partial sort itself. :func:`percentile` returns what
+``np.percentile(values, q)`` returns with its default ``"linear"`` method, bit for bit:
+the same order statistics (which value sits at a sorted position does not depend on how
+the sort gets there) interpolated with the same floating-point operations in the same
+order (``a + (b - a) t``, or ``b - (b - a) (1 - t)`` for ``t >= 0.5``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def percentile(values: np.ndarray, q: float) -> float:
+    """``float(np.percentile(values, q))`` for a 1-D float array without NaN and ``q`` in
+    [0, 100]; NaN for an empty array."""
+    return percentiles(values, (q,))[0]
+
+
+def percentiles(values: np.ndarray, qs: tuple[float, ...]) -> tuple[float, ...]:
+    """:func:`percentile` of ``values`` at each of ``qs``, with one partial sort."""
+    n = len(values)
+    if n == 0:
+        return tuple(math.nan for _ in qs)
+    positions = [(n - 1) * (q / 100) for q in qs]
+    # Below the last position, a percentile lies between two neighbouring order statistics.
+    inner = [math.floor(p) for p in positions if p < n - 1]
+    kth = sorted({k for below in inner for k in (below, below + 1)} | {n - 1})
+    ordered = np.partition(values, kth)
+    found = []
+    for position in positions:
+        if position >= n - 1:
+            found.append(float(ordered[n - 1]))
+            continue
+        below = math.floor(position)
+        a, b = float(ordered[below]), float(ordered[below + 1])
+        t = position - below
+        difference = b - a
+        found.append(b - difference * (1 - t) if t >= 0.5 else a + difference * t)
+    return tuple(found)
