@@ -29,6 +29,8 @@ from pipeline.estimation.measurement import freeze, linearise, predict
 from pipeline.estimation.problem import bias_plane_covariance, estimate_result, general_plane
 from pipeline.estimation.structured import StructuredCovariance, block_diagonal
 from pipeline.io.formats import stage_to_json
+from pipeline.run.runner import initial_estimate
+from pipeline.types import Bias, PointCloud, Symmetry, SymmetryInit, SymmetryPlane
 
 RNG = np.random.default_rng(11)
 G7 = np.array([0.3, 0.01, -0.02, 0.005, 0.013, 0.7, 0.6])
@@ -245,3 +247,19 @@ def test_a_downward_normal_is_reported_by_its_upward_opposite():
     flipped = covariance[4:, 4:] * np.array([[1, -1, 1], [-1, 1, -1], [1, -1, 1]])
     np.testing.assert_allclose(symmetry.covariance, flipped)
     assert general_plane(G7[:6], covariance[:6, :6]) is None
+
+
+def test_stage_0_alone_of_a_leaning_plane_has_a_covariance_the_size_of_its_state(box):
+    # `complete` without contacts reports Stage 0 alone (initial_estimate); a leaning
+    # plane's state has seven parameters, so its unknown covariance must be 7 x 7 too.
+    normal = state_normal(box.g_true)
+    symmetry = Symmetry("plane", normal, box.g_true[4] * normal)
+    init = SymmetryInit(
+        plane=SymmetryPlane(theta_rad=0.0, offset_m=box.g_true[4]),
+        bias=Bias(yaw_rad=0.0, translation_m=np.zeros(3), pivot_m=box.pivot_m),
+        symmetry=symmetry,
+    )
+    stage = initial_estimate(PointCloud(points=box.points_m), init).stages[0]
+    assert stage.covariance.shape == (7, 7) and np.isnan(stage.covariance).all()
+    assert stage.symmetry.kind == "plane"
+    np.testing.assert_allclose(abs(stage.symmetry.direction @ normal), 1.0)

@@ -127,7 +127,7 @@ def initial_estimate(cloud: PointCloud, init: SymmetryInit) -> EstimateResult:
     started = time.perf_counter()
     pivot = np.mean(cloud.points, axis=0)
     g = initial_state(EstimationProblem(cloud=cloud, init=init, grasps=()), pivot)
-    covariance = np.full((6, 6), np.nan)
+    covariance = np.full((len(g), len(g)), np.nan)
     seconds = time.perf_counter() - started
     stage = stage_estimate(0, g, covariance, cloud.points, pivot, 0, "initial", seconds, 0)
     return EstimateResult(stages=(stage,))
