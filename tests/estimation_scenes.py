@@ -8,9 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.estimation.correspondences import PointIndex, exclusive_sides, find_correspondences
 from pipeline.estimation.covariances import normal_ellipsoids
 from pipeline.estimation.geometry import apply_bias, invert_bias
 from pipeline.estimation.iekf import FusionProblem, GraspContacts
+from pipeline.estimation.measurement import freeze
 from pipeline.geometry.poses import rotation_z
 
 RADIUS_M = 0.04
@@ -217,3 +219,20 @@ def leaning_box_scene(
         normals=np.concatenate(normals),
         pads=np.concatenate(pads),
     )
+
+
+def frozen_measurement(problem: FusionProblem, g: np.ndarray, points: np.ndarray):
+    """The first grasp's correspondences found under ``g`` and frozen (the measurement one
+    iteration linearises), each taxel on one side only."""
+    contacts = problem.grasps[0]
+    found = find_correspondences(
+        PointIndex(points),
+        points,
+        g,
+        problem.pivot_m,
+        contacts.positions_m,
+        contacts.window,
+        problem.covariance_init,
+        alternative=False,
+    )
+    return freeze(exclusive_sides(found), contacts.positions_m, contacts.noise)

@@ -8,15 +8,14 @@ import dataclasses
 import numpy as np
 import pytest
 import scipy.optimize
-from estimation_scenes import cylinder_scene, fusion_problem
+from estimation_scenes import cylinder_scene, frozen_measurement, fusion_problem
 from filterpy.kalman import ExtendedKalmanFilter
 
-from pipeline.estimation.correspondences import PointIndex, exclusive_sides, find_correspondences
 from pipeline.estimation.covariances import shared_pad_noise
 from pipeline.estimation.dense import DenseCovariance
 from pipeline.estimation.geometry import apply_bias, apply_mirror_bias
 from pipeline.estimation.iekf import IekfSettings, fuse
-from pipeline.estimation.measurement import freeze, linearise, predict
+from pipeline.estimation.measurement import linearise, predict
 from pipeline.estimation.structured import StructuredCovariance, block_diagonal
 
 G_INIT = np.array([0.0, 0.0, 0.0, 0.0, 0.008, 0.08])
@@ -25,21 +24,6 @@ G_INIT = np.array([0.0, 0.0, 0.0, 0.0, 0.008, 0.08])
 @pytest.fixture(scope="module")
 def scene():
     return cylinder_scene(250, seed=3)
-
-
-def _frozen(scene, problem, g, points):
-    contacts = problem.grasps[0]
-    found = find_correspondences(
-        PointIndex(points),
-        points,
-        g,
-        problem.pivot_m,
-        contacts.positions_m,
-        contacts.window,
-        problem.covariance_init,
-        alternative=False,
-    )
-    return freeze(exclusive_sides(found), contacts.positions_m, contacts.noise)
 
 
 def _state(g, points):
@@ -52,7 +36,7 @@ def _completed(g, points, pivot):
 
 def test_stacked_jacobian_matches_central_differences(scene):
     problem = fusion_problem(scene, G_INIT)
-    measurement = _frozen(scene, problem, G_INIT, scene.points_m)
+    measurement = frozen_measurement(problem, G_INIT, scene.points_m)
     g = G_INIT + np.array([0.01, 0.001, -0.002, 0.0005, 0.001, -0.02])
     points = scene.points_m + 1e-3
     lin = linearise(measurement, g, points, problem.pivot_m, with_points=True)
@@ -77,7 +61,7 @@ def test_stacked_jacobian_matches_central_differences(scene):
 
 def test_point_jacobian_products_match_the_dense_matrix(scene):
     problem = fusion_problem(scene, G_INIT)
-    measurement = _frozen(scene, problem, G_INIT, scene.points_m)
+    measurement = frozen_measurement(problem, G_INIT, scene.points_m)
     jacobian = linearise(measurement, G_INIT, scene.points_m, problem.pivot_m, True).point_jacobian
     local = jacobian.points()
     variance = np.random.default_rng(5).uniform(1e-6, 4e-6, len(local))
@@ -97,7 +81,7 @@ def test_point_jacobian_products_match_the_dense_matrix(scene):
 def test_one_iteration_equals_filterpy_ekf_update(scene):
     problem = fusion_problem(scene, G_INIT)
     points = scene.points_m
-    measurement = _frozen(scene, problem, G_INIT, points)
+    measurement = frozen_measurement(problem, G_INIT, points)
     lin = linearise(measurement, G_INIT, points, problem.pivot_m, with_points=True)
     covariance = StructuredCovariance(problem.covariance_init, problem.point_variance_m2)
     gain = covariance.gain(lin, measurement.noise)
@@ -123,7 +107,7 @@ def test_converged_iterate_is_the_map_least_squares_minimiser():
     scene = cylinder_scene(100, seed=5)
     problem = fusion_problem(scene, G_INIT)
     points_prior = scene.points_m
-    measurement = _frozen(scene, problem, G_INIT, points_prior)
+    measurement = frozen_measurement(problem, G_INIT, points_prior)
     covariance = StructuredCovariance(problem.covariance_init, problem.point_variance_m2)
     g, points = G_INIT.copy(), points_prior.copy()
     for _ in range(50):
@@ -263,7 +247,7 @@ def _information_form(scene, problem, outcome):
     """``(P0^-1 + H^T R^-1 H)^-1`` at the iterate of the last gain, ``R`` the reported
     noise: block-diagonal per taxel plus, by hand, the error each pad's taxels share."""
     g = outcome.trace[-2].g
-    measurement = _frozen(scene, problem, g, problem.points_m)
+    measurement = frozen_measurement(problem, g, problem.points_m)
     lin = linearise(measurement, g, problem.points_m, problem.pivot_m, with_points=False)
     H = lin.bias_plane_jacobian
     contacts = problem.grasps[0]

@@ -10,11 +10,10 @@ import time
 
 import numpy as np
 import pytest
-from estimation_scenes import fusion_problem, leaning_box_scene
+from estimation_scenes import frozen_measurement, fusion_problem, leaning_box_scene
 from filterpy.kalman import ExtendedKalmanFilter
 
 from pipeline.estimation.consistency import ConsistencySettings
-from pipeline.estimation.correspondences import PointIndex, exclusive_sides, find_correspondences
 from pipeline.estimation.dense import DenseCovariance
 from pipeline.estimation.geometry import (
     apply_side,
@@ -25,7 +24,7 @@ from pipeline.estimation.geometry import (
     state_normal,
 )
 from pipeline.estimation.iekf import IekfSettings, fuse
-from pipeline.estimation.measurement import freeze, linearise, predict
+from pipeline.estimation.measurement import linearise, predict
 from pipeline.estimation.problem import bias_plane_covariance, estimate_result, general_plane
 from pipeline.estimation.structured import StructuredCovariance, block_diagonal
 from pipeline.io.formats import stage_to_json
@@ -103,24 +102,9 @@ def _completed(g, points, pivot):
     return completed_model(points, g, pivot)
 
 
-def _frozen(problem, g, points):
-    contacts = problem.grasps[0]
-    found = find_correspondences(
-        PointIndex(points),
-        points,
-        g,
-        problem.pivot_m,
-        contacts.positions_m,
-        contacts.window,
-        problem.covariance_init,
-        alternative=False,
-    )
-    return freeze(exclusive_sides(found), contacts.positions_m, contacts.noise)
-
-
 def test_leaning_stacked_jacobian_matches_central_differences(box):
     problem = fusion_problem(box, _start(box), prior_std=PRIOR_STD)
-    measurement = _frozen(problem, problem.g_init, box.points_m)
+    measurement = frozen_measurement(problem, problem.g_init, box.points_m)
     assert measurement.back.any() and (~measurement.back).any()
     g, points = problem.g_init + 0.001, box.points_m + 1e-3
     lin = linearise(measurement, g, points, problem.pivot_m, with_points=True)
@@ -139,7 +123,7 @@ def test_leaning_stacked_jacobian_matches_central_differences(box):
 def test_one_leaning_iteration_equals_filterpy_ekf_update(box):
     problem = fusion_problem(box, _start(box), prior_std=PRIOR_STD)
     points, g = box.points_m, problem.g_init
-    measurement = _frozen(problem, g, points)
+    measurement = frozen_measurement(problem, g, points)
     lin = linearise(measurement, g, points, problem.pivot_m, with_points=True)
     covariance = StructuredCovariance(problem.covariance_init, problem.point_variance_m2)
     gain = covariance.gain(lin, measurement.noise)
