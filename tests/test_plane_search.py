@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.run.result_document import LEANING_PLANE, init_to_json
+from pipeline.run.result_document import init_to_json
 from pipeline.symmetry.kinds import free_space_share
 from pipeline.symmetry.plane_search import best_plane, violation_counts
 from pipeline.synthetic import synthetic_observation
@@ -51,17 +51,17 @@ def test_the_level_mirror_plane_of_an_l_block_is_found(l_view):
     assert fit.violation_share < 0.01
 
 
-def test_vc_by_evidence_proposes_the_leaning_plane_for_the_estimator(l_view):
+def test_vc_by_evidence_rejects_a_view_whose_only_plane_mirrors_it_onto_itself(l_view):
     observation, cloud = l_view
     init = VcInitialiser(VcInitialiser.Params(kind="evidence")).propose(cloud, observation)
     assert init.kind == "plane"
     assert init.kind_scores["plane"] + 0.02 < init.kind_scores["vertical-plane"]
-    # No vertical plane passes VC's own bound but the leaning one does: it is proposed for
-    # the estimator to fuse, the best vertical plane kept beside it.
-    assert init.status == "ok" and init.reason == ""
+    # No vertical plane passes VC's own bound; the level mid-plane does, but it mirrors the
+    # view onto itself and completes nothing hidden: the view is rejected, and the
+    # rejection names the plane it carries.
+    assert init.status == "rejected" and "leaning mirror plane is supported" in init.reason
     assert init.plane == init.hypotheses[0].plane
     assert init.hypotheses[0].score > VcInitialiser.Params().max_violation_fraction
-    assert init_to_json(init)["completion"] == LEANING_PLANE
 
 
 def test_no_completion_note_for_the_vertical_plane():

@@ -54,9 +54,10 @@ class VcInitialiser(SymmetryInitialiser):
     when the camera accepts it as well. It also searches mirror planes of any orientation
     and proposes a leaning one when the view supports it better by more than
     ``plane_margin``: the estimator fuses it (``init.symmetry``, kind ``"plane"``), and
-    ``init.plane`` stays the best vertical plane. When no vertical plane passes but a
-    leaning one does (its mirrored sample within the same bar), the leaning one is
-    proposed; when it fails the bar as well, the rejection carries it and says so.
+    ``init.plane`` stays the best vertical plane. When no vertical plane passes
+    (``"rejected"``) but a leaning one does, the rejection carries it and says so: such a
+    plane can mirror the view onto itself (a prism's horizontal mid-plane) and complete
+    nothing hidden.
     """
 
     name = "vc"
@@ -190,21 +191,13 @@ class VcInitialiser(SymmetryInitialiser):
                 "the viewing direction"
             )
             leaning = choice is not None and choice.symmetry.kind == "plane"
-            if leaning and choice.plane_fit.violation_share <= limit:
-                # The leaning plane passes the bar the vertical ones failed: the
-                # estimator fuses it (its vertical plane stays VC's best, for estimators
-                # that take vertical planes only).
-                return SymmetryInit(
-                    best.plane,
-                    bias,
-                    hypotheses,
-                    symmetry=choice.symmetry,
-                    kind_scores=choice.scores,
-                )
             if leaning:
+                # Not proposed: where no vertical plane passes, the plane the wide search
+                # finds can mirror the view onto itself and complete nothing hidden (an
+                # L-shaped block's horizontal mid-plane, a true symmetry of any prism).
                 reason += (
-                    f"; a leaning mirror plane is supported (init.symmetry) but "
-                    f"{choice.plane_fit.violation_share:.0%} of its mirrored sample violates"
+                    "; a leaning mirror plane is supported (init.symmetry), but it is not "
+                    "proposed where no vertical plane passes"
                 )
             return SymmetryInit(
                 plane=best.plane,
