@@ -878,7 +878,8 @@ class StageEstimate:
     Attributes:
         stage: 0, 1 or 2.
         plane, bias: the estimated symmetry plane and bias.
-        covariance: ``(6, 6)`` covariance of ``(b_theta, b_x, b_y, b_z, m_r, m_theta)``.
+        covariance: ``(6, 6)`` covariance of ``(b_theta, b_x, b_y, b_z, m_r, m_theta)``;
+            ``(7, 7)``, the normal's elevation ``m_phi`` appended, for a leaning plane.
         points: ``(N, 3)`` the estimated object points ``p_n`` (unbiased, camera view).
         completed: ``(2N, 3)`` the completed model ``{f_b(p_n)} U {f_mb(p_n)}`` in frame R.
         iterations: IEKF iterations used (summed over grasps; 0 for stage 0).
@@ -890,11 +891,11 @@ class StageEstimate:
         consistency: the self-diagnosis of this stage's model, None when not assessed.
         hypothesis: the alternative hypothesis the model comes from, None when it is the
             fused (or initial) estimate itself.
-        grasp_g: the ``(6,)`` state ``(b_theta, b_x, b_y, b_z, m_r, m_theta)`` each grasp's
-            taxels are compared under, in grasp order (the bias differs between grasps when
-            the object was re-grasped); empty when the estimator does not say.
-        filter_covariance: the ``(6, 6)`` covariance of ``g`` the estimator's own iteration
-            ended with, when it differs from ``covariance`` (the built-in IEKF's, which also
+        grasp_g: the state ``g`` (ordered as ``covariance``'s rows) each grasp's taxels
+            are compared under, in grasp order (the bias differs between grasps when the
+            object was re-grasped); empty when the estimator does not say.
+        filter_covariance: the covariance of ``g`` the estimator's own iteration ended
+            with, when it differs from ``covariance`` (the built-in IEKF's, which also
             counts the taxels across their normals); a later grasp is fused from it. None:
             ``covariance``.
         symmetry: the mirror plane of any orientation the stage estimated (kind
