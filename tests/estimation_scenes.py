@@ -236,3 +236,33 @@ def frozen_measurement(problem: FusionProblem, g: np.ndarray, points: np.ndarray
         alternative=False,
     )
     return freeze(exclusive_sides(found), contacts.positions_m, contacts.noise)
+
+
+def one_step_and_filterpy(problem: FusionProblem, g: np.ndarray, points: np.ndarray):
+    """One structured IEKF step from ``g`` on the first grasp, and the same update by
+    filterpy's dense EKF: ``(ours_state, ours_covariance, ekf_state, ekf_covariance)``,
+    each state ``g`` followed by the points."""
+    from filterpy.kalman import ExtendedKalmanFilter
+
+    from pipeline.estimation.dense import DenseCovariance
+    from pipeline.estimation.measurement import linearise
+    from pipeline.estimation.structured import StructuredCovariance, block_diagonal
+
+    measurement = frozen_measurement(problem, g, points)
+    lin = linearise(measurement, g, points, problem.pivot_m, with_points=True)
+    covariance = StructuredCovariance(problem.covariance_init, problem.point_variance_m2)
+    gain = covariance.gain(lin, measurement.noise)
+    delta_g, moved, delta_p = gain.step(measurement.observation() - lin.prediction)
+    covariance.commit(gain, with_points=True)
+    ours = np.concatenate([g + delta_g, points.ravel()])
+    ours[len(g) :].reshape(-1, 3)[moved] += delta_p
+
+    n = len(points)
+    jacobian = np.hstack([lin.bias_plane_jacobian, lin.point_jacobian.dense(n)])
+    ekf = ExtendedKalmanFilter(dim_x=len(g) + 3 * n, dim_z=len(jacobian))
+    ekf.x = np.concatenate([g, points.ravel()])[:, None]
+    ekf.P = DenseCovariance(problem.covariance_init, problem.point_variance_m2).matrix
+    ekf.R = block_diagonal(measurement.noise)
+    prediction = lin.prediction[:, None]
+    ekf.update(measurement.observation()[:, None], lambda x: jacobian, lambda x: prediction)
+    return ours, covariance.dense(), ekf.x[:, 0], ekf.P

@@ -8,8 +8,12 @@ import dataclasses
 import numpy as np
 import pytest
 import scipy.optimize
-from estimation_scenes import cylinder_scene, frozen_measurement, fusion_problem
-from filterpy.kalman import ExtendedKalmanFilter
+from estimation_scenes import (
+    cylinder_scene,
+    frozen_measurement,
+    fusion_problem,
+    one_step_and_filterpy,
+)
 
 from pipeline.estimation.covariances import shared_pad_noise
 from pipeline.estimation.dense import DenseCovariance
@@ -80,27 +84,11 @@ def test_point_jacobian_products_match_the_dense_matrix(scene):
 
 def test_one_iteration_equals_filterpy_ekf_update(scene):
     problem = fusion_problem(scene, G_INIT)
-    points = scene.points_m
-    measurement = frozen_measurement(problem, G_INIT, points)
-    lin = linearise(measurement, G_INIT, points, problem.pivot_m, with_points=True)
-    covariance = StructuredCovariance(problem.covariance_init, problem.point_variance_m2)
-    gain = covariance.gain(lin, measurement.noise)
-    delta_g, moved, delta_p = gain.step(measurement.observation() - lin.prediction)
-    covariance.commit(gain, with_points=True)
-    ours = _state(G_INIT, points.copy())
-    ours[:6] += delta_g
-    ours[6:].reshape(-1, 3)[moved] += delta_p
-
-    n = len(points)
-    jacobian = np.hstack([lin.bias_plane_jacobian, lin.point_jacobian.dense(n)])
-    ekf = ExtendedKalmanFilter(dim_x=6 + 3 * n, dim_z=len(jacobian))
-    ekf.x = _state(G_INIT, points)[:, None]
-    ekf.P = DenseCovariance(problem.covariance_init, problem.point_variance_m2).matrix
-    ekf.R = block_diagonal(measurement.noise)
-    prediction = lin.prediction[:, None]
-    ekf.update(measurement.observation()[:, None], lambda x: jacobian, lambda x: prediction)
-    np.testing.assert_allclose(ours, ekf.x[:, 0], atol=1e-10)
-    np.testing.assert_allclose(covariance.dense(), ekf.P, atol=1e-12)
+    ours, ours_covariance, ekf_state, ekf_covariance = one_step_and_filterpy(
+        problem, G_INIT, scene.points_m
+    )
+    np.testing.assert_allclose(ours, ekf_state, atol=1e-10)
+    np.testing.assert_allclose(ours_covariance, ekf_covariance, atol=1e-12)
 
 
 def test_converged_iterate_is_the_map_least_squares_minimiser():

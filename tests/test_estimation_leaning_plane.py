@@ -10,8 +10,12 @@ import time
 
 import numpy as np
 import pytest
-from estimation_scenes import frozen_measurement, fusion_problem, leaning_box_scene
-from filterpy.kalman import ExtendedKalmanFilter
+from estimation_scenes import (
+    frozen_measurement,
+    fusion_problem,
+    leaning_box_scene,
+    one_step_and_filterpy,
+)
 
 from pipeline.estimation.consistency import ConsistencySettings
 from pipeline.estimation.dense import DenseCovariance
@@ -26,7 +30,6 @@ from pipeline.estimation.geometry import (
 from pipeline.estimation.iekf import IekfSettings, fuse
 from pipeline.estimation.measurement import linearise, predict
 from pipeline.estimation.problem import bias_plane_covariance, estimate_result, general_plane
-from pipeline.estimation.structured import StructuredCovariance, block_diagonal
 from pipeline.io.formats import stage_to_json
 from pipeline.run.runner import initial_estimate
 from pipeline.types import Bias, PointCloud, Symmetry, SymmetryInit, SymmetryPlane
@@ -122,26 +125,11 @@ def test_leaning_stacked_jacobian_matches_central_differences(box):
 
 def test_one_leaning_iteration_equals_filterpy_ekf_update(box):
     problem = fusion_problem(box, _start(box), prior_std=PRIOR_STD)
-    points, g = box.points_m, problem.g_init
-    measurement = frozen_measurement(problem, g, points)
-    lin = linearise(measurement, g, points, problem.pivot_m, with_points=True)
-    covariance = StructuredCovariance(problem.covariance_init, problem.point_variance_m2)
-    gain = covariance.gain(lin, measurement.noise)
-    delta_g, moved, delta_p = gain.step(measurement.observation() - lin.prediction)
-    covariance.commit(gain, with_points=True)
-    ours = np.concatenate([g + delta_g, points.ravel()])
-    ours[7:].reshape(-1, 3)[moved] += delta_p
-
-    n = len(points)
-    jacobian = np.hstack([lin.bias_plane_jacobian, lin.point_jacobian.dense(n)])
-    ekf = ExtendedKalmanFilter(dim_x=7 + 3 * n, dim_z=len(jacobian))
-    ekf.x = np.concatenate([g, points.ravel()])[:, None]
-    ekf.P = DenseCovariance(problem.covariance_init, problem.point_variance_m2).matrix
-    ekf.R = block_diagonal(measurement.noise)
-    prediction = lin.prediction[:, None]
-    ekf.update(measurement.observation()[:, None], lambda x: jacobian, lambda x: prediction)
-    np.testing.assert_allclose(ours, ekf.x[:, 0], atol=1e-10)
-    np.testing.assert_allclose(covariance.dense(), ekf.P, atol=1e-12)
+    ours, ours_covariance, ekf_state, ekf_covariance = one_step_and_filterpy(
+        problem, problem.g_init, box.points_m
+    )
+    np.testing.assert_allclose(ours, ekf_state, atol=1e-10)
+    np.testing.assert_allclose(ours_covariance, ekf_covariance, atol=1e-12)
 
 
 def test_leaning_structured_and_dense_agree(box):
