@@ -624,6 +624,15 @@ def consistency_to_json(consistency: Consistency | None) -> dict[str, Any] | Non
             "reason": consistency.reason,
             "after_view_nis": consistency.after_view_nis,
             "after_view_threshold": consistency.after_view_threshold,
+            # A leaning plane's test only: a vertical plane's document is unchanged.
+            **(
+                {}
+                if consistency.plane_turn_deg is None
+                else {
+                    "plane_turn_deg": consistency.plane_turn_deg,
+                    "plane_turn_bound_deg": consistency.plane_turn_bound_deg,
+                }
+            ),
         }
     )
 
