@@ -129,12 +129,16 @@ class PointCloud:
             from; lets visibility reasoning go back to the image.
         viewpoint_m: optional ``(3,)`` position of the sensor's optical centre in
             ``frame`` (m); tells which side of the object the camera saw.
+        table_height_m: optional height of the table under the object, as the segmenter
+            measured it (``frame``'s z of its table plane at the cloud's centroid, m); the
+            cloud itself starts the segmenter's cut above it. None: not measured.
     """
 
     points: np.ndarray
     frame: str = "robot"
     pixels: np.ndarray | None = None
     viewpoint_m: np.ndarray | None = None
+    table_height_m: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "points", _as_points(self.points, "PointCloud.points"))
@@ -145,6 +149,10 @@ class PointCloud:
             if viewpoint.shape != (3,) or not np.all(np.isfinite(viewpoint)):
                 raise ValueError("PointCloud.viewpoint_m must be a finite (3,) position")
             object.__setattr__(self, "viewpoint_m", viewpoint)
+        if self.table_height_m is not None:
+            if not np.isfinite(self.table_height_m):
+                raise ValueError("PointCloud.table_height_m must be finite")
+            object.__setattr__(self, "table_height_m", float(self.table_height_m))
 
     def __len__(self) -> int:
         return len(self.points)
