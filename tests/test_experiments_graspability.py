@@ -46,6 +46,36 @@ def test_a_plane_moves_with_the_object():
     np.testing.assert_allclose(moved.normal, [0.0, 1.0, 0.0], atol=1e-12)
 
 
+def test_a_held_objects_tilt_is_not_carried_to_the_models():
+    # The motion back to rest: a turn of 0.5 rad about the vertical after a 2 deg tilt about
+    # x (the pads tilting the held object), then a shift. Its planar part is the turn of
+    # 0.5 rad (R_z(a) R_x(b) has yaw atan2(sin a (1 + cos b), cos a (1 + cos b)) = a)
+    # and moves the pivot where the whole motion does.
+    tilt = np.radians(2.0)
+    c, s = np.cos(tilt), np.sin(tilt)
+    motion = np.eye(4)
+    motion[:3, :3] = rotation_z(0.5) @ np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    motion[:3, 3] = [0.01, -0.02, 0.003]
+    pivot = np.array([0.4, 0.05, 0.09])
+    planar = graspability.planar_motion(motion, pivot)
+    np.testing.assert_allclose(planar[:3, :3], rotation_z(0.5), atol=1e-12)
+    np.testing.assert_allclose(
+        planar[:3, :3] @ pivot + planar[:3, 3], motion[:3, :3] @ pivot + motion[:3, 3], atol=1e-12
+    )
+    # A vertical edge stays vertical: its top is not carried 2 deg over.
+    top = pivot + np.array([0.0, 0.0, 0.08])
+    np.testing.assert_allclose(
+        (planar[:3, :3] @ top + planar[:3, 3])[:2],
+        (planar[:3, :3] @ pivot + planar[:3, 3])[:2],
+        atol=1e-12,
+    )
+    # A motion with no tilt is its own planar part, whatever the pivot.
+    flat = np.eye(4)
+    flat[:3, :3] = rotation_z(-1.2)
+    flat[:3, 3] = [0.3, 0.1, 0.0]
+    np.testing.assert_allclose(graspability.planar_motion(flat, pivot), flat, atol=1e-12)
+
+
 def _row(label, yaw, stage0, fused, true, **fields):
     grasps = graspability.GRASPS
     row = {

@@ -26,7 +26,9 @@ mirror onto themselves): a stage's plane moved by its bias
 (:func:`~pipeline.metrics.plane_after_bias`; the plane the estimator holds is the one
 before the bias, and mirroring a fused model through it adds a copy turned by twice the
 bias's yaw, too wide for the jaws). Each is moved by the object's true motion from where
-the model was scored (the object after the trial's grasps) to its resting pose, so that
+the model was scored (the object after the trial's grasps) to its resting pose, its turn
+about the vertical and its shift at the fused model's centroid (:func:`planar_motion`:
+not the tilt the pads gave the held object, which the upright models never had), so that
 the three differ by their shape and by where the estimate put it, not by the trial's
 grasp. Each grasp is executed on the
 true object in a freshly built scene (the object at its resting pose, every attempt
@@ -146,10 +148,27 @@ def _pose(entry: Mapping[str, Any]) -> ObjectPose:
     return ObjectPose(np.asarray(entry["position"]), np.asarray(entry["quaternion_xyzw"]))
 
 
+def planar_motion(motion: np.ndarray, pivot_m: np.ndarray) -> np.ndarray:
+    """The planar part of the rigid ``motion`` (4x4, frame R): the turn about the vertical
+    nearest its rotation (the yaw of ``R`` that maximises ``trace(R_z^T R)``), and the
+    shift that moves ``pivot_m`` where ``motion`` does. A held object tilts in the pads by
+    a degree or two (a tall box squeezed above its middle); the models, upright like the
+    bias that placed them (docs/method.md §1), are carried by the turn and the shift
+    alone: carried by the tilt too, a 17 cm box comes out leaning 5 mm at its top, and
+    mirrored through its vertical plane by the planner, 10 mm wider there."""
+    from pipeline.geometry.poses import rotation_z
+
+    rotation = motion[:3, :3]
+    yaw = math.atan2(rotation[1, 0] - rotation[0, 1], rotation[0, 0] + rotation[1, 1])
+    planar = np.eye(4)
+    planar[:3, :3] = rotation_z(yaw)
+    planar[:3, 3] = rotation @ pivot_m + motion[:3, 3] - planar[:3, :3] @ pivot_m
+    return planar
+
+
 def moved_plane(plane: SymmetryPlane, motion: np.ndarray) -> SymmetryPlane:
-    """``plane`` carried by the rigid ``motion`` (4x4, frame R); its normal kept
-    horizontal (the motion of an object resting on the table is a turn about the
-    vertical and a shift, up to the millimetres a grasp tilts it)."""
+    """``plane`` carried by the rigid ``motion`` (4x4, frame R), its normal kept
+    horizontal (exactly so for a :func:`planar_motion`)."""
     from pipeline.types import SymmetryPlane
 
     normal = motion[:3, :3] @ plane.normal
@@ -167,7 +186,10 @@ def planning_models(
 
     result = record.result
     scored_at = _pose(record.document["object_pose_after"])
-    motion = resting.transform @ np.linalg.inv(scored_at.transform)
+    motion = planar_motion(
+        resting.transform @ np.linalg.inv(scored_at.transform),
+        result.selected.completed.mean(axis=0),
+    )
 
     def moved(points: np.ndarray) -> np.ndarray:
         return points @ motion[:3, :3].T + motion[:3, 3]
