@@ -411,7 +411,8 @@ def _contact_centre(
     the palm's x axis, between finger 1's and finger 2's across it (spread 0); midway
     between finger 1's and finger 2's (the pinch); or the circumcentre of the three
     contacts (fingers facing the palm axis)."""
-    points = np.array([c.points.mean(axis=0)[:2] for c in contacts])
+    # Each contact's mean point (``mean``'s sum and division, without its checks).
+    points = np.array([c.points[:, :2].sum(axis=0) / len(c.points) for c in contacts])
     if spread_rad == 0.0:
         x = (points[:2].mean(axis=0) @ x_hand[:2] + points[2] @ x_hand[:2]) / 2.0
         y = points[:2].mean(axis=0) @ y_hand[:2]
