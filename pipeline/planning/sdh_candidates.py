@@ -566,16 +566,24 @@ def _corridors(
     """For each finger (base and facing, ``(F, 2)`` each), the points of
     ``cloud.above(z_m, visible=visible)`` within ``half_width_m`` of the line along its
     facing through its base: their distance ``t`` along the facing from the base and their
-    depth ``d`` below the palm at ``palm_z`` (m), in the order of those points."""
+    depth ``d`` below the palm at ``palm_z`` (m), in the order of those points.
+
+    The closing check's (``visible``) offsets come from the products a closing
+    direction's candidates share (:meth:`CandidateCloud.along_above`): most candidates
+    reach that check. The pre-shape search, on the completed cloud, which few reach,
+    takes its own."""
     normals = np.column_stack([-facings[:, 1], facings[:, 0]])
-    # Every finger's offsets, ``(F, N)``, from the products shared by a closing direction.
-    across = np.abs(
-        cloud.along_above(normals, z_m, visible=visible) - np.sum(bases * normals, axis=1)[:, None]
-    )
-    along = (
-        cloud.along_above(facings, z_m, visible=visible) - np.sum(bases * facings, axis=1)[:, None]
-    )
-    depth = palm_z - cloud.above(z_m, visible=visible)[:, 2]
+    points = cloud.above(z_m, visible=visible)
+    # Every finger's offsets, ``(F, N)``.
+    if visible:
+        across = cloud.along_above(normals, z_m, visible=True)
+        along = cloud.along_above(facings, z_m, visible=True)
+    else:
+        xy = points[:, :2].T
+        across, along = normals @ xy, facings @ xy
+    across = np.abs(across - np.sum(bases * normals, axis=1)[:, None])
+    along = along - np.sum(bases * facings, axis=1)[:, None]
+    depth = palm_z - points[:, 2]
     corridors = []
     for t, offset in zip(along, across, strict=True):
         near = offset <= half_width_m
