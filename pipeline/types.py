@@ -129,12 +129,16 @@ class PointCloud:
             from; lets visibility reasoning go back to the image.
         viewpoint_m: optional ``(3,)`` position of the sensor's optical centre in
             ``frame`` (m); tells which side of the object the camera saw.
+        table_height_m: optional height of the table under the object, as the segmenter
+            measured it (``frame``'s z of its table plane at the cloud's centroid, m); the
+            cloud itself starts the segmenter's cut above it. None: not measured.
     """
 
     points: np.ndarray
     frame: str = "robot"
     pixels: np.ndarray | None = None
     viewpoint_m: np.ndarray | None = None
+    table_height_m: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "points", _as_points(self.points, "PointCloud.points"))
@@ -145,6 +149,10 @@ class PointCloud:
             if viewpoint.shape != (3,) or not np.all(np.isfinite(viewpoint)):
                 raise ValueError("PointCloud.viewpoint_m must be a finite (3,) position")
             object.__setattr__(self, "viewpoint_m", viewpoint)
+        if self.table_height_m is not None:
+            if not np.isfinite(self.table_height_m):
+                raise ValueError("PointCloud.table_height_m must be finite")
+            object.__setattr__(self, "table_height_m", float(self.table_height_m))
 
     def __len__(self) -> int:
         return len(self.points)
@@ -753,7 +761,8 @@ class Consistency:
 
     Attributes:
         checks: the checks that ran: ``"taxels"`` (always, when there were contacts) and
-            ``"free_space"`` (only when the problem carried the camera's depth image).
+            ``"free_space"`` (only when the problem carried the camera's depth image), and
+            ``"plane_turn"`` (a fused stage of a leaning plane).
         taxel_rms_m: RMS distance of the taxels in contact from the model's surface (m),
             NaN without taxels.
         nis: pad-averaged normalised innovation squared of those residuals against the
@@ -770,6 +779,10 @@ class Consistency:
             does not enter ``consistent``: the selection weighs it (docs/method.md §9).
         after_view_threshold: its bound at the configured false-alarm probability, None
             with it.
+        plane_turn_deg: a fused leaning plane's turn from the initialiser's normal (deg,
+            :func:`pipeline.estimation.consistency.plane_turn_test`), None for a vertical
+            plane and for Stage 0. Beyond ``plane_turn_bound_deg`` (its bound at the
+            false-alarm probability) the stage is not ``consistent``.
     """
 
     checks: tuple[str, ...]
@@ -782,6 +795,8 @@ class Consistency:
     reason: str = ""
     after_view_nis: float | None = None
     after_view_threshold: float | None = None
+    plane_turn_deg: float | None = None
+    plane_turn_bound_deg: float | None = None
 
     @property
     def contradicts_after_view(self) -> bool:
@@ -831,7 +846,10 @@ class Consistency:
         after_view = 0.0
         if self.after_view_nis is not None and self.after_view_threshold is not None:
             after_view = self.after_view_nis / self.after_view_threshold
-        return float(max(taxels, self.free_space_excess, after_view))
+        turn = 0.0
+        if self.plane_turn_deg is not None and self.plane_turn_bound_deg is not None:
+            turn = self.plane_turn_deg / self.plane_turn_bound_deg
+        return float(max(taxels, self.free_space_excess, after_view, turn))
 
 
 @dataclass(frozen=True)

@@ -240,25 +240,29 @@ def test_parallel_reaches_down_to_a_low_object_only_when_nothing_else_is_feasibl
     # An 18 mm tall box segmented with the fitted cut (a few mm above the table), the table
     # taken at the cloud's bottom (the shipped config): with the fingertips 10 mm above it
     # the pads' lowest taxels stand over the box's top, so no grasp is feasible; reaching
-    # down to the lowest point seen grasps it with both pads on its sides.
+    # down to 2 mm above the table the segmenter measured grasps it with both pads on its
+    # sides, and without the measured table down to 2 mm above the lowest point seen.
     observation = synthetic_observation(
         box_object(0.04, 0.04, 0.018), (0.6, 0.0, 0.0), rng=np.random.default_rng(8)
     )
     cloud = TableCluster().segment(observation)
     bottom = float(cloud.points[:, 2].min())
-    assert bottom < 0.008
+    assert 0.002 < bottom < 0.008
+    assert abs(cloud.table_height_m - observation.table_height_m) < 0.001
     plans = {}
-    for low in (0.01, 0.0):
+    for low in (0.01, 0.002):
         params = TopParallel.Params(cloud_base_above_table_m=0.0, low_table_clearance_m=low)
         plans[low] = TopParallel(params).plan(cloud, _true_plane(), PG70)
+    unmeasured = dataclasses.replace(cloud, table_height_m=None)
+    plans[None] = TopParallel(params).plan(unmeasured, _true_plane(), PG70)
     assert plans[0.01].status == "refused"
     assert "no surface before the front pad" in plans[0.01].reason
-    plan = plans[0.0]
-    assert plan.status == "ok"
-    fingertip_z = plan.T_robot_hand[2, 3] - 0.125 - 0.029
-    assert bottom - 1e-6 <= fingertip_z < bottom + 0.01
-    best = plan.candidates[0]
-    assert len(best.contact_coverage) == 2 and min(best.contact_coverage) > 0.0
+    for plan, table in ((plans[0.002], cloud.table_height_m), (plans[None], bottom)):
+        assert plan.status == "ok"
+        fingertip_z = plan.T_robot_hand[2, 3] - 0.125 - 0.029
+        assert fingertip_z == pytest.approx(table + 0.002, abs=1e-6)
+        best = plan.candidates[0]
+        assert len(best.contact_coverage) == 2 and min(best.contact_coverage) > 0.0
     # A tall box keeps the clearance: the lower reach is tried only when nothing else is.
     tall = TableCluster().segment(
         synthetic_observation(

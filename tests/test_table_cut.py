@@ -34,6 +34,10 @@ def test_measure_table_recovers_tilt_and_range_dependent_noise():
     assert fit.plane.offset_m == pytest.approx(0.002 * np.cos(tilt), abs=1e-4)
     for r in (1.4, 1.9, 2.4):  # within the table's distances, 1.1-2.9 m
         assert fit.sigma_at(np.array([r]))[0] == pytest.approx(0.001 * r**2, rel=0.15)
+    # The table's height under an object: the tilted plane's z there, as generated.
+    assert fit.plane.z_at(np.array([0.5, -0.3])) == pytest.approx(
+        np.tan(tilt) * 0.5 + 0.002, abs=1e-4
+    )
 
 
 def test_measure_table_names_a_missing_table():

@@ -22,6 +22,11 @@ class TablePlane:
         """Signed height ``(N,)`` of robot-frame points above the plane, metres."""
         return points_robot @ self.normal - self.offset_m
 
+    def z_at(self, xy_m: np.ndarray) -> float:
+        """The plane's z at the horizontal position ``xy_m`` ``(2,)``, metres."""
+        n = self.normal
+        return float((self.offset_m - n[:2] @ np.asarray(xy_m, dtype=np.float64)) / n[2])
+
 
 def table_from_height(table_height_m: float) -> TablePlane:
     """The horizontal plane ``z = table_height_m``."""

@@ -269,10 +269,10 @@ class CandidateParams:
         0.01, "lowest fingertip height above the table (m)", at_least=0.0
     )
     low_table_clearance_m: float = param(
-        0.0,
+        0.002,
         "candidates: the fingertips' clearance above the table tried when no grasp is "
         "feasible with table_clearance_m, so a low object's sides reach the pads' lowest "
-        "taxels (m)",
+        "taxels; above the table the segmenter measured, when it did (m)",
         at_least=0.0,
     )
     cloud_base_above_table_m: float = param(

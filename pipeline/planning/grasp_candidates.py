@@ -132,7 +132,13 @@ class CandidatePlanner(GraspPlanner):
         it instead. The clearance keeps a fingertip off a table that is not quite where the
         cloud says, and costs nothing on an object taller than the pads; on a low object it
         leaves the pads' lowest taxels above the object's sides, and the lower reach is the
-        only grasp there is (docs/method.md §5)."""
+        only grasp there is (docs/method.md §5).
+
+        The lower reach measures from the table the segmenter measured
+        (:attr:`PointCloud.table_height_m`) when the cloud carries it: the cloud's lowest
+        point lies the segmenter's cut above it (three sigmas of the table's depth noise,
+        2-5 mm), and on a lying cylinder 20 mm across those millimetres put the pads'
+        lowest taxel row above the widest line or on it."""
         p = self.params
         candidates = self._candidates(cloud, proposal, gripper, p)
         if p.low_table_clearance_m >= p.table_clearance_m or any(
@@ -140,6 +146,9 @@ class CandidatePlanner(GraspPlanner):
         ):
             return candidates
         low = replace(p, table_clearance_m=p.low_table_clearance_m)
+        if cloud.table_height_m is not None:
+            base_m = float(cloud.points[:, 2].min()) - cloud.table_height_m
+            low = replace(low, cloud_base_above_table_m=max(base_m, 0.0))
         return self._candidates(cloud, proposal, gripper, low)
 
     def alternatives(

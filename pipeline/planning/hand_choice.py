@@ -248,7 +248,9 @@ def _with_hidden_volume(cloud: PointCloud) -> PointCloud | None:
     if not len(hidden):
         return None
     points = np.concatenate([cloud.points, hidden])
-    return PointCloud(points, cloud.frame, viewpoint_m=cloud.viewpoint_m)
+    return PointCloud(
+        points, cloud.frame, viewpoint_m=cloud.viewpoint_m, table_height_m=cloud.table_height_m
+    )
 
 
 def create_planner(config: Config, registry: StageRegistry, name: str) -> GraspPlanner:

@@ -79,7 +79,13 @@ class GroundTruthMask(Segmenter):
                 f"{p.min_height_m * 1000:.0f} mm above the table (< min_object_points = "
                 f"{p.min_object_points}; {int(on_object.sum())} masked pixels with depth)"
             )
-        return PointCloud(points[keep], "robot", pixels[keep], observation.T_robot_camera[:3, 3])
+        return PointCloud(
+            points[keep],
+            "robot",
+            pixels[keep],
+            observation.T_robot_camera[:3, 3],
+            table.z_at(points[keep, :2].mean(axis=0)),
+        )
 
 
 @hookimpl

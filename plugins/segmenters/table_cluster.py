@@ -179,7 +179,13 @@ class TableCluster(Segmenter):
         pixel_area_m2 = depth**2 / (k.fx * k.fy)
         viewpoint = observation.T_robot_camera[:3, 3]
         return tuple(
-            PointCloud(points[indices], "robot", pixels[indices], viewpoint)
+            PointCloud(
+                points[indices],
+                "robot",
+                pixels[indices],
+                viewpoint,
+                table.z_at(points[indices, :2].mean(axis=0)),
+            )
             for rank, indices in enumerate(result.objects)
             if len(indices) >= p.min_object_points
             and (rank == 0 or pixel_area_m2[indices].sum() >= p.min_object_area_m2)
