@@ -118,6 +118,7 @@ class CandidateCloud:
         self._slabs: dict[tuple[bool, float, float], np.ndarray] = {}
         self._bands: dict[tuple[float, float], np.ndarray] = {}
         self._footprints: dict[tuple[float, ...], float] = {}
+        self._offsets: dict[tuple[bool, bytes, bytes], np.ndarray] = {}
 
     def slab(self, low_m: float, high_m: float, *, visible: bool = False) -> np.ndarray:
         """The completed (or ``visible``) points with ``low_m <= z <= high_m``, in the
@@ -141,6 +142,32 @@ class CandidateCloud:
         the cloud's order: for counts and order statistics)."""
         by_height = self._by_height[visible]
         return by_height[np.searchsorted(by_height[:, 2], z_m) :]
+
+    def along_above(self, axes: np.ndarray, z_m: float, *, visible: bool = False) -> np.ndarray:
+        """``(A, K)``: the horizontal offsets ``axes @ xy`` (``axes`` ``(A, 2)``) of the
+        points :meth:`above` returns, in its order.
+
+        Every candidate closing along one direction has the same axes (its fingers'
+        facings, the lines across them): the product is taken once for the whole cloud
+        and sliced, a row of a matrix product being the same whichever rows stand beside
+        it."""
+        key = (visible, axes.tobytes(), b"")
+        by_height = self._by_height[visible]
+        if key not in self._offsets:
+            self._offsets[key] = axes @ by_height[:, :2].T
+        return self._offsets[key][:, np.searchsorted(by_height[:, 2], z_m) :]
+
+    def offsets_above(
+        self, origin_m: np.ndarray, axis: np.ndarray, z_m: float, *, visible: bool = False
+    ) -> np.ndarray:
+        """``(K,)``: ``(points - origin_m) @ axis`` (both ``(3,)``) of the points
+        :meth:`above` returns, in its order; taken once for the whole cloud, as
+        :meth:`along_above`."""
+        key = (visible, axis.tobytes(), origin_m.tobytes())
+        by_height = self._by_height[visible]
+        if key not in self._offsets:
+            self._offsets[key] = (by_height - origin_m) @ axis
+        return self._offsets[key][np.searchsorted(by_height[:, 2], z_m) :]
 
     def footprint_half_m(self, direction: np.ndarray) -> float:
         """:func:`footprint_half_m` of the completed cloud along ``direction``."""

@@ -213,9 +213,13 @@ def pad_coverages(
     point_inside = np.abs(z - taxels.row_z[point_row]) <= half
     starts = np.sum(origins_m[:, :2] * laterals, axis=1)
     u = laterals @ points_robot[at_rows, :2].T - starts[:, None]
-    query, index = np.nonzero((u >= taxels.col_u.min() - half) & (u <= taxels.col_u.max() + half))
+    # ``np.nonzero`` of the (Q, N) mask, row by row, from its flat indices.
+    query, index = np.divmod(
+        np.flatnonzero((u >= taxels.col_u.min() - half) & (u <= taxels.col_u.max() + half)),
+        u.shape[1],
+    )
     inside = point_inside[index]
-    query, index = query[inside], index[inside]
+    query, index = query.compress(inside), index.compress(inside)
     if len(query) == 0:
         return [None] * len(origins_m)
     u = u[query, index]
@@ -240,7 +244,7 @@ def pad_coverages(
     nearest = np.full(len(origins_m) * per_pad, np.inf)
     np.minimum.at(nearest, taxel, depth)
     layer = depth <= nearest[taxel] + LAYER_M
-    taxel, depth, source = taxel[layer], depth[layer], source[layer]
+    taxel, depth, source = taxel.compress(layer), depth.compress(layer), source.compress(layer)
     # By taxel, and by depth within one: ``np.lexsort((depth, taxel))``, as two stable
     # sorts, the second by the taxels' numbers as 16-bit integers where they fit (sorted
     # in one pass of counting).

@@ -164,15 +164,17 @@ def parallel_candidate(
         return Candidate.rejected(angle_rad, height_m, 0.0, "fingertips below the table clearance")
 
     def column(visible: bool) -> np.ndarray:
-        """The points between the jaws' paths above the fingertips (lowest first)."""
-        points = cloud.above(fingertip_z, visible=visible)
-        return points[np.abs((points - centre_m) @ lateral) <= hand.jaw_half_width_m]
+        """Where the points between the jaws' paths above the fingertips lie along
+        ``direction`` (lowest first)."""
+        across = cloud.offsets_above(centre_m, lateral, fingertip_z, visible=visible)
+        along = cloud.offsets_above(_ORIGIN, direction, fingertip_z, visible=visible)
+        return along.compress(np.abs(across) <= hand.jaw_half_width_m)
 
-    front_points, all_points = column(visible=True), column(visible=False)
-    if len(front_points) == 0:
+    front_along, all_along = column(visible=True), column(visible=False)
+    if len(front_along) == 0:
         return Candidate.rejected(angle_rad, height_m, 0.0, "no visible surface between the jaws")
-    front = percentile(front_points @ direction, 2.0)
-    back = percentile(all_points @ direction, 98.0)
+    front = percentile(front_along, 2.0)
+    back = percentile(all_along, 98.0)
     if not front < centre_m @ direction < back:
         # Where the completed model has a gap (a thin-walled object's unseen side), the
         # column may hold one wall only: the jaws would pinch it, not close around the object.
@@ -214,7 +216,8 @@ def parallel_candidate(
         points = cloud.slab(*jaw.z_range_m, visible=seen)
         # Beyond the pad's sides the finger stands back: its face there meets nothing the
         # pad's edges do not meet first.
-        points = points[np.abs((points - centre_m) @ lateral) <= hand.pad_width_m / 2.0]
+        before = np.abs((points - centre_m) @ lateral) <= hand.pad_width_m / 2.0
+        points = points.compress(before, axis=0)
         contact = pad_coverage(points, position, sign * direction, jaw, s.touch_tolerance_m)
         if contact is None:
             taxels = _flat_taxels(hand.pad, height_m)
@@ -254,6 +257,10 @@ def parallel_candidate(
         opening_m=hand.aperture_m,
         predicted_contacts=contacts[0].points,
     )
+
+
+#: Offsets from it along an axis are the points' own products with the axis.
+_ORIGIN = np.zeros(3)
 
 
 @functools.lru_cache(maxsize=64)

@@ -256,10 +256,11 @@ def sdh_candidates(
                     hand.palm_xy = _contact_centre(
                         hand.contacts, hand.x_hand, hand.y_hand, spread_rad
                     ) - (centre_offset * hand.x_hand)
+    distal_pad = sdh.distal_pad_m()
     return [
         hand.verdict
         if hand.verdict is not None
-        else _checked(cloud, centre_m, hand, spread_rad, sdh, s, beyond_m)
+        else _checked(cloud, centre_m, hand, spread_rad, sdh, s, beyond_m, distal_pad)
         for hand in hands
     ]
 
@@ -272,17 +273,19 @@ def _checked(
     sdh: SdhHand,
     s: CandidateSettings,
     beyond_m: float,
+    distal_pad: tuple[tuple[float, float], float],
 ) -> Candidate:
     """The checks of :func:`sdh_candidate` after the fingers' contacts are found (a pad
-    may stop ``beyond_m`` past ``centre_m``), and the feasible candidate's score and
-    plan."""
+    may stop ``beyond_m`` past ``centre_m``; ``distal_pad``: :meth:`SdhHand.distal_pad_m`),
+    and the feasible candidate's score and plan."""
     angle_rad, height_m, taxels = hand.angle_rad, hand.height_m, hand.taxels
     x_hand, palm_xy, in_band = hand.x_hand, hand.palm_xy, hand.in_band
     bases, facings, contacts, alphas = hand.bases, hand.facings, hand.contacts, hand.alphas
     k = sdh.kinematics
+    along = np.column_stack([facings, np.zeros(len(facings))])
     if not all(
-        contact.stops_before(centre_m + beyond_m * np.append(facing, 0.0), np.append(facing, 0.0))
-        for contact, facing in zip(contacts, facings, strict=True)
+        contact.stops_before(centre_m + beyond_m * facing, facing)
+        for contact, facing in zip(contacts, along, strict=True)
     ):
         return Candidate.rejected(angle_rad, height_m, spread_rad, BEYOND_CENTRE)
     palm_z = height_m + float(np.mean(k.distal_pad_depth_m(np.array(alphas))))
@@ -297,11 +300,11 @@ def _checked(
         )
     # Points deeper than the proximal link reaches from its joint are never hit closing.
     reach = _closing_reach_m(k, s.touch_tolerance_m)
-    within = cloud.above(palm_z - k.knuckle_depth_m - reach - _MARGIN_M, visible=True)
-    closing = _closing_corridors(k, within, bases, facings, palm_z, s)
+    closing = _closing_corridors(
+        k, cloud, palm_z - k.knuckle_depth_m - reach - _MARGIN_M, bases, facings, palm_z, s
+    )
     # Every closing ends at the contact angles, whatever the pre-shape: a link that meets
     # the cloud there rejects the grasp before the pre-shape search.
-    distal_pad = sdh.distal_pad_m()
     hit = _closing_collides(k, closing, [[alpha] for alpha in alphas], s, distal_pad)
     if hit is not None:
         return Candidate.rejected(angle_rad, height_m, spread_rad, hit)
@@ -408,7 +411,8 @@ def _contact_centre(
     the palm's x axis, between finger 1's and finger 2's across it (spread 0); midway
     between finger 1's and finger 2's (the pinch); or the circumcentre of the three
     contacts (fingers facing the palm axis)."""
-    points = np.array([c.points.mean(axis=0)[:2] for c in contacts])
+    # Each contact's mean point (``mean``'s sum and division, without its checks).
+    points = np.array([c.points[:, :2].sum(axis=0) / len(c.points) for c in contacts])
     if spread_rad == 0.0:
         x = (points[:2].mean(axis=0) @ x_hand[:2] + points[2] @ x_hand[:2]) / 2.0
         y = points[:2].mean(axis=0) @ y_hand[:2]
@@ -445,13 +449,18 @@ def _clear_preshape(
     # Points deeper below the palm than any profile reaches, or beside every profile's
     # grid, are never hit.
     deepest, t_low, t_high = _profile_bounds(kinematics, s.descent_clearance_m)
-    points = cloud.above(palm_z - deepest - _MARGIN_M)
     corridors = []
     for t, d in _corridors(
-        points, bases, facings, palm_z, kinematics.finger_half_width_m + s.descent_clearance_m
+        cloud,
+        palm_z - deepest - _MARGIN_M,
+        False,
+        bases,
+        facings,
+        palm_z,
+        kinematics.finger_half_width_m + s.descent_clearance_m,
     ):
         within = (t >= t_low) & (t <= t_high)
-        corridors.append((t[within], d[within]))
+        corridors.append((t.compress(within), d.compress(within)))
     # The corridors run from the deepest point up (``cloud.above``'s order): their last
     # points are the shallowest below the palm, the first any pre-shape sweeps. A pre-shape
     # that sweeps MIN_HITS of those is blocked whatever the rest; of the others, in order,
@@ -469,25 +478,32 @@ def _clear_preshape(
 
 def _closing_corridors(
     kinematics: FingerKinematics,
-    visible: np.ndarray,
+    cloud: CandidateCloud,
+    z_m: float,
     bases: np.ndarray,
     facings: np.ndarray,
     palm_z: float,
     s: CandidateSettings,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Each finger's corridor (:func:`_corridors`) through the ``visible`` points, grown by
-    the touch tolerance, without the points farther from the proximal joint than any part
-    of the finger reaches at any angle: what :func:`_closing_collides` tests.
-    Only seen points count: the mirrored ones are where the plane guesses the back, too
-    uncertain to veto a grasp on."""
+    """Each finger's corridor (:func:`_corridors`) through the visible points above
+    ``z_m``, grown by the touch tolerance, without the points farther from the proximal
+    joint than any part of the finger reaches at any angle: what :func:`_closing_collides`
+    tests. Only seen points count: the mirrored ones are where the plane guesses the back,
+    too uncertain to veto a grasp on."""
     corridors = _corridors(
-        visible, bases, facings, palm_z, kinematics.finger_half_width_m + s.touch_tolerance_m
+        cloud,
+        z_m,
+        True,
+        bases,
+        facings,
+        palm_z,
+        kinematics.finger_half_width_m + s.touch_tolerance_m,
     )
     reach = _closing_reach_m(kinematics, s.touch_tolerance_m) + _MARGIN_M
     near = []
     for t, d in corridors:
         kept = t * t + (d - kinematics.knuckle_depth_m) ** 2 <= reach * reach
-        near.append((t[kept], d[kept]))
+        near.append((t.compress(kept), d.compress(kept)))
     return near
 
 
@@ -539,26 +555,39 @@ def _closing_reach_m(kinematics: FingerKinematics, clearance_m: float) -> float:
 
 
 def _corridors(
-    points: np.ndarray,
+    cloud: CandidateCloud,
+    z_m: float,
+    visible: bool,
     bases: np.ndarray,
     facings: np.ndarray,
     palm_z: float,
     half_width_m: float,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """For each finger (base and facing, ``(F, 2)`` each), the ``points`` within
-    ``half_width_m`` of the line along its facing through its base: their distance ``t``
-    along the facing from the base and their depth ``d`` below the palm at ``palm_z`` (m),
-    in the order of ``points``."""
+    """For each finger (base and facing, ``(F, 2)`` each), the points of
+    ``cloud.above(z_m, visible=visible)`` within ``half_width_m`` of the line along its
+    facing through its base: their distance ``t`` along the facing from the base and their
+    depth ``d`` below the palm at ``palm_z`` (m), in the order of those points.
+
+    The closing check's (``visible``) offsets come from the products a closing
+    direction's candidates share (:meth:`CandidateCloud.along_above`): most candidates
+    reach that check. The pre-shape search, on the completed cloud, which few reach,
+    takes its own."""
     normals = np.column_stack([-facings[:, 1], facings[:, 0]])
-    xy = points[:, :2].T
-    # Every finger's offsets in one product each, ``(F, N)``.
-    across = np.abs(normals @ xy - np.sum(bases * normals, axis=1)[:, None])
-    along = facings @ xy - np.sum(bases * facings, axis=1)[:, None]
+    points = cloud.above(z_m, visible=visible)
+    # Every finger's offsets, ``(F, N)``.
+    if visible:
+        across = cloud.along_above(normals, z_m, visible=True)
+        along = cloud.along_above(facings, z_m, visible=True)
+    else:
+        xy = points[:, :2].T
+        across, along = normals @ xy, facings @ xy
+    across = np.abs(across - np.sum(bases * normals, axis=1)[:, None])
+    along = along - np.sum(bases * facings, axis=1)[:, None]
     depth = palm_z - points[:, 2]
     corridors = []
     for t, offset in zip(along, across, strict=True):
         near = offset <= half_width_m
-        corridors.append((t[near], depth[near]))
+        corridors.append((t.compress(near), depth.compress(near)))
     return corridors
 
 
@@ -634,7 +663,7 @@ def _profile_hits(
     shallow = d <= deepest
     kept = np.concatenate([[0], np.cumsum(shallow)])
     ends = kept[np.cumsum([len(t) for t, _ in corridors])]
-    t, d = t[shallow], d[shallow]
+    t, d = t.compress(shallow), d.compress(shallow)
     index = np.round((t[None, :] - starts[:, None]) / _PROFILE_STEP_M).astype(int)
     # Cells before a grid's start read column 0 and after its end a later one: -inf.
     width = reaches.shape[1]
