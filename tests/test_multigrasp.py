@@ -683,6 +683,38 @@ def test_a_grasp_already_made_is_made_again_only_when_nothing_else_teaches():
     assert choice.chosen == 0 and choice.scores[1] == 0.0
 
 
+def test_the_floor_stays_set_by_the_best_delivered_grasp_a_repeat_included():
+    stage = _box_stage()
+    gripper = GRIPPERS["pg70"]
+    made = _plan(0.0)
+    again = replace(_plan(0.003), score=1.0)  # the grasp made, found again: rated best
+    beside, apart = _plan(0.006), _plan(-0.03)  # overlapping it: teaches less; clear: more
+
+    def choose(apart_rating):
+        plans = [again, replace(beside, score=0.55), replace(apart, score=apart_rating)]
+        return choose_next_grasp(
+            "information", [NextHand(_Planner(plans), gripper)], stage, MODEL,
+            np.random.default_rng(0), earlier=(made,),
+        )  # fmt: skip
+
+    # Delivered at 0.45, under half the repeat's 1.0, the grasp clear of it stays out though
+    # its gain times its delivery is the larger (and half the best new grasp's 0.55 would
+    # let it in).
+    choice = choose(0.45)
+    assert choice.scores[2] * 0.45 > choice.scores[1] * 0.55 > 0.0
+    assert choice.repeated == (True, False, False)
+    assert choice.chosen == 1
+    # Above the floor it is chosen; with no new grasp above it, the new ones are compared
+    # among themselves and the repeat is still not made again.
+    assert choose(0.55).chosen == 2
+    alone = [again, replace(apart, score=0.3)]
+    choice = choose_next_grasp(
+        "information", [NextHand(_Planner(alone), gripper)], stage, MODEL,
+        np.random.default_rng(0), earlier=(made,),
+    )  # fmt: skip
+    assert choice.chosen == 1
+
+
 def test_no_strategy_chooses_a_grasp_that_was_not_fused_again():
     stage = _box_stage()
     gripper = GRIPPERS["pg70"]

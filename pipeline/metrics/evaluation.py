@@ -169,6 +169,29 @@ def evaluate_stage(
     return metrics, distances
 
 
+def deviation_floor(stage: StageEstimate, truth: GroundTruth) -> DeviationSummary | None:
+    """The deviation (m) of the model ``stage``'s points would complete with the true bias
+    and the true mirror plane: each point moved by ``truth.cloud_motion`` and mirrored by the
+    true plane (of any orientation) nearest the stage's own after its bias.
+
+    No estimate of the plane and the bias, and so no grasp, brings the stage's completed
+    model closer to the object than this: what is left is the points' own error (the camera's
+    depth noise, the detail of the hidden side the mirror image misses). Its median against
+    the stage's ``deviation_m`` says how much of the deviation more grasps could still
+    remove. None when the truth has no cloud motion (the sensor does not know its
+    calibration error) or the object no mirror plane.
+    """
+    planes = [symmetry for symmetry in truth.symmetries if symmetry.is_plane]
+    if truth.cloud_motion is None or not planes:
+        return None
+    estimated = _moved_symmetry(stage, plane_after_bias(stage.plane, stage.bias)).direction
+    plane = max(planes, key=lambda symmetry: abs(float(symmetry.direction @ estimated)))
+    motion = np.asarray(truth.cloud_motion, dtype=float)
+    seen = np.asarray(stage.points, dtype=float) @ motion[:3, :3].T + motion[:3, 3]
+    distances = truth.surface.distances(np.concatenate([seen, plane.apply(seen)]))
+    return DeviationSummary.from_distances(distances)
+
+
 def _moved_symmetry(stage: StageEstimate, moved_plane: SymmetryPlane) -> Symmetry:
     """The stage's mirror plane after its bias: the leaning plane it fused, else the
     vertical ``moved_plane``."""

@@ -79,9 +79,10 @@ SAME_PLACE_M = 0.005
 SAME_DIRECTION_RAD = math.radians(7.5)
 
 #: ``information`` chooses among the alternatives whose :func:`delivery` is at least this
-#: fraction of the best. Below it are grasps that meet an edge or hold the object off its
-#: centre, which turn it as the pads close: on the CD drive, third grasps there turned it
-#: 7-10 deg, more than the re-grasp noise ``Q`` lets the estimator follow.
+#: fraction of the best (a grasp already made included, though not chosen). Below it are
+#: grasps that meet an edge or hold the object off its centre, which turn it as the pads
+#: close: on the CD drive, third grasps there turned it 7-10 deg, more than the re-grasp
+#: noise ``Q`` lets the estimator follow.
 PLANNER_FLOOR = 0.5
 
 
@@ -566,12 +567,18 @@ def choose_next_grasp(
     turns = tuple(predicted_turn_rad(touch) for touch in touches)
     followed = np.abs(turns) <= turn_limit
     # A grasp already made is made again only when no other the estimator can follow
-    # teaches anything: the floor below then compares the new grasps among themselves.
+    # teaches anything. The floor below stays set by the best grasp the hands deliver, a
+    # repeat included: leaving a grasp out for being made already does not make a worse
+    # delivered one likelier to hold. Only where no new grasp reaches it does the floor
+    # compare the new grasps among themselves.
     repeated = np.array([repeats(plan, earlier, grippers) for plan in alternatives], dtype=bool)
-    if np.any(followed & ~repeated & (np.asarray(scores) > 0.0)):
-        followed &= ~repeated
     rated = np.array([delivery(plan) for plan in alternatives]) * followed
-    eligible = rated >= PLANNER_FLOOR * rated.max()
+    best = rated.max()
+    if np.any(followed & ~repeated & (np.asarray(scores) > 0.0)):
+        rated = rated * ~repeated
+        if not np.any(rated >= PLANNER_FLOOR * best):
+            best = rated.max()
+    eligible = rated >= PLANNER_FLOOR * best
     expected = np.where(eligible, np.multiply(scores, rated), -1.0)
     if expected.max() <= 0.0:  # none teaches: the best delivered, else the planner's best
         planned = np.array([_planner_score(plan) for plan in alternatives])

@@ -39,8 +39,10 @@ from pipeline.io.formats import (
     write_cloud,
     write_json,
 )
+from pipeline.metrics import DeviationSummary
 from pipeline.metrics.evaluation import (
     GroundTruth,
+    deviation_floor,
     evaluate_stage,
     model_scores,
     object_motion,
@@ -548,7 +550,9 @@ def _take_choice(trial: Trial, choice: HandChoice, missed: list[MissedGrasp]) ->
 class Fused:
     """What the grasps of a trial left: the estimate after the last grasp fused, the truth
     it is scored against (the object after that grasp), each stage's evaluation, the
-    initial state and every grasp's contacts."""
+    initial state, every grasp's contacts and the selected stage's deviation floor
+    (:func:`~pipeline.metrics.evaluation.deviation_floor`: its points with the true bias
+    and plane; None where the truth cannot give it)."""
 
     init: SymmetryInit
     result: EstimateResult
@@ -556,6 +560,7 @@ class Fused:
     evaluated: list[tuple[dict[str, Any], np.ndarray]]
     object_after: ObjectPose
     contacts: tuple[Contacts, ...]
+    floor: DeviationSummary | None = None
 
 
 @dataclass(frozen=True)
@@ -761,7 +766,8 @@ def _fuse(
         truth = ground_truth(trial.obj, after, look.pose_seen, look.observation.calibration_error)
         centre = np.asarray(attempt.plan.T_robot_hand)[:2, 3]
         evaluated = [evaluate_stage(stage, truth, centre) for stage in result.stages]
-    return Fused(init, result, truth, evaluated, after, grasps)
+        floor = deviation_floor(result.selected, truth)
+    return Fused(init, result, truth, evaluated, after, grasps, floor)
 
 
 def next_hands(world: World, planners: Planners, choice: HandChoice) -> dict[str, NextHand]:
@@ -873,5 +879,6 @@ def grasp_to_json(
         "status": fused.result.final.status,
         **selection_to_json(fused.result),
         "uncertainty": known.to_json(),
+        "deviation_floor_m": None if fused.floor is None else fused.floor.as_dict(),
         "stages": entries["stages"],
     }
