@@ -277,6 +277,7 @@ def rim_pinches(
     normal: np.ndarray,
     sdh: SdhHand,
     settings: CandidateSettings,
+    surface_m: np.ndarray | None = None,
 ) -> list[Candidate]:
     """SDH-2 pinches across the wall at each of ``sites``: fingers 1 and 2 facing the
     thumb (spread 0), the palm's x axis along the site's outward direction (the thumb
@@ -292,10 +293,16 @@ def rim_pinches(
     closing among them, so a pad height at which the thumb's tip meets a wall curving in
     below the rim before its pad meets the wall is rejected.
 
+    No pinch is tried at a site where the wall leans more than a pad's rows can follow
+    (:meth:`RimSite.lean_rad`, :func:`lean_limit_rad`).
+
     Args:
         normal: ``(3,)`` the proposed symmetry plane's normal: the closing angle is
             measured from it, signed about +z (the score's alignment).
+        surface_m: ``(M, 3)`` the seen surface the wall's lean is measured on, where
+            ``visible_m`` has volume added under it (default ``visible_m``).
     """
+    surface_m = visible_m if surface_m is None else surface_m
     seen = CandidateCloud(visible_m, visible_m)
     limit = lean_limit_rad(sdh.pad.pitch_m, settings.touch_tolerance_m)
     candidates = []
@@ -306,7 +313,7 @@ def rim_pinches(
             normal[0] * direction[0] + normal[1] * direction[1],
         )
         poses = [(angle, direction, site.wall_m[2] + dz) for dz in PINCH_HEIGHTS_M]
-        lean = site.lean_rad(visible_m, _pads_half_width_m(sdh))
+        lean = site.lean_rad(surface_m, _pads_half_width_m(sdh))
         if lean is not None and lean > limit:
             reason = leaning_reason(lean, limit)
             candidates += [Candidate.rejected(angle, height, 0.0, reason) for _, _, height in poses]

@@ -302,7 +302,9 @@ class TopThreeFinger(CandidatePlanner):
         if any(c.summary.feasible for c in candidates):
             return candidates
         # No hand closes around it: an open object's wall can still be pinched at the rim.
-        return candidates + rim_pinches(sites, surface, proposal.plane.normal, hand, frame.settings)
+        return candidates + rim_pinches(
+            sites, points, proposal.plane.normal, hand, frame.settings, surface
+        )
 
 
 @hookimpl
