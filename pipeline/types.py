@@ -753,7 +753,8 @@ class Consistency:
 
     Attributes:
         checks: the checks that ran: ``"taxels"`` (always, when there were contacts) and
-            ``"free_space"`` (only when the problem carried the camera's depth image).
+            ``"free_space"`` (only when the problem carried the camera's depth image), and
+            ``"plane_turn"`` (a fused stage of a leaning plane).
         taxel_rms_m: RMS distance of the taxels in contact from the model's surface (m),
             NaN without taxels.
         nis: pad-averaged normalised innovation squared of those residuals against the
@@ -770,6 +771,10 @@ class Consistency:
             does not enter ``consistent``: the selection weighs it (docs/method.md §9).
         after_view_threshold: its bound at the configured false-alarm probability, None
             with it.
+        plane_turn_deg: a fused leaning plane's turn from the initialiser's normal (deg,
+            :func:`pipeline.estimation.consistency.plane_turn_test`), None for a vertical
+            plane and for Stage 0. Beyond ``plane_turn_bound_deg`` (its bound at the
+            false-alarm probability) the stage is not ``consistent``.
     """
 
     checks: tuple[str, ...]
@@ -782,6 +787,8 @@ class Consistency:
     reason: str = ""
     after_view_nis: float | None = None
     after_view_threshold: float | None = None
+    plane_turn_deg: float | None = None
+    plane_turn_bound_deg: float | None = None
 
     @property
     def contradicts_after_view(self) -> bool:
@@ -831,7 +838,10 @@ class Consistency:
         after_view = 0.0
         if self.after_view_nis is not None and self.after_view_threshold is not None:
             after_view = self.after_view_nis / self.after_view_threshold
-        return float(max(taxels, self.free_space_excess, after_view))
+        turn = 0.0
+        if self.plane_turn_deg is not None and self.plane_turn_bound_deg is not None:
+            turn = self.plane_turn_deg / self.plane_turn_bound_deg
+        return float(max(taxels, self.free_space_excess, after_view, turn))
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from estimation_scenes import (
     one_step_and_filterpy,
 )
 
-from pipeline.estimation.consistency import ConsistencySettings
+from pipeline.estimation.consistency import ConsistencySettings, plane_turn_test
 from pipeline.estimation.dense import DenseCovariance
 from pipeline.estimation.geometry import (
     apply_side,
@@ -29,10 +29,16 @@ from pipeline.estimation.geometry import (
 )
 from pipeline.estimation.iekf import IekfSettings, fuse
 from pipeline.estimation.measurement import linearise, predict
-from pipeline.estimation.problem import bias_plane_covariance, estimate_result, general_plane
+from pipeline.estimation.problem import (
+    bias_plane_covariance,
+    estimate_result,
+    general_plane,
+    plane_angle_stds,
+    with_plane_turn_test,
+)
 from pipeline.io.formats import stage_to_json
 from pipeline.run.runner import initial_estimate
-from pipeline.types import Bias, PointCloud, Symmetry, SymmetryInit, SymmetryPlane
+from pipeline.types import Bias, Consistency, PointCloud, Symmetry, SymmetryInit, SymmetryPlane
 
 RNG = np.random.default_rng(11)
 G7 = np.array([0.3, 0.01, -0.02, 0.005, 0.013, 0.7, 0.6])
@@ -202,6 +208,10 @@ def test_a_leaning_plane_is_diagnosed_selected_and_reported(box):
         assert document["kind"] == "plane"
         assert list(document["parameters"]) == ["m_r", "m_azimuth", "m_elevation"]
         assert np.array(document["covariance"]).shape == (3, 3)
+        # A fused leaning plane's turn from Stage 0's is tested and written; Stage 0's not.
+        turned = stage_to_json(stage)["consistency"].get("plane_turn_deg")
+        assert ("plane_turn" in stage.consistency.checks) == (stage.stage > 0)
+        assert (turned is None) == (stage.stage == 0)
         # The vertical stand-in shares the azimuth and the point nearest the origin.
         assert stage.plane.theta_rad == pytest.approx(g[5])
         assert stage.plane.offset_m == pytest.approx(g[4] * np.cos(g[6]))
@@ -235,3 +245,69 @@ def test_stage_0_alone_of_a_leaning_plane_has_a_covariance_the_size_of_its_state
     assert stage.covariance.shape == (7, 7) and np.isnan(stage.covariance).all()
     assert stage.symmetry.kind == "plane"
     np.testing.assert_allclose(abs(stage.symmetry.direction @ normal), 1.0)
+
+
+def _normal_spread(g, stds):
+    """Covariance of the unit normal (3 x 3) under the chart's angle stds, through
+    central differences of :func:`state_normal` (not the analytic derivatives)."""
+    step = 1e-6
+    columns = []
+    for k in (5, 6):
+        dg = np.zeros(len(g))
+        dg[k] = step
+        columns.append((state_normal(g + dg) - state_normal(g - dg)) / (2 * step))
+    jacobian = np.array(columns).T
+    return jacobian @ np.diag(np.square(stds)) @ jacobian.T
+
+
+@pytest.mark.parametrize("elevation", [0.0, 0.6, 1.3, -1.0])
+def test_a_leaning_normal_may_turn_alike_in_every_direction(elevation):
+    std = 0.05
+    g = np.array([*G7[:6], elevation])
+    spread = np.sort(np.linalg.eigvalsh(_normal_spread(g, plane_angle_stds(0.4, std, g))))
+    # Both tangent directions of the sphere get the same variance; none along the normal.
+    np.testing.assert_allclose(spread, [0.0, std**2, std**2], atol=1e-12)
+    assert plane_angle_stds(0.4, std, G7[:6]) == (0.4,)
+
+
+def test_at_the_charts_pole_the_azimuth_std_is_capped():
+    std = 0.05
+    g = np.array([*G7[:6], np.pi / 2 - 0.01])  # cos(elevation) = 0.01 < sin(std)
+    azimuth_std, elevation_std = plane_angle_stds(0.4, std, g)
+    assert elevation_std == std
+    assert azimuth_std == pytest.approx(std / np.sin(std))
+    spread = np.sort(np.linalg.eigvalsh(_normal_spread(g, (azimuth_std, elevation_std))))
+    assert spread[2] == pytest.approx(std**2) and spread[1] < std**2
+
+
+def _turn_prior(std):
+    return np.diag(np.square([0.05, 0.01, 0.01, 0.002, 0.03, std / np.cos(G7[6]), std]))
+
+
+def test_the_turn_test_measures_the_angle_between_normals():
+    std, alpha = 0.05, 0.001
+    # Chi-square with two degrees of freedom: its 1 - alpha quantile is -2 ln(alpha).
+    bound = std * np.sqrt(-2.0 * np.log(alpha))
+    for turn in (0.01, 0.2):
+        g = np.array([*G7[:6], G7[6] + turn])  # along a meridian: the turn is the step
+        measured, measured_bound = plane_turn_test(g, G7, _turn_prior(std), alpha)
+        assert measured == pytest.approx(turn) and measured_bound == pytest.approx(bound)
+    # The opposite normal is the same plane.
+    opposite = np.array([*G7[:4], -G7[4], G7[5] + np.pi, -G7[6]])
+    assert plane_turn_test(opposite, G7, _turn_prior(std), alpha)[0] == pytest.approx(0.0, abs=1e-7)
+
+
+@pytest.mark.parametrize("turn", [0.05, 0.3])
+def test_a_plane_turned_beyond_its_prior_is_inconsistent(turn):
+    passed = Consistency(("taxels",), 0.001, 1.0, 5.0, None, None, True)
+    fusion = dataclasses.make_dataclass("Fusion", ["g_init", "covariance_init"])(
+        G7, _turn_prior(0.05)
+    )
+    g = np.array([*G7[:6], G7[6] + turn])
+    verdict = with_plane_turn_test(passed, g, fusion, 0.001)
+    assert verdict.checks == ("taxels", "plane_turn")
+    assert verdict.plane_turn_deg == pytest.approx(np.degrees(turn))
+    beyond = bool(turn > np.radians(verdict.plane_turn_bound_deg))
+    assert verdict.consistent is not beyond
+    assert (verdict.excess > 1.0) is beyond
+    assert ("plane turned" in verdict.reason) is beyond

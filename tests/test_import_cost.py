@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-HEAVY = ("open3d", "trimesh", "matplotlib", "plotly", "dash")
+HEAVY = ("open3d", "trimesh", "matplotlib", "plotly", "dash", "igl")
 
 
 def loaded_after(code: str, modules: tuple[str, ...]) -> list[str]:
@@ -148,3 +148,16 @@ def test_a_sweeps_fork_server_imports_the_trial_under_the_hook():
     hook first: the trial's modules load without numpy's test tools or networkx."""
     code = "import pipeline.experiments.trial_worker"
     assert loaded_after(code, ("numpy.f2py", "numpy.testing", "networkx")) == []
+
+
+@pytest.mark.slow
+def test_a_default_trial_never_loads_open3d(tmp_path):
+    """open3d's import is the largest of a new process (about 0.6 s): the default trial's
+    clouds are written and its evaluation computed without it."""
+    arguments = ["trial", "--set", "trial.pictures=false", "--out", str(tmp_path / "run")]
+    code = (
+        "import contextlib, io\nfrom pipeline.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    assert main({arguments!r}) == 0"
+    )
+    assert loaded_after(code, ("open3d", "igl")) == ["igl"]

@@ -40,7 +40,7 @@ from scipy.special import gammaincinv, ndtri
 
 from pipeline.errors import FELL_BACK_STATUSES, estimate_failed
 from pipeline.estimation.after_view_term import MEASURED, normalised_innovation
-from pipeline.estimation.geometry import invert_side, mirror, side_linear_part
+from pipeline.estimation.geometry import invert_side, mirror, side_linear_part, state_normal
 from pipeline.estimation.iekf import GraspContacts
 from pipeline.perception.visibility import free_space_depths
 from pipeline.types import Consistency, DepthObservation, StageEstimate
@@ -208,6 +208,25 @@ def pad_test(nis: np.ndarray, groups: np.ndarray, alpha: float) -> tuple[float, 
     pads = int(group.max()) + 1
     means = np.bincount(group, weights=nis, minlength=pads) / np.bincount(group, minlength=pads)
     return float(means.mean()), float(2.0 * gammaincinv(pads / 2, 1.0 - alpha) / pads)
+
+
+def plane_turn_test(
+    g: np.ndarray, g_init: np.ndarray, covariance_init: np.ndarray, alpha: float
+) -> tuple[float, float]:
+    """A fused leaning plane's turn from the initialiser's normal and its bound (rad).
+
+    The prior lets the normal turn by ``s = sqrt(P0[m_phi, m_phi])`` in any direction on
+    the sphere (:func:`.problem.plane_angle_stds`), so the turn ``t`` between the fused
+    and the initial normal (the sign of a normal carries no meaning) has ``(t / s)^2``
+    about chi-square with two degrees of freedom when the touch agrees with the camera;
+    the bound is its ``1 - alpha`` quantile (the posterior moves the mean by less than the
+    prior's spread, so the test errs on the side of passing). Beyond it the taxels pulled
+    the plane where the camera's view does not put it (docs/method.md §1).
+    """
+    cosine = abs(float(state_normal(g) @ state_normal(g_init)))
+    turn = float(np.arccos(min(cosine, 1.0)))
+    spread = float(np.sqrt(covariance_init[6, 6]))
+    return turn, float(np.sqrt(2.0 * gammaincinv(1.0, 1.0 - alpha))) * spread
 
 
 def after_view_test(

@@ -21,6 +21,7 @@ from pipeline.estimation.problem import (
     diagonal_covariance,
     grasp_contacts,
     initial_state,
+    plane_angle_stds,
 )
 from pipeline.params import param
 from pipeline.types import EstimationProblem
@@ -72,6 +73,14 @@ class MapParams:
         "prior std of the plane normal angle m_theta: the initialiser's orientation error "
         "(VC hypotheses, or PCA axes of a nearly round cloud, can be off by tens of "
         "degrees; 23 deg puts a 45 deg error at 2 std, inside the 95 % gate) (rad)",
+        above=0.0,
+    )
+    prior_m_lean_rad: float = param(
+        0.05,
+        "prior std of a leaning plane's normal: the angle it may turn in any direction on "
+        "the sphere of normals (the azimuth-elevation chart's stds follow from it). A top "
+        "grasp's pads on a lying object touch near the plane, where its tilt has no lever, "
+        "so the camera's plane must hold it (docs/method.md §1) (rad)",
         above=0.0,
     )
     point_std_m: float = param(0.002, "prior std of each cloud point (sensor noise) (m)", above=0.0)
@@ -136,9 +145,7 @@ def fusion_problem(
     noise = (p.noise_along_normal_m, p.noise_across_normal_m)
     xy = p.prior_b_xy_m
     g_init = initial_state(problem, pivot)
-    # A leaning plane's elevation has the azimuth's prior std: the initialiser measures both
-    # angles of its normal alike.
-    angles = (p.prior_m_theta_rad,) * (len(g_init) - 5)
+    angles = plane_angle_stds(p.prior_m_theta_rad, p.prior_m_lean_rad, g_init)
     stds = (p.prior_b_theta_rad, xy, xy, p.prior_b_z_m, p.prior_m_r_m, *angles)
     grasps = [grasp_contacts(c, window_std_m, noise, facing_filter) for c in problem.grasps]
     if after_view is not None:

@@ -20,6 +20,7 @@ from pipeline.estimation.geometry import (
 )
 from pipeline.types import (
     Bias,
+    Consistency,
     Contacts,
     DepthObservation,
     EstimateResult,
@@ -250,6 +251,8 @@ def estimate_result(
         verdict = assess(
             stage.points, g, stage.grasp_g, fusion.pivot_m, fusion.grasps, view, consistency, tree
         )
+        if stage.stage > 0 and len(g) != BIAS_PLANE_DIM:
+            verdict = with_plane_turn_test(verdict, g, fusion, consistency.alpha)
         status = stage.status
         if not verdict.consistent and status in ("converged", "max_iterations"):
             status = "inconsistent"
@@ -281,9 +284,52 @@ def estimate_result(
     return EstimateResult(stages=tuple(diagnosed), selected_stage=selected, selection_reason=reason)
 
 
+def with_plane_turn_test(
+    verdict: Consistency, g: np.ndarray, fusion: FusionProblem, alpha: float
+) -> Consistency:
+    """``verdict`` with a fused leaning plane's turn from Stage 0's
+    (:func:`.consistency.plane_turn_test`); failed when it turned further than its prior
+    allows."""
+    from pipeline.estimation.consistency import plane_turn_test
+
+    turn, bound = plane_turn_test(g, fusion.g_init, fusion.covariance_init, alpha)
+    checked = replace(
+        verdict,
+        checks=(*verdict.checks, "plane_turn"),
+        plane_turn_deg=float(np.degrees(turn)),
+        plane_turn_bound_deg=float(np.degrees(bound)),
+    )
+    if turn <= bound:
+        return checked
+    failure = (
+        f"plane turned {np.degrees(turn):.1f} deg from the camera's (bound {np.degrees(bound):.1f})"
+    )
+    reason = "; ".join(r for r in (verdict.reason, failure) if r)
+    return replace(checked, consistent=False, reason=reason)
+
+
 def diagonal_covariance(stds: tuple[float, ...]) -> np.ndarray:
     """``diag(stds^2)``."""
     return np.diag(np.square(np.asarray(stds, dtype=float)))
+
+
+def plane_angle_stds(
+    azimuth_std_rad: float, normal_std_rad: float, g: np.ndarray
+) -> tuple[float, ...]:
+    """Prior stds of the plane's angles in ``g`` (rad): ``(azimuth_std_rad,)`` for the
+    paper's vertical plane; for a leaning plane ``(azimuth, elevation)`` stds that let its
+    normal turn by ``normal_std_rad`` in any direction on the sphere.
+
+    A step ``da`` of the azimuth turns the normal by ``cos(elevation) da`` and a step of
+    the elevation by itself, so the chart's stds are ``normal_std / cos(elevation)`` and
+    ``normal_std``. Near the chart's pole (a level plane) the azimuth hardly moves the
+    normal: its std is capped where ``cos(elevation)`` falls below ``sin(normal_std)``,
+    inside one std of the pole, where every azimuth is as good as another.
+    """
+    if len(g) == BIAS_PLANE_DIM:
+        return (azimuth_std_rad,)
+    lever = max(float(np.cos(g[6])), float(np.sin(normal_std_rad)))
+    return (normal_std_rad / lever, normal_std_rad)
 
 
 def bias_plane_covariance(

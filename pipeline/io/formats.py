@@ -148,11 +148,17 @@ def _first_line(exc: BaseException) -> str:
 
 
 def write_cloud(path: Path, points: np.ndarray) -> Path:
-    """Write ``(N, 3)`` points as PLY/PCD (binary, via open3d) or NPY, by suffix."""
+    """Write ``(N, 3)`` points as binary PLY (:func:`ply_bytes`), PCD (binary, via open3d)
+    or NPY, by suffix; an empty cloud is refused (open3d writes none)."""
     path = Path(path)
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if path.suffix.lower() == ".npy":
         np.save(path, points)
+        return path
+    if len(points) == 0:
+        raise InputError(f"{path}: a cloud of no points is not written")
+    if path.suffix.lower() == ".ply":
+        path.write_bytes(ply_bytes(points))
         return path
     from pipeline.io.open3d_loader import open3d
 
@@ -161,6 +167,21 @@ def write_cloud(path: Path, points: np.ndarray) -> Path:
     if not o3d.io.write_point_cloud(str(path), cloud):
         raise InputError(f"{path}: open3d could not write the cloud")
     return path
+
+
+#: The header of a binary PLY point cloud, as open3d writes it (``{count}``: the points).
+PLY_HEADER = (
+    "ply\nformat binary_little_endian 1.0\ncomment Created by Open3D\nelement vertex {count}\n"
+    "property double x\nproperty double y\nproperty double z\nend_header\n"
+)
+
+
+def ply_bytes(points: np.ndarray) -> bytes:
+    """A binary PLY file of ``(N, 3)`` points: little-endian doubles, byte for byte the file
+    open3d's ``write_point_cloud`` writes for a cloud of points alone (written here, a run
+    that only writes clouds does not load open3d)."""
+    points = np.ascontiguousarray(points, dtype="<f8").reshape(-1, 3)
+    return PLY_HEADER.format(count=len(points)).encode("ascii") + points.tobytes()
 
 
 def _vector(value: Any, where: str, path: Path) -> np.ndarray:
@@ -624,6 +645,15 @@ def consistency_to_json(consistency: Consistency | None) -> dict[str, Any] | Non
             "reason": consistency.reason,
             "after_view_nis": consistency.after_view_nis,
             "after_view_threshold": consistency.after_view_threshold,
+            # A leaning plane's test only: a vertical plane's document is unchanged.
+            **(
+                {}
+                if consistency.plane_turn_deg is None
+                else {
+                    "plane_turn_deg": consistency.plane_turn_deg,
+                    "plane_turn_bound_deg": consistency.plane_turn_bound_deg,
+                }
+            ),
         }
     )
 

@@ -7,11 +7,13 @@
   geometric deviation of every completed point from the ground-truth mesh surface
   (:class:`MeshSurface`: one mesh asked about several point sets);
 * :mod:`.shape_scores` - :func:`surface_scores` (Chamfer distance, F-score at
-  :data:`FSCORE_THRESHOLDS_M`) and :func:`hull_iou` (volumetric IoU on a grid).
+  :data:`FSCORE_THRESHOLDS_M`) and :func:`hull_iou` (volumetric IoU on a grid);
+* :mod:`.mesh_queries` - where lines along a coordinate axis cross a mesh (the inside
+  tests of the solids and the IoU).
 
-Pure functions on point arrays in the robot frame ``R`` (metres, radians); open3d is loaded
-lazily (through :mod:`pipeline.io.open3d_loader`) for exact point-to-triangle distances and
-inside tests.
+Pure functions on point arrays in the robot frame ``R`` (metres, radians); exact
+point-to-triangle distances come from libigl's AABB tree (float64), the inside tests from
+numpy: the evaluation does not load open3d.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Geometric deviation of a completed model from the true mesh (docs/method.md §6): exact
-point-to-triangle distances and inside tests with open3d's ``RaycastingScene`` (loaded
-lazily through :mod:`pipeline.io.open3d_loader`), summarised per trial.
+point-to-triangle distances (libigl's AABB tree, in float64) and inside tests
+(:mod:`pipeline.metrics.mesh_queries`), summarised per trial.
 """
 
 from __future__ import annotations
@@ -8,6 +8,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
+from pipeline.metrics.mesh_queries import grid_crossings, ray_crossings
 
 
 @dataclass(frozen=True)
@@ -42,49 +44,10 @@ class DeviationSummary:
         return asdict(self)
 
 
-def _raycasting_scene(vertices: np.ndarray, faces: np.ndarray):
-    """An open3d ``RaycastingScene`` of a triangle mesh and the origin its coordinates are
-    taken relative to.
-
-    open3d works in float32, so the mesh is shifted to its bounding-box centre first (queries
-    must be shifted by the same origin); the remaining rounding is below 1e-6 m for objects
-    under 1 m.
-    """
-    from pipeline.io.open3d_loader import open3d
-
-    o3d = open3d()
-    vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces)
-    if len(faces) == 0:
-        raise ValueError("the mesh has no triangles")
-    origin = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor((vertices - origin).astype(np.float32)),
-        o3d.core.Tensor(faces.astype(np.uint32)),
-    )
-    return scene, origin
-
-
-def _tensor(array: np.ndarray):
-    """An open3d tensor of a float32 array."""
-    from pipeline.io.open3d_loader import open3d
-
-    return open3d().core.Tensor(np.ascontiguousarray(array, dtype=np.float32))
-
-
-def _queries(points: np.ndarray, origin: np.ndarray):
-    points = np.asarray(points, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points must have shape (N, 3), got {points.shape}")
-    return _tensor(points - origin)
-
-
 class MeshSurface:
-    """A triangle mesh ready for repeated distance and inside queries: its open3d scene
-    (and the bounding-volume hierarchy open3d builds at the first query) made once, however
-    many point sets are then asked about (a true mesh scored against every stage, a model's
-    mesh asked for distances and for its inside).
+    """A triangle mesh ready for repeated distance and inside queries: its bounding-volume
+    tree built once, however many point sets are then asked about (a true mesh scored
+    against every stage, a model's mesh asked for distances and for its inside).
 
     Args:
         vertices: ``(V, 3)`` mesh vertices (m).
@@ -92,30 +55,53 @@ class MeshSurface:
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
-        self._scene, self._origin = _raycasting_scene(vertices, faces)
+        import igl
+
+        self._vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        self._faces = np.ascontiguousarray(faces, dtype=np.int64)
+        if self._faces.ndim != 2 or len(self._faces) == 0:
+            raise ValueError("the mesh has no triangles")
+        self._tree = igl.AABB()
+        self._tree.init(self._vertices, self._faces)
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """``(F, 3, 3)`` the corners of every triangle (m)."""
+        return self._vertices[self._faces]
 
     def distances(self, points: np.ndarray) -> np.ndarray:
         """Unsigned distance (m) of every ``(N, 3)`` point to the surface, same frame as
         the mesh: :func:`point_to_mesh_distances`."""
-        query = _queries(points, self._origin)
-        return self._scene.compute_distance(query).numpy().astype(np.float64)
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f"points must have shape (N, 3), got {points.shape}")
+        if len(points) == 0:
+            return np.zeros(0)
+        squared, _, _ = self._tree.squared_distance(
+            self._vertices, self._faces, np.ascontiguousarray(points)
+        )
+        return np.sqrt(np.asarray(squared, dtype=np.float64).reshape(-1))
 
-    def occupancy(self, points: np.ndarray, rays: int = 3) -> np.ndarray:
+    def occupancy(self, points: np.ndarray) -> np.ndarray:
         """``(N,)`` bool: which points lie inside the closed mesh, :func:`mesh_occupancy`."""
-        query = _queries(points, self._origin)
-        return self._scene.compute_occupancy(query, nsamples=rays).numpy().astype(bool)
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        votes = np.zeros(len(points), dtype=np.int64)
+        triangles = self.triangles
+        for axis in range(3):
+            ray, _ = ray_crossings(triangles, points, axis)
+            votes += np.bincount(ray, minlength=len(points)) % 2
+        return votes >= 2
 
-    def crossings_up(self, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where vertical rays cross the surface: for rays from the ``(N, 3)`` points
-        ``starts`` along +z, every crossing's ray index and height above its start (m),
-        ordered by ray and, within a ray, upward."""
-        query = np.asarray(starts, dtype=np.float64) - self._origin
-        rays = np.hstack([query, np.tile([0.0, 0.0, 1.0], (len(query), 1))])
-        hits = self._scene.list_intersections(_tensor(rays))
-        ray = hits["ray_ids"].numpy().astype(np.int64)
-        height = hits["t_hit"].numpy().astype(np.float64)
-        order = np.lexsort((height, ray))
-        return ray[order], height[order]
+    def column_crossings(
+        self, low_xy: np.ndarray, pitch: float, counts: tuple[int, int]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Where the vertical lines through the grid ``low_xy + pitch * (i, j)`` (``0 <= i
+        < counts[0]``, ``0 <= j < counts[1]``) cross the surface: every crossing's column
+        index ``i * counts[1] + j`` and height (m), ordered by column and, within a column,
+        upward (:func:`~pipeline.metrics.mesh_queries.grid_crossings`)."""
+        column, height = grid_crossings(self.triangles, 2, low_xy, pitch, counts)
+        order = np.lexsort((height, column))
+        return column[order], height[order]
 
 
 def point_to_mesh_distances(
@@ -123,10 +109,10 @@ def point_to_mesh_distances(
 ) -> np.ndarray:
     """Unsigned distance (m) of every point to the surface of a triangle mesh.
 
-    Exact point-to-triangle distances from open3d's ``RaycastingScene.compute_distance``
-    (BVH-accelerated). It was chosen over ``trimesh.proximity.closest_point``, which gives the
-    same distances two orders of magnitude more slowly. Several point sets against one
-    mesh: :class:`MeshSurface`.
+    Exact point-to-triangle distances in float64 from libigl's AABB tree (open3d's
+    ``RaycastingScene``, which this replaced, answers as fast but in float32 and loads
+    open3d, the largest import of a trial). Several point sets against one mesh:
+    :class:`MeshSurface`.
 
     Args:
         points: ``(N, 3)`` points, same frame as the mesh.
@@ -136,16 +122,14 @@ def point_to_mesh_distances(
     return MeshSurface(vertices, faces).distances(points)
 
 
-def mesh_occupancy(
-    points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, rays: int = 3
-) -> np.ndarray:
+def mesh_occupancy(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """``(N,)`` bool: which points lie inside a closed triangle mesh.
 
-    open3d's ``RaycastingScene.compute_occupancy`` counts the crossings of ``rays`` (odd)
-    rays from each point and takes the majority vote, so a ray that hits an edge or a
-    vertex exactly does not flip the answer.
+    Each point's rays along +x, +y and +z count their crossings of the surface (an odd
+    count: inside), and the majority of the three decides, so a ray that grazes the
+    surface where it is not closed does not flip the answer alone.
     """
-    return MeshSurface(vertices, faces).occupancy(points, rays)
+    return MeshSurface(vertices, faces).occupancy(points)
 
 
 def mesh_deviation(

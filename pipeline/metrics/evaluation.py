@@ -255,7 +255,7 @@ def mesh_scores(mesh: trimesh.Trimesh, truth: GroundTruth) -> dict[str, float]:
         truth.surface.distances(samples), truth.sample_distances(surface.distances)
     )
     solid = truth.solid
-    inside_share = solid_share_inside(surface, solid, float(vertices[:, 2].min()))
+    inside_share = solid_share_inside(surface, solid)
     volume = abs(signed_volume(mesh))
     shared = min(inside_share * solid.volume_m3, volume)
     union = volume + solid.volume_m3 - shared

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from pipeline.metrics.deviation import MeshSurface, _raycasting_scene, _tensor
+from pipeline.metrics.deviation import MeshSurface
+from pipeline.metrics.mesh_queries import grid_crossings
 
 #: Distance thresholds of the F-score (m): 2 and 5 mm, the values shape-completion papers
 #: report for objects of hand size.
@@ -157,30 +158,25 @@ class SolidGrid:
 
 
 def _odd_crossings_below(
-    scene, origin: np.ndarray, centres: list[np.ndarray], pitch: float, axis: int
+    triangles: np.ndarray, centres: list[np.ndarray], pitch: float, axis: int
 ) -> np.ndarray:
     """``(nx, ny, nz)`` uint8: 1 where a ray along ``+axis`` from outside the grid crosses
-    the mesh of ``scene`` an odd number of times before the cell centre, one ray per line of
-    cells."""
+    the mesh of ``triangles`` (``(F, 3, 3)``) an odd number of times before the cell
+    centre, one ray per line of cells."""
     across = [i for i in range(3) if i != axis]
-    grid = np.meshgrid(centres[across[0]], centres[across[1]], indexing="ij")
-    starts = np.empty((grid[0].size, 3))
-    starts[:, across[0]], starts[:, across[1]] = grid[0].ravel(), grid[1].ravel()
-    starts[:, axis] = centres[axis][0] - pitch
-    direction = np.zeros((len(starts), 3))
-    direction[:, axis] = 1.0
-    rays = np.hstack([starts - origin, direction]).astype(np.float32)
-    hits = scene.list_intersections(_tensor(rays))
-    line = hits["ray_ids"].numpy().astype(np.int64)
-    # The first cell whose centre lies beyond each crossing (the ray starts one pitch before
+    lines = (len(centres[across[0]]), len(centres[across[1]]))
+    low = np.array([centres[across[0]][0], centres[across[1]][0]])
+    line, coordinate = grid_crossings(triangles, axis, low, pitch, lines)
+    # The first cell whose centre lies beyond each crossing (counted from one pitch before
     # cell 0); crossings past the last centre land in the spare slot n.
     n = len(centres[axis])
-    beyond = np.clip(np.floor(hits["t_hit"].numpy() / pitch), 0, n).astype(np.int64)
-    counts = np.bincount(line * (n + 1) + beyond, minlength=len(starts) * (n + 1))
+    start = centres[axis][0] - pitch
+    beyond = np.clip(np.floor((coordinate - start) / pitch), 0, n).astype(np.int64)
+    counts = np.bincount(line * (n + 1) + beyond, minlength=lines[0] * lines[1] * (n + 1))
     # Only the parity matters: a running count modulo 256 keeps it, in a byte per cell.
-    below = np.cumsum(counts.reshape(len(starts), n + 1)[:, :n], axis=1, dtype=np.uint8)
+    below = np.cumsum(counts.reshape(lines[0] * lines[1], n + 1)[:, :n], axis=1, dtype=np.uint8)
     below &= 1
-    return np.moveaxis(below.reshape(len(grid[0]), len(grid[0][0]), n), 2, axis)
+    return np.moveaxis(below.reshape(*lines, n), 2, axis)
 
 
 def solid_grid(vertices: np.ndarray, faces: np.ndarray, max_cells: int = 1_000_000) -> SolidGrid:
@@ -204,44 +200,39 @@ def solid_grid(vertices: np.ndarray, faces: np.ndarray, max_cells: int = 1_000_0
     pitch = float(np.cbrt(np.prod(extent) / max_cells))
     counts = np.ceil(extent / pitch).astype(int)
     centres = [low[i] + pitch * (np.arange(counts[i]) + 0.5) for i in range(3)]
-    scene, origin = _raycasting_scene(vertices, faces)
-    votes = _odd_crossings_below(scene, origin, centres, pitch, 0)
+    faces = np.asarray(faces, dtype=np.int64)
+    if len(faces) == 0:
+        raise ValueError("the mesh has no triangles")
+    triangles = vertices[faces]
+    votes = _odd_crossings_below(triangles, centres, pitch, 0)
     for axis in (1, 2):
-        votes += _odd_crossings_below(scene, origin, centres, pitch, axis)
+        votes += _odd_crossings_below(triangles, centres, pitch, axis)
     return SolidGrid(votes >= 2, low + 0.5 * pitch, pitch)
 
 
-def solid_share_inside(surface: MeshSurface, solid: SolidGrid, low_z_m: float) -> float:
+def solid_share_inside(surface: MeshSurface, solid: SolidGrid) -> float:
     """The share of a solid's cells (:class:`SolidGrid`) whose centres lie inside the closed
     mesh of ``surface`` (0 for an empty solid).
 
-    One ray goes up each column of cells from below the grid and the mesh (``low_z_m``: the
-    mesh's lowest height, m); its crossings of the mesh pair up, entering and leaving, and
-    the solid's cells between each pair are counted from the column's running count
-    (:attr:`SolidGrid.column_counts`). A ray that crosses the surface an odd number of times
-    grazed an edge or a vertex (or the mesh is open there): that column's solid cells are
-    tested one by one (:meth:`MeshSurface.occupancy`, a majority of three rays) instead.
+    The vertical line through each column of cells crosses the mesh at heights that pair
+    up from below, entering and leaving, and the solid's cells between each pair are
+    counted from the column's running count (:attr:`SolidGrid.column_counts`). A line that
+    crosses the surface an odd number of times runs through an opening of the mesh: that
+    column's solid cells are tested one by one (:meth:`MeshSurface.occupancy`, a majority
+    of three rays) instead.
     """
     nx, ny, nz = solid.inside.shape
     running = solid.column_counts.reshape(nx * ny, nz + 1)
     total = int(running[:, -1].sum())
     if total == 0:
         return 0.0
-    x, y = np.meshgrid(
-        solid.origin_m[0] + solid.pitch_m * np.arange(nx),
-        solid.origin_m[1] + solid.pitch_m * np.arange(ny),
-        indexing="ij",
-    )
-    bottom = min(solid.origin_m[2], low_z_m) - solid.pitch_m
-    column, height = surface.crossings_up(
-        np.column_stack([x.ravel(), y.ravel(), np.full(x.size, bottom)])
-    )
+    column, height = surface.column_crossings(solid.origin_m[:2], solid.pitch_m, (nx, ny))
     odd = np.bincount(column, minlength=nx * ny) % 2 == 1
     paired = ~odd[column]
     column, height = column[paired], height[paired]
     # Cell index (fractional) of every crossing along its column; within a column with an
     # even count the crossings alternate entering and leaving.
-    k = (bottom + height - solid.origin_m[2]) / solid.pitch_m
+    k = (height - solid.origin_m[2]) / solid.pitch_m
     lo = np.clip(np.ceil(k[0::2]), 0, nz).astype(np.int64)
     hi = np.clip(np.floor(k[1::2]) + 1, 0, nz).astype(np.int64)
     spans = column[0::2]
@@ -269,22 +260,14 @@ def hull_iou(points: np.ndarray, solid: SolidGrid) -> float:
         hull = ConvexHull(np.asarray(points, dtype=np.float64))
     except (QhullError, ValueError):
         return 0.0
-    scene, origin = _raycasting_scene(hull.points, hull.simplices)
     nx, ny, nz = solid.inside.shape
-    x, y = np.meshgrid(
-        solid.origin_m[0] + solid.pitch_m * np.arange(nx),
-        solid.origin_m[1] + solid.pitch_m * np.arange(ny),
-        indexing="ij",
+    column, height = grid_crossings(
+        hull.points[hull.simplices], 2, solid.origin_m[:2], solid.pitch_m, (nx, ny)
     )
-    bottom = min(solid.origin_m[2], hull.min_bound[2]) - solid.pitch_m
-    starts = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, bottom)])
-    rays = np.hstack([starts - origin, np.tile([0.0, 0.0, 1.0], (len(starts), 1))])
-    hits = scene.list_intersections(_tensor(rays.astype(np.float32)))
-    column = hits["ray_ids"].numpy().astype(np.int64)
     # Cell index (fractional) of every crossing along its column.
-    k = (bottom + hits["t_hit"].numpy() - solid.origin_m[2]) / solid.pitch_m
-    first = np.full(x.size, np.inf)
-    last = np.full(x.size, -np.inf)
+    k = (height - solid.origin_m[2]) / solid.pitch_m
+    first = np.full(nx * ny, np.inf)
+    last = np.full(nx * ny, -np.inf)
     np.minimum.at(first, column, k)
     np.maximum.at(last, column, k)
     crossed = np.flatnonzero(last > first)

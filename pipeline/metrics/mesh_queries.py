@@ -1,0 +1,125 @@
+"""Where lines parallel to a coordinate axis cross a triangle mesh, in numpy
+(docs/method.md §6): the inside tests of the evaluation's solids and IoU.
+
+Crossings are counted once per crossing even where a line meets an edge or a vertex that
+triangles share: a point on an edge belongs to exactly one of the two triangles that share
+it (the edge's test is the same number for both, with opposite signs, and a tie goes to
+the side the edge's direction names, as rasterisers do), so the parity of a ray's
+crossings of a closed mesh says whether its start lies inside.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def grid_crossings(
+    triangles: np.ndarray, axis: int, low: np.ndarray, pitch: float, counts: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where lines parallel to coordinate ``axis`` cross a triangle mesh.
+
+    The lines pass through the points of a regular grid across the axis: the two other
+    coordinates (in increasing order of their index) are ``low + pitch * (i, j)`` for
+    ``0 <= i < counts[0]``, ``0 <= j < counts[1]``. Returns every crossing's line index
+    ``i * counts[1] + j`` and the crossing's coordinate along ``axis`` (m), unordered.
+    Triangles parallel to the axis are never crossed (their neighbours are).
+
+    Args:
+        triangles: ``(F, 3, 3)`` the corners of each triangle (m).
+        axis: 0, 1 or 2.
+        low: ``(2,)`` the grid's first point across the axis (m).
+        pitch: the grid's spacing (m).
+        counts: the grid's lines along each of the two other coordinates.
+    """
+    across = [k for k in range(3) if k != axis]
+    u, v = triangles[:, :, across[0]], triangles[:, :, across[1]]
+    # The grid lines inside each triangle's bounding rectangle.
+    first_i = np.clip(np.ceil((u.min(axis=1) - low[0]) / pitch), 0, counts[0]).astype(np.int64)
+    last_i = np.clip(np.floor((u.max(axis=1) - low[0]) / pitch), -1, counts[0] - 1)
+    first_j = np.clip(np.ceil((v.min(axis=1) - low[1]) / pitch), 0, counts[1]).astype(np.int64)
+    last_j = np.clip(np.floor((v.max(axis=1) - low[1]) / pitch), -1, counts[1] - 1)
+    width_i = np.maximum(last_i.astype(np.int64) - first_i + 1, 0)
+    width_j = np.maximum(last_j.astype(np.int64) - first_j + 1, 0)
+    owner, offset = _ragged(np.zeros(len(triangles), dtype=np.int64), width_i * width_j)
+    i = first_i[owner] + offset // width_j[owner]
+    j = first_j[owner] + offset % width_j[owner]
+    points = np.column_stack([low[0] + pitch * i, low[1] + pitch * j])
+    line, height = _crossings(triangles[owner], axis, points)
+    return (i * counts[1] + j)[line], height
+
+
+def ray_crossings(
+    triangles: np.ndarray, starts: np.ndarray, axis: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where rays from the ``(N, 3)`` points ``starts`` along ``+axis`` cross a triangle
+    mesh (``(F, 3, 3)`` corners, m): every crossing's ray index and its coordinate along
+    ``axis`` (m), unordered. A crossing exactly at the start does not count."""
+    across = [k for k in range(3) if k != axis]
+    order = np.argsort(starts[:, across[0]], kind="stable")
+    sorted_u = starts[order, across[0]]
+    first = np.searchsorted(sorted_u, triangles[:, :, across[0]].min(axis=1), side="left")
+    last = np.searchsorted(sorted_u, triangles[:, :, across[0]].max(axis=1), side="right")
+    owner, index = _ragged(first, last - first)
+    ray = order[index]
+    v = starts[ray, across[1]]
+    near = (v >= triangles[owner, :, across[1]].min(axis=1)) & (
+        v <= triangles[owner, :, across[1]].max(axis=1)
+    )
+    owner, ray = owner[near], ray[near]
+    hits, height = _crossings(triangles[owner], axis, starts[ray][:, across])
+    ahead = height > starts[ray[hits], axis]
+    return ray[hits][ahead], height[ahead]
+
+
+def _ragged(first: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Runs ``first[k], first[k] + 1, ... first[k] + count[k] - 1`` one after another: each
+    entry's run ``k`` and value."""
+    owner = np.repeat(np.arange(len(count)), count)
+    starts = np.cumsum(count) - count
+    return owner, first[owner] + np.arange(len(owner)) - starts[owner]
+
+
+def _crossings(
+    triangles: np.ndarray, axis: int, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which of the pairs (triangle ``k``, the line through ``points[k]`` (the two other
+    coordinates) along ``axis``) cross, and where: the indices of the crossing pairs and
+    their coordinates along ``axis``."""
+    across = [k for k in range(3) if k != axis]
+    u, v, w = (triangles[:, :, k] for k in (*across, axis))
+    weights = []
+    for start, end in ((1, 2), (2, 0), (0, 1)):
+        weights.append(_edge_side(u[:, start], v[:, start], u[:, end], v[:, end], points))
+    area = weights[0][0] + weights[1][0] + weights[2][0]
+    # Facing the other way: the same tests mirrored (an edge's tie then goes to the other
+    # side, as the edge runs the other way round this triangle).
+    sign = np.sign(area)
+    inside = sign != 0.0
+    for value, tie in weights:
+        value = value * sign
+        inside &= (value > 0.0) | ((value == 0.0) & (tie == (sign > 0.0)))
+    hits = np.flatnonzero(inside)
+    (e0, _), (e1, _), (e2, _) = weights
+    height = (e0[hits] * w[hits, 0] + e1[hits] * w[hits, 1] + e2[hits] * w[hits, 2]) / area[hits]
+    return hits, height
+
+
+def _edge_side(
+    u0: np.ndarray, v0: np.ndarray, u1: np.ndarray, v1: np.ndarray, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Twice the signed area of triangle (edge start, edge end, point) in the plane across
+    the axis, and whether a point on the edge counts as inside for a triangle that goes
+    round counter-clockwise.
+
+    The area is computed from the edge's endpoints in a fixed order (the lesser first), so
+    the two triangles sharing an edge get exactly opposite numbers; the tie goes to the
+    triangle for which the edge runs downward in ``v`` (or, level, towards lesser ``u``),
+    which is exactly one of the two.
+    """
+    swap = (u0 > u1) | ((u0 == u1) & (v0 > v1))
+    au, av = np.where(swap, u1, u0), np.where(swap, v1, v0)
+    bu, bv = np.where(swap, u0, u1), np.where(swap, v0, v1)
+    area = (bu - au) * (points[:, 1] - av) - (bv - av) * (points[:, 0] - au)
+    area = np.where(swap, -area, area)
+    tie = (v1 < v0) | ((v1 == v0) & (u1 < u0))
+    return area, tie
