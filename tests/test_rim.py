@@ -4,6 +4,7 @@ and the pinch across an open object's wall at its rim (:mod:`pipeline.planning.r
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -12,8 +13,22 @@ import trimesh
 
 from pipeline.config import load_config
 from pipeline.metrics.evaluation import opposing_contacts
+from pipeline.planning.candidate import Candidate
+from pipeline.planning.grasp_candidates import plan_from_candidates
 from pipeline.planning.hand_choice import choose_grasp
-from pipeline.planning.rim import RIM_WALL_M, RimSite, find_rim, rim_sites, ring_centre
+from pipeline.planning.hidden_volume import hidden_below, seen_surface
+from pipeline.planning.rim import (
+    RIM_WALL_M,
+    WALL_LEANS,
+    Rim,
+    RimSite,
+    find_rim,
+    lean_limit_rad,
+    lean_named,
+    off_leaning_wall,
+    rim_sites,
+    ring_centre,
+)
 from pipeline.planning.sdh_candidates import SdhHand
 from pipeline.planning.sdh_geometry import DISTAL_PAD_CURVE_RADIUS_M
 from pipeline.registry import load_registry
@@ -80,14 +95,20 @@ def test_the_distal_link_is_hit_below_and_above_its_pad_but_not_at_it(distal_pad
 
 
 def _bowl_view(
-    radius_m: float, height_m: float, viewpoint: np.ndarray, open_top: bool = True
+    radius_m: float,
+    height_m: float,
+    viewpoint: np.ndarray,
+    open_top: bool = True,
+    lean_deg: float = 0.0,
 ) -> np.ndarray:
-    """What a camera at ``viewpoint`` sees of a thin-walled open cylinder (or, not
-    ``open_top``, a closed one) standing on z = 0 at the origin: the faces turned to it,
-    sampled every 2 mm, the near wall hiding the inside behind it."""
+    """What a camera at ``viewpoint`` sees of a thin-walled open cone, its 3 mm wall
+    ``lean_deg`` from vertical, the rim ``radius_m`` wide (a cylinder at 0; not
+    ``open_top``, a closed cylinder), standing on z = 0 at the origin: the faces turned
+    to it, sampled every 2 mm, the near wall hiding the inside behind it."""
+    foot = radius_m - height_m * math.tan(math.radians(lean_deg))
     if open_top:
-        profile = [(0, 0), (radius_m, 0), (radius_m, height_m), (radius_m - 0.003, height_m)]
-        profile += [(radius_m - 0.003, 0.003), (0, 0.003)]
+        profile = [(0, 0), (foot, 0), (radius_m, height_m), (radius_m - 0.003, height_m)]
+        profile += [(foot - 0.003, 0.003), (0, 0.003)]
     else:
         profile = [(0, 0), (radius_m, 0), (radius_m, height_m), (0, height_m)]
     mesh = trimesh.creation.revolve(np.array(profile), sections=96)
@@ -118,6 +139,111 @@ def test_an_open_top_has_rim_sites_on_its_far_side_and_a_closed_top_none():
         assert site.wall_m[2] == pytest.approx(0.06, abs=0.003)
     assert find_rim(_bowl_view(0.075, 0.06, VIEWPOINT, open_top=False)) is None
     assert rim_sites(find_rim(seen), 12, None) == []
+
+
+@pytest.mark.parametrize("lean_deg", [0.0, 15.0, 30.0, 60.0])
+def test_a_walls_lean_is_measured_on_its_seen_inner_face(lean_deg):
+    """Cones 150 mm wide at the rim and 40 mm tall, their walls leaning 0-60 deg: at
+    every site (the far side, where the inner face is seen) the measured lean is the
+    cone's within 4 deg."""
+    seen = _bowl_view(0.075, 0.04, VIEWPOINT, lean_deg=lean_deg)
+    sites = rim_sites(find_rim(seen), 12, VIEWPOINT)
+    assert sites
+    for site in sites:
+        lean = site.lean_rad(seen, 0.04)
+        assert lean is not None
+        assert math.degrees(lean) == pytest.approx(lean_deg, abs=4.0)
+
+
+def _rendered_cone(radius_m: float, height_m: float, lean_deg: float) -> np.ndarray:
+    """What a depth camera at :data:`VIEWPOINT` sees of an open cone (as
+    :func:`_bowl_view`): the first hits of rays on a grid 1.4 mrad apart (a Kinect's
+    pixels), aimed over the cone's bounding box."""
+    foot = radius_m - height_m * math.tan(math.radians(lean_deg))
+    profile = [(0, 0), (foot, 0), (radius_m, height_m), (radius_m - 0.003, height_m)]
+    profile += [(foot - 0.003, 0.003), (0, 0.003)]
+    mesh = trimesh.creation.revolve(np.array(profile), sections=96)
+    centre = mesh.bounds.mean(axis=0)
+    axis = (centre - VIEWPOINT) / np.linalg.norm(centre - VIEWPOINT)
+    right = np.cross(axis, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, axis)
+    span = np.arange(-0.13, 0.13, 0.0014)
+    u, v = np.meshgrid(span, span)
+    directions = axis + u.reshape(-1, 1) * right + v.reshape(-1, 1) * up
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    origins = np.repeat(VIEWPOINT[None], len(directions), axis=0)
+    hits, _, _ = mesh.ray.intersects_location(origins, directions, multiple_hits=False)
+    return hits
+
+
+@pytest.mark.slow
+def test_the_lean_is_measured_on_the_surface_of_a_cloud_filled_under_it():
+    """The hand choice plans again with the volume the view hides under the cloud added
+    (:func:`hidden_below`); under a wall leaning 40 deg that volume reaches out to the
+    rim at every depth, and the lean measured with it is under the pads' limit. The seen surface
+    (:func:`seen_surface`) drops the added points, and the lean measured on it is the
+    cone's."""
+    seen = _rendered_cone(0.075, 0.04, 40.0)
+    filled = np.concatenate([seen, hidden_below(seen, VIEWPOINT, 0.004)])
+    surface = seen_surface(filled, VIEWPOINT)
+    for cloud, lean_deg in ((seen, 40.0), (surface, 40.0)):
+        sites = rim_sites(find_rim(cloud), 12, VIEWPOINT)
+        assert sites
+        for site in sites:
+            assert math.degrees(site.lean_rad(cloud, 0.04)) == pytest.approx(lean_deg, abs=4.0)
+    sites = rim_sites(find_rim(filled), 12, VIEWPOINT)
+    assert np.median([math.degrees(site.lean_rad(filled, 0.04)) for site in sites]) < 24.0
+
+
+def test_the_steepest_wall_a_pad_meets_with_three_rows():
+    """Three rows' centres span 2 x 3.4 mm = 6.8 mm in height; a wall receding the touch
+    tolerance, 3 mm, over them leans atan(3 / 6.8) = 23.8 deg; with no tolerance only a
+    vertical wall."""
+    assert math.degrees(lean_limit_rad(0.0034, 0.003)) == pytest.approx(23.81, abs=0.01)
+    assert lean_limit_rad(0.0034, 0.0) == 0.0
+
+
+def test_a_refusal_names_the_walls_lean_where_it_ruled_the_pinch_out():
+    """The pinches' reason leads a refused plan's (with their count), though the
+    enveloping grasps' reason is the more common; a plan that is not refused, or one
+    without such pinches, is left as it is."""
+    leaning = "the wall under the rim leans 52 deg from vertical (more than 24): edge"
+    reasons = ["f1 meets no surface"] * 5 + [leaning.replace("52", "58"), leaning]
+    candidates = [Candidate.rejected(0.0, 0.1, 0.0, reason) for reason in reasons]
+    refused = plan_from_candidates("sdh", candidates, 0.1, 0.2)
+    named = lean_named(refused, candidates)
+    assert named.reason.startswith(WALL_LEANS + " 52-58 deg from vertical")
+    assert "(2 pinches at the rim); none of 7 grasps is feasible (5 of them" in named.reason
+    assert lean_named(refused, candidates[:5]) is refused
+    ok = replace(refused, status="ok")
+    assert lean_named(ok, candidates) is ok
+
+
+def test_pads_on_a_leaning_walls_top_are_ruled_out_and_lower_down_kept():
+    """A rim 100 mm in radius at z = 0.05, its wall leaning 40 deg: a pad touching it
+    within 15 mm of the top from outside (at the rim) or inside (where the wall has come
+    in 8 x tan 40 = 6.7 mm) is ruled out; one 20 mm down, or one touching the floor
+    inside, is kept; at a lean within the limit nothing changes."""
+    rim = Rim(np.zeros((0, 3)), np.array([0.0, 0.0, 0.05]), 0.1)
+
+    def feasible(*contacts):
+        rejected = Candidate.rejected(0.3, 0.04, 0.0, "")
+        summary = replace(rejected.summary, feasible=True, score=0.1)
+        return replace(rejected, summary=summary, predicted_contacts=np.array(contacts))
+
+    outside = feasible([0.101, 0.0, 0.048], [0.1, 0.0, 0.045])
+    inside = feasible([0.0, -0.088, 0.042])
+    lower = feasible([0.08, 0.0, 0.03])
+    floor = feasible([0.03, 0.0, 0.038])
+    lean, limit = math.radians(40.0), math.radians(24.0)
+    kept = off_leaning_wall([outside, inside, lower, floor], rim, lean, limit)
+    assert [c.summary.feasible for c in kept] == [False, False, True, True]
+    assert kept[0].summary.reason.startswith(WALL_LEANS + " 40 deg from vertical (more than 24)")
+    assert kept[0].summary.closing_angle_deg == pytest.approx(math.degrees(0.3))
+    assert kept[2] is lower
+    steep = off_leaning_wall([outside, inside], rim, math.radians(20.0), limit)
+    assert all(c.summary.feasible for c in steep)
 
 
 def test_ring_centre_finds_a_circle_from_part_of_its_turn():

@@ -37,10 +37,19 @@ if TYPE_CHECKING:
         parallel_top_grasp,
         rotate_z,
     )
+    from pipeline.planning.hidden_volume import seen_surface
     from pipeline.planning.next_grasp import MeasurementModel
     from pipeline.planning.pad_contact import sdh_flat_part_edge_m
     from pipeline.planning.parallel_candidates import ParallelHand, parallel_candidate
-    from pipeline.planning.rim import find_rim, rim_pinches, rim_sites
+    from pipeline.planning.rim import (
+        find_rim,
+        lean_limit_rad,
+        lean_named,
+        off_leaning_wall,
+        rim_pinches,
+        rim_sites,
+        wall_lean_rad,
+    )
     from pipeline.planning.sdh_candidates import (
         PINCH_SPREAD_RAD,
         SDH_SPREADS,
@@ -84,12 +93,17 @@ _SOURCES = {
     "parallel_top_grasp": ("pipeline.planning.grasp_geometry", "parallel_top_grasp"),
     "plan_from_candidates": ("pipeline.planning.grasp_candidates", "plan_from_candidates"),
     "find_rim": ("pipeline.planning.rim", "find_rim"),
+    "lean_limit_rad": ("pipeline.planning.rim", "lean_limit_rad"),
+    "lean_named": ("pipeline.planning.rim", "lean_named"),
+    "off_leaning_wall": ("pipeline.planning.rim", "off_leaning_wall"),
     "rim_pinches": ("pipeline.planning.rim", "rim_pinches"),
     "rim_sites": ("pipeline.planning.rim", "rim_sites"),
     "rotate_z": ("pipeline.planning.grasp_geometry", "rotate_z"),
     "sdh_candidate": ("pipeline.planning.sdh_candidates", "sdh_candidate"),
     "sdh_candidates": ("pipeline.planning.sdh_candidates", "sdh_candidates"),
     "sdh_flat_part_edge_m": ("pipeline.planning.pad_contact", "sdh_flat_part_edge_m"),
+    "seen_surface": ("pipeline.planning.hidden_volume", "seen_surface"),
+    "wall_lean_rad": ("pipeline.planning.rim", "wall_lean_rad"),
 }
 
 __all__ = [
@@ -115,6 +129,9 @@ __all__ = [
     "find_rim",
     "front_to_back",
     "hand_pose",
+    "lean_limit_rad",
+    "lean_named",
+    "off_leaning_wall",
     "pad_band",
     "parallel_candidate",
     "parallel_top_grasp",
@@ -125,6 +142,8 @@ __all__ = [
     "sdh_candidate",
     "sdh_candidates",
     "sdh_flat_part_edge_m",
+    "seen_surface",
+    "wall_lean_rad",
 ]
 
 

@@ -51,6 +51,16 @@ def hidden_below(points_m: np.ndarray, viewpoint_m: np.ndarray, step_m: float) -
     return candidates[_behind_seen(points_m, candidates, viewpoint_m)]
 
 
+def seen_surface(points_m: np.ndarray, viewpoint_m: np.ndarray) -> np.ndarray:
+    """The points of ``points_m`` (``(N, 3)``) that no other hides from the camera at
+    ``viewpoint_m``: the seen surface of a cloud :func:`hidden_below`'s points were added
+    to, for what is measured on the surface (the wall of an open object under its rim,
+    :mod:`pipeline.planning.rim`)."""
+    if len(points_m) < 2:
+        return points_m
+    return points_m[~_behind_seen(points_m, points_m, viewpoint_m)]
+
+
 def _behind_seen(seen_m: np.ndarray, points_m: np.ndarray, viewpoint_m: np.ndarray) -> np.ndarray:
     """Whether each of ``points_m`` lies behind the seen surface from ``viewpoint_m``:
     a seen point on its ray (within :data:`_RAY_SPACINGS` of the cloud's median angular

@@ -98,7 +98,7 @@ class SurfaceCells:
 
 
 #: Fewest taxel rows a pad must touch for its contact to be a side of the object.
-_MIN_CONTACT_ROWS = 3
+MIN_CONTACT_ROWS = 3
 #: Depth of the surface layer a pad meets in each taxel cell (m): over twice the cloud's
 #: depth noise, thinner than any graspable object's wall-to-wall depth.
 LAYER_M = 0.006
@@ -285,7 +285,7 @@ def pad_coverages(
     touched = points_robot[source[under_touching]]
     touched_ends = np.cumsum(np.add.reduceat(np.where(touches, counts, 0), pad_first)).tolist()
     contacts: list[PadContact | None] = [None] * len(origins_m)
-    for k in np.flatnonzero(row_counts >= _MIN_CONTACT_ROWS).tolist():  # else an edge or a top
+    for k in np.flatnonzero(row_counts >= MIN_CONTACT_ROWS).tolist():  # else an edge or a top
         cells = slice(int(pad_first[k]), int(pad_first[k] + pad_cells[k]))
         pad = int(pads[k])
         start = touched_ends[k - 1] if k else 0

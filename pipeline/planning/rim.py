@@ -23,12 +23,15 @@ objects (a lid, a dome, a box's top) have no sites.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from pipeline.planning.candidate import Candidate, CandidateCloud, CandidateSettings
+from pipeline.planning.grasp_candidates import common_reason
+from pipeline.planning.pad_contact import MIN_CONTACT_ROWS
 from pipeline.planning.sdh_candidates import SdhHand, sdh_candidates
+from pipeline.types import GraspPlan
 
 #: The top layer of the seen cloud taken as the rim (m): deeper than the depth noise at a
 #: rim seen from a metre, shallower than any wall is tall.
@@ -55,6 +58,22 @@ _MIN_SITE_POINTS = 5
 #: wall: a few millimetres of the cloud's error decide that, which the closing check
 #: (:meth:`~pipeline.planning.sdh_geometry.FingerKinematics.distal_hits`) cannot resolve.
 PINCH_HEIGHTS_M = (0.0, 0.004, 0.008, 0.012)
+#: The wall under the rim is measured down to this far below the rim's top (m): the
+#: ring's band and, below it, the three taxel rows a pad's contact needs
+#: (:data:`~pipeline.planning.pad_contact.MIN_CONTACT_ROWS`), whose lowest lies about
+#: 15 mm down when the top one meets the rim.
+LEAN_DEPTH_M = 0.015
+#: ... from this far below the rim's top (m): above, the rim's top itself, as wide as the
+#: wall is thick, lies beyond the inner face.
+_LEAN_TOP_M = RIM_BAND_M / 2.0
+#: The depth bins the wall's inner face is taken in (m): a few times the points' spacing
+#: at a metre, so that each holds points of the face.
+_LEAN_BIN_M = 0.0015
+#: Fewest bins with points that give the wall's lean (a line through them).
+_MIN_LEAN_BINS = 4
+#: How the refusal of a pinch whose wall leans too far begins: the planner names the
+#: measurement when nothing else is feasible.
+WALL_LEANS = "the wall under the rim leans"
 
 
 @dataclass(frozen=True)
@@ -80,6 +99,37 @@ class RimSite:
         there (its sagitta) and a wall's thickness (:data:`RIM_WALL_M`)."""
         lateral = min(abs(lateral_m), self.radius_m)
         return self.radius_m - math.sqrt(self.radius_m**2 - lateral**2) + RIM_WALL_M
+
+    def lean_rad(self, visible_m: np.ndarray, half_width_m: float) -> float | None:
+        """How far the wall under the rim here leans from vertical (rad; positive where it
+        recedes toward the opening's centre going down, as a flaring bowl's or a plate's
+        does), or None where too little of it is seen.
+
+        Measured on the wall's inner face, which the camera sees at a site (module doc):
+        of the seen points within ``half_width_m`` (m) of the line from the centre through
+        the site, on the site's side, from :data:`_LEAN_TOP_M` to :data:`LEAN_DEPTH_M`
+        below the rim's top, those
+        in each :data:`_LEAN_BIN_M` of depth at the bin's greatest distance from the
+        centre (the 90th percentile: the floor and what lies inside are nearer the
+        centre, mixed pixels beyond the face are few) are the face at that depth, and the
+        lean is that of the straight line fitted to them (least squares). The outer face
+        the fingers outside close on is hidden there; it is taken to lean as the inner
+        one does (a wall of even thickness).
+        """
+        offsets = visible_m - self.centre_m
+        along = offsets[:, :2] @ self.outward[:2]
+        across = offsets[:, 0] * self.outward[1] - offsets[:, 1] * self.outward[0]
+        depth = -offsets[:, 2]
+        keep = (along > 0.0) & (np.abs(across) <= half_width_m)
+        keep &= (depth >= _LEAN_TOP_M) & (depth <= LEAN_DEPTH_M)
+        radius = np.hypot(*offsets[keep, :2].T)
+        bins = np.floor(depth[keep] / _LEAN_BIN_M).astype(int)
+        filled = np.unique(bins)
+        if len(filled) < _MIN_LEAN_BINS:
+            return None
+        face = [float(np.percentile(radius[bins == k], 90.0)) for k in filled]
+        slope = np.polyfit((filled + 0.5) * _LEAN_BIN_M, face, 1)[0]
+        return math.atan(-slope)
 
     def near_half(self, points_m: np.ndarray) -> np.ndarray:
         """The ``points_m`` (``(N, 3)``, frame R) on this site's side of the opening's
@@ -200,12 +250,34 @@ def rim_sites(rim: Rim | None, count: int, viewpoint_m: np.ndarray | None) -> li
     return sites
 
 
+def lean_limit_rad(pitch_m: float, tolerance_m: float) -> float:
+    """The most a wall may lean from vertical for a vertical pad closing on it to touch
+    it with :data:`~pipeline.planning.pad_contact.MIN_CONTACT_ROWS` rows, the least that
+    is a side and not an edge (rad): their centres span that many pitches less one
+    (``pitch_m``) in height, over which the wall may recede no more than the touch
+    tolerance (``tolerance_m``). For the SDH-2 (3.4 mm) and the planner's 3 mm, 24 deg."""
+    return math.atan2(tolerance_m, (MIN_CONTACT_ROWS - 1) * pitch_m)
+
+
+def lean_named(plan: GraspPlan, candidates: list[Candidate]) -> GraspPlan:
+    """``plan`` (from ``candidates``), its reason beginning with the wall's lean where it
+    is refused and the lean ruled out a pinch at the rim (:func:`rim_pinches`): the
+    measurement that rules the hand out on an open object, which the most common reason
+    among the enveloping grasps (their pads meeting a rim's edge) does not name."""
+    leaning = [c.summary.reason for c in candidates if c.summary.reason.startswith(WALL_LEANS)]
+    if plan.status != "refused" or not leaning:
+        return plan
+    reason, count = common_reason(leaning)
+    return replace(plan, reason=f"{reason} ({count} pinches at the rim); {plan.reason}")
+
+
 def rim_pinches(
     sites: list[RimSite],
     visible_m: np.ndarray,
     normal: np.ndarray,
     sdh: SdhHand,
     settings: CandidateSettings,
+    surface_m: np.ndarray | None = None,
 ) -> list[Candidate]:
     """SDH-2 pinches across the wall at each of ``sites``: fingers 1 and 2 facing the
     thumb (spread 0), the palm's x axis along the site's outward direction (the thumb
@@ -221,11 +293,18 @@ def rim_pinches(
     closing among them, so a pad height at which the thumb's tip meets a wall curving in
     below the rim before its pad meets the wall is rejected.
 
+    No pinch is tried at a site where the wall leans more than a pad's rows can follow
+    (:meth:`RimSite.lean_rad`, :func:`lean_limit_rad`).
+
     Args:
         normal: ``(3,)`` the proposed symmetry plane's normal: the closing angle is
             measured from it, signed about +z (the score's alignment).
+        surface_m: ``(M, 3)`` the seen surface the wall's lean is measured on, where
+            ``visible_m`` has volume added under it (default ``visible_m``).
     """
+    surface_m = visible_m if surface_m is None else surface_m
     seen = CandidateCloud(visible_m, visible_m)
+    limit = lean_limit_rad(sdh.pad.pitch_m, settings.touch_tolerance_m)
     candidates = []
     for site in sites:
         direction = site.outward
@@ -234,6 +313,11 @@ def rim_pinches(
             normal[0] * direction[0] + normal[1] * direction[1],
         )
         poses = [(angle, direction, site.wall_m[2] + dz) for dz in PINCH_HEIGHTS_M]
+        lean = site.lean_rad(surface_m, _pads_half_width_m(sdh))
+        if lean is not None and lean > limit:
+            reason = leaning_reason(lean, limit)
+            candidates += [Candidate.rejected(angle, height, 0.0, reason) for _, _, height in poses]
+            continue
         near = site.near_half(visible_m)
         candidates += sdh_candidates(
             seen,
@@ -246,3 +330,62 @@ def rim_pinches(
             site.beyond_m(sdh.turning_lateral_m()),
         )
     return candidates
+
+
+def _pads_half_width_m(sdh: SdhHand) -> float:
+    """How far to either side of a pinch's closing line its pads reach (m): fingers 1
+    and 2's offset and half a pad."""
+    return sdh.turning_lateral_m() + sdh.pad.cols * sdh.pad.pitch_m / 2.0
+
+
+def leaning_reason(lean_rad: float, limit_rad: float) -> str:
+    """Why no pad holds a wall leaning ``lean_rad`` from vertical, more than ``limit_rad``
+    (:func:`lean_limit_rad`)."""
+    return (
+        f"{WALL_LEANS} {math.degrees(lean_rad):.0f} deg from vertical (more than "
+        f"{math.degrees(limit_rad):.0f}): the pads would meet only its edge"
+    )
+
+
+def wall_lean_rad(sites: list[RimSite], visible_m: np.ndarray, sdh: SdhHand) -> float | None:
+    """The lean of the wall under the rim (rad, :meth:`RimSite.lean_rad`): the median
+    over ``sites`` where it is measured (a spout or a handle is one site of several), or
+    None where it is measured at none."""
+    leans = [site.lean_rad(visible_m, _pads_half_width_m(sdh)) for site in sites]
+    measured = [lean for lean in leans if lean is not None]
+    return float(np.median(measured)) if measured else None
+
+
+def off_leaning_wall(
+    candidates: list[Candidate], rim: Rim, lean_rad: float, limit_rad: float
+) -> list[Candidate]:
+    """``candidates`` with every feasible one whose pads are predicted to touch the wall
+    under ``rim`` within :data:`LEAN_DEPTH_M` of its top rejected, the wall leaning
+    ``lean_rad`` from vertical, more than ``limit_rad`` (:func:`lean_limit_rad`): a
+    vertical pad meets such a wall with a row or two, at the rim's outer edge from
+    outside, at the lowest rows' reach from inside, whatever the cloud's few millimetres
+    of noise and mixed pixels at the rim predict. Where the wall is at least that far
+    from the rim's middle: a wall's thickness (:data:`RIM_WALL_M`) inside the rim's
+    fitted circle, less what the lean takes it in at the contact's depth. A pad meeting
+    the wall lower down, where it stands steeper, is kept. ``candidates`` are returned
+    as they are where ``lean_rad`` is within the limit."""
+    if lean_rad <= limit_rad:
+        return candidates
+    reason = leaning_reason(lean_rad, limit_rad)
+    kept = []
+    for candidate in candidates:
+        contacts = candidate.predicted_contacts
+        depth = rim.centre_m[2] - contacts[:, 2]
+        radius = np.hypot(*(contacts[:, :2] - rim.centre_m[:2]).T)
+        inner = rim.radius_m - RIM_WALL_M - np.clip(depth, 0.0, None) * math.tan(lean_rad)
+        on_wall = (depth <= LEAN_DEPTH_M) & (radius >= inner)
+        if candidate.summary.feasible and np.any(on_wall):
+            summary = candidate.summary
+            candidate = Candidate.rejected(
+                math.radians(summary.closing_angle_deg),
+                summary.height_m,
+                math.radians(summary.spread_deg),
+                reason,
+            )
+        kept.append(candidate)
+    return kept

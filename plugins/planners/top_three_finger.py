@@ -32,6 +32,9 @@ from pipeline.api.planning import (
     cylindrical_top_grasp,
     find_rim,
     front_to_back,
+    lean_limit_rad,
+    lean_named,
+    off_leaning_wall,
     pad_band,
     plan_from_candidates,
     rim_pinches,
@@ -39,6 +42,8 @@ from pipeline.api.planning import (
     rotate_z,
     sdh_candidates,
     sdh_flat_part_edge_m,
+    seen_surface,
+    wall_lean_rad,
 )
 
 #: Spacing of the points along an open object's fitted rim the candidates are planned with
@@ -156,12 +161,11 @@ class TopThreeFinger(CandidatePlanner):
         p = self.params
         hand = self._check_hand(gripper)
         if p.strategy == "candidates":
-            return plan_from_candidates(
-                gripper.name,
-                self._ranked(cloud, proposal, gripper),
-                p.pregrasp_height_m,
-                gripper.max_aperture_m,
+            candidates = self._ranked(cloud, proposal, gripper)
+            plan = plan_from_candidates(
+                gripper.name, candidates, p.pregrasp_height_m, gripper.max_aperture_m
             )
+            return lean_named(plan, candidates)
         points = cloud.points
         completed = np.concatenate([points, proposal.plane.mirror(points)])
         direction = front_to_back(
@@ -285,11 +289,22 @@ class TopThreeFinger(CandidatePlanner):
             ],
         )
         candidates = [c for group in by_spread.values() for c in group] + pinches
+        sites = rim_sites(rim, p.rim_sites, cloud.viewpoint_m)
+        # Where nothing was feasible on the cloud as seen, it comes again with the volume
+        # under it filled (the hand choice): the wall is measured on the surface.
+        surface = seen_surface(points, cloud.viewpoint_m) if sites else points
+        lean = wall_lean_rad(sites, surface, hand)
+        if rim is not None and lean is not None:
+            # An open object's wall leaning under the rim is met by a vertical pad with its
+            # edge alone, wherever the cloud's noise at the rim predicts more.
+            limit = lean_limit_rad(hand.pad.pitch_m, frame.settings.touch_tolerance_m)
+            candidates = off_leaning_wall(candidates, rim, lean, limit)
         if any(c.summary.feasible for c in candidates):
             return candidates
         # No hand closes around it: an open object's wall can still be pinched at the rim.
-        sites = rim_sites(rim, p.rim_sites, cloud.viewpoint_m)
-        return candidates + rim_pinches(sites, points, proposal.plane.normal, hand, frame.settings)
+        return candidates + rim_pinches(
+            sites, points, proposal.plane.normal, hand, frame.settings, surface
+        )
 
 
 @hookimpl
