@@ -169,19 +169,20 @@ def write_cloud(path: Path, points: np.ndarray) -> Path:
     return path
 
 
-#: The header of a binary PLY point cloud, as open3d writes it (``{count}``: the points).
-PLY_HEADER = (
-    "ply\nformat binary_little_endian 1.0\ncomment Created by Open3D\nelement vertex {count}\n"
+#: The header of a binary PLY point cloud, laid out as open3d writes it (``{count}``: the
+#: points); only the comment names the writer.
+_PLY_HEADER = (
+    "ply\nformat binary_little_endian 1.0\ncomment written by symfuse\nelement vertex {count}\n"
     "property double x\nproperty double y\nproperty double z\nend_header\n"
 )
 
 
 def ply_bytes(points: np.ndarray) -> bytes:
-    """A binary PLY file of ``(N, 3)`` points: little-endian doubles, byte for byte the file
-    open3d's ``write_point_cloud`` writes for a cloud of points alone (written here, a run
-    that only writes clouds does not load open3d)."""
+    """A binary PLY file of ``(N, 3)`` points: little-endian doubles, the file open3d's
+    ``write_point_cloud`` writes for a cloud of points alone but for the comment naming the
+    writer (written here, a run that only writes clouds does not load open3d)."""
     points = np.ascontiguousarray(points, dtype="<f8").reshape(-1, 3)
-    return PLY_HEADER.format(count=len(points)).encode("ascii") + points.tobytes()
+    return _PLY_HEADER.format(count=len(points)).encode("ascii") + points.tobytes()
 
 
 def _vector(value: Any, where: str, path: Path) -> np.ndarray:
