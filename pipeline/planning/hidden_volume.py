@@ -15,7 +15,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 #: Seen points within this many of their median angular spacing of a ray count as the
 #: surface the ray meets (a pixel's neighbours along a row or a diagonal).
@@ -65,6 +64,8 @@ def _behind_seen(seen_m: np.ndarray, points_m: np.ndarray, viewpoint_m: np.ndarr
     """Whether each of ``points_m`` lies behind the seen surface from ``viewpoint_m``:
     a seen point on its ray (within :data:`_RAY_SPACINGS` of the cloud's median angular
     spacing) lies :data:`_BEHIND_M` or more nearer the camera."""
+    from scipy.spatial import cKDTree  # deferred: planners load with `plugins`
+
     rays = seen_m - viewpoint_m
     seen_range = np.linalg.norm(rays, axis=1)
     tree = cKDTree(rays / seen_range[:, None])
