@@ -49,12 +49,6 @@ _INNER_TOP_FRACTION = 0.05
 _HOLLOW_DEPTH_M = 0.015
 #: Fewest seen points inside the ring, that far down, that show a hollow.
 _MIN_INSIDE = 20
-#: The top points go round the centre: they fall in at least this share of the ring's
-#: :data:`_RING_SECTORS` equal sectors. A camera above a rim sees its top all the way
-#: round (the near side's top faces up as the far side's does); the top of a curved ridge
-#: (a lying tool's body) is an arc, which fits a circle as well but covers half the turn.
-_RING_COVERAGE = 2.0 / 3.0
-_RING_SECTORS = 36
 #: Fewest top points in a site's sector of the ring.
 _MIN_SITE_POINTS = 5
 #: The pads' centres above the rim a pinch is tried at (m): from the rim itself, the pads'
@@ -190,8 +184,9 @@ def find_rim(visible_m: np.ndarray) -> Rim | None:
     percentile of the heights); its centre and radius are the circle fitted to them
     (:func:`ring_centre`). The object is open when those points form a ring around a
     hollow: almost all of them (:data:`_INNER_TOP_FRACTION` aside) lie at least
-    :data:`_HOLLOW_SHARE` of the radius from the centre, they go round it
-    (:data:`_RING_COVERAGE` of the turn), and the camera saw
+    :data:`_HOLLOW_SHARE` of the radius from the centre, their distances from it spread
+    (standard deviation) no more than a wall is thick (:data:`RIM_WALL_M`), and the camera
+    saw
     :data:`_MIN_INSIDE` points or more within that distance at least
     :data:`_HOLLOW_DEPTH_M` below the rim.
 
@@ -209,9 +204,10 @@ def find_rim(visible_m: np.ndarray) -> Rim | None:
     inner = _HOLLOW_SHARE * radius
     if np.count_nonzero(radii < inner) > _INNER_TOP_FRACTION * len(ring):
         return None
-    turn = np.arctan2(ring[:, 1] - centre[1], ring[:, 0] - centre[0])
-    sectors = np.floor((turn + math.pi) / (2.0 * math.pi) * _RING_SECTORS).astype(np.int64)
-    if len(np.unique(sectors % _RING_SECTORS)) < _RING_COVERAGE * _RING_SECTORS:
+    # A rim is a wall's top: its points lie about the circle within a wall's thickness.
+    # The top of a rounded body (a lying tool's) fits a circle around lower points too,
+    # but spreads across it by far more.
+    if float(np.std(radii)) > RIM_WALL_M:
         return None
     inside = np.hypot(*(visible_m[:, :2] - centre).T) < inner
     if np.count_nonzero(inside & (visible_m[:, 2] < top - _HOLLOW_DEPTH_M)) < _MIN_INSIDE:
