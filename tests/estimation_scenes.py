@@ -266,3 +266,20 @@ def one_step_and_filterpy(problem: FusionProblem, g: np.ndarray, points: np.ndar
     prediction = lin.prediction[:, None]
     ekf.update(measurement.observation()[:, None], lambda x: jacobian, lambda x: prediction)
     return ours, covariance.dense(), ekf.x[:, 0], ekf.P
+
+
+def structured_and_dense(problem: FusionProblem):
+    """Stages 1-2 fused with the structured covariance and with the dense reference (8
+    iterations at most), checked to agree in status, iterations and covariance:
+    ``(structured, dense)``."""
+    from pipeline.estimation.dense import DenseCovariance
+    from pipeline.estimation.iekf import IekfSettings, fuse
+
+    settings = IekfSettings(max_iterations=8)
+    structured = fuse(problem, settings)
+    dense = fuse(problem, settings, covariance_model=DenseCovariance)
+    for ours, reference in zip(structured, dense, strict=True):
+        assert ours.status == reference.status
+        assert ours.iterations == reference.iterations
+        np.testing.assert_allclose(ours.covariance, reference.covariance, atol=1e-12)
+    return structured, dense
