@@ -232,16 +232,18 @@ def measure_table(
                 f"{int(on_table.sum())} points lie within {band_m * 1000:.1f} mm of the table "
                 f"(< {MIN_TABLE_POINTS})"
             )
-        normal, offset = plane_through(points[on_table])
-        residual = points[on_table] @ normal - offset
+        table_points = points[on_table]
+        normal, offset = plane_through(table_points)
+        residual = table_points @ normal - offset
         ranges = distance[on_table]
         bins = max(1, min(TABLE_RANGE_BINS, len(ranges) // MIN_TABLE_POINTS))
         edges = np.quantile(ranges, np.linspace(0.0, 1.0, bins + 1))
         which = np.clip(np.searchsorted(edges, ranges, side="right") - 1, 0, bins - 1)
         centres, sigmas = np.empty(bins), np.empty(bins)
         for b in range(bins):
-            r = residual[which == b]
-            centres[b] = np.median(ranges[which == b])
+            in_bin = which == b
+            r = residual[in_bin]
+            centres[b] = np.median(ranges[in_bin])
             sigmas[b] = 1.4826 * np.median(np.abs(r - np.median(r)))
         fit = TableFit(TablePlane(normal, float(offset)), centres, sigmas, int(on_table.sum()))
         band = np.maximum(band_m, TABLE_BAND_SIGMAS * fit.sigma_at(distance))
