@@ -61,7 +61,7 @@ def dbscan_labels(points: np.ndarray, eps_m: float, min_points: int) -> np.ndarr
     rank = np.empty(len(first), dtype=np.int64)
     rank[np.argsort(first)] = np.arange(len(first))
     labels[core] = rank[component]
-    others = np.setdiff1d(np.arange(len(points)), core, assume_unique=True)
+    others = np.flatnonzero(~is_core)
     if len(others):
         distance, nearest = cKDTree(points[core]).query(points[others])
         border = distance <= eps_m

@@ -195,6 +195,8 @@ def measure_table(
     viewpoint_robot: np.ndarray,
     table: TablePlane,
     band_m: float,
+    *,
+    ranges_m: np.ndarray | None = None,
 ) -> TableFit:
     """Refit ``table`` to the points within ``band_m`` of it and measure their scatter by
     distance from the camera; then set the band about the refitted plane to
@@ -213,12 +215,16 @@ def measure_table(
         viewpoint_robot: ``(3,)`` camera position, robot frame.
         table: the plane to start from.
         band_m: first half-width of the band of table points about ``table`` (m).
+        ranges_m: ``(N,)`` each point's distance from ``viewpoint_robot`` (m), when the
+            caller has them (computed here otherwise).
 
     Raises:
         ValueError: fewer than :data:`MIN_TABLE_POINTS` points lie on the table.
     """
     points = np.asarray(points_robot, dtype=np.float64)
-    distance = np.linalg.norm(points - np.asarray(viewpoint_robot, dtype=np.float64), axis=1)
+    distance = ranges_m
+    if distance is None:
+        distance = np.linalg.norm(points - np.asarray(viewpoint_robot, dtype=np.float64), axis=1)
     band = np.full(len(points), float(band_m))
     normal, offset = np.asarray(table.normal, dtype=np.float64), float(table.offset_m)
     previous = None
