@@ -75,7 +75,9 @@ class VoxelMoments:
         units = self.size_m if units_m is None else units_m
         key = tuple(float(u) for u in units)
         if key not in self._trees:
-            self._trees[key] = cKDTree(self.centroid / units)
+            self._trees[key] = cKDTree(
+                self.centroid / units, balanced_tree=False, compact_nodes=False
+            )
         return self._trees[key]
 
 
