@@ -39,6 +39,7 @@ from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
+from planner_check import differences
 from summary import record
 from sweep_speed import ROOT, unpack
 
@@ -135,24 +136,18 @@ def measure(inputs: dict, repeats: int, profile: bool) -> tuple[list[float], tup
     return seconds, results, text
 
 
-def differences(first: object, second: object, where: str = "") -> list[str]:
-    """Where two evaluations' results differ (arrays and floats bit for bit, NaN = NaN)."""
-    if isinstance(first, dict) and isinstance(second, dict):
-        if set(first) != set(second):
-            return [f"{where}: keys {sorted(set(first) ^ set(second))}"]
-        return [d for k in first for d in differences(first[k], second[k], f"{where}.{k}")]
-    if isinstance(first, list | tuple) and isinstance(second, list | tuple):
-        if len(first) != len(second):
-            return [f"{where}: lengths {len(first)}, {len(second)}"]
-        pairs = enumerate(zip(first, second, strict=True))
-        return [d for k, (a, b) in pairs for d in differences(a, b, f"{where}[{k}]")]
-    if hasattr(first, "__dataclass_fields__"):
-        return differences(vars(first), vars(second), where)
-    if isinstance(first, np.ndarray):
-        same = first.shape == second.shape and np.array_equal(first, second, equal_nan=True)
-        return [] if same else [where]
-    same = first == second or (first != first and second != second)
-    return [] if same else [where]
+def plain(value: object) -> object:
+    """An evaluation's results as JSON-like values (arrays as lists, dataclasses as dicts),
+    for :func:`planner_check.differences`."""
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if hasattr(value, "__dataclass_fields__"):
+        return plain(vars(value))
+    return value
 
 
 def main() -> None:
@@ -205,10 +200,10 @@ def main() -> None:
         rounds = ", ".join(f"{s:.3f}" for s in seconds)
         print(f"{label:<10} {statistics.median(seconds):.3f} ({rounds})")
         print(texts[label], end="")
-    found = differences(*results)
+    found = differences(*(plain(r) for r in results))
     print(f"scores that differ, bit for bit: {len(found)}")
-    for where in found[:20]:
-        print(f"    {where}")
+    for where, by in found[:20]:
+        print(f"    {where}: by {by:.3g}")
 
 
 if __name__ == "__main__":
