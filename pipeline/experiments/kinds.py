@@ -5,9 +5,10 @@ Every object (catalogue, and ``--scans DIR``'s ``*/textured.obj``) at 4 seeded y
 the rest pose ``trial.rest`` gives it (``--rest``), is seen by the configured camera and
 segmented, as a trial sees it, without a grasp. VC proposes its vertical plane and chooses,
 as ``initialiser.vc.kind = "evidence"`` makes it (:mod:`pipeline.symmetry.kinds`), between it,
-a vertical axis and a plane of any orientation. The view is completed each way (the vertical
-plane's and the leaning plane's mirror images, the sweep about the fitted axis) and each
-completion's Chamfer distance to the true surface is measured.
+an axis (vertical, or of any direction) and a plane of any orientation. The view is
+completed each way (the vertical plane's and the leaning plane's mirror images, the sweep
+about the fitted axis, clipped at the table) and each completion's Chamfer distance to the
+true surface is measured.
 
 The report splits the views by the true kind of the object as it lies
 (:func:`pipeline.symmetry.scoring.true_kind`) and the scans into the half the rules were
@@ -78,6 +79,7 @@ def run_one(params: Mapping[str, Any]) -> dict[str, Any]:
     from pipeline.experiments.paper_tasks import trial_config
     from pipeline.metrics import mesh_deviation
     from pipeline.metrics.evaluation import GroundTruth, shape_scores
+    from pipeline.symmetry.axis_fit import tilt_deg
     from pipeline.symmetry.kinds import complete, free_space_share, vc_kind
     from pipeline.symmetry.plane_search import table_top
     from pipeline.symmetry.scoring import symmetry_errors, true_kind
@@ -131,12 +133,16 @@ def run_one(params: Mapping[str, Any]) -> dict[str, Any]:
     completions = {"vertical-plane": Symmetry.from_plane(init.plane)}
     if choice.axis_fit is not None:
         row["profile_rms_mm"] = choice.axis_fit.profile_rms_m * 1e3
-        completions["axis"] = choice.axis_fit.axis
+    if choice.tilted_fit is not None:
+        row["tilted_profile_rms_mm"] = choice.tilted_fit.profile_rms_m * 1e3
+    if choice.axis is not None:
+        row["axis_tilt_deg"] = tilt_deg(choice.axis)
+        completions["axis"] = choice.axis
     if choice.plane_fit is not None:
         completions["plane"] = choice.plane_fit.symmetry
     table_z = table_top(cloud.points, observation)
     for kind, symmetry in completions.items():
-        model = complete(cloud.points, symmetry)
+        model = complete(cloud.points, symmetry, table_z)
         row[f"free_space_{kind}"] = free_space_share(model, observation, vc.tolerance_m, table_z)
         distances, _ = mesh_deviation(model, truth.vertices, truth.faces)
         row[f"chamfer_{kind}_mm"] = shape_scores(model, distances, truth)["chamfer_mm"]
@@ -160,32 +166,33 @@ def report(rows: list[dict], out_dir: Path) -> list[Path]:
         "# The kind of symmetry one view supports",
         "",
         f"{len(done)} of {len(rows)} views ran. True kind: of the object as it lies "
-        "(`pipeline.symmetry.scoring.true_kind`); 'lying': views of an object not standing on "
-        "its base or top. Chamfer distances in mm (medians) of the completions by VC's "
-        "vertical plane, the vertical axis, the best plane of any orientation, and the kind "
-        "VC chose by evidence; 'axis wins' the share of views whose axis completion is closer "
-        "to the truth than the vertical plane's. Angle errors (deg, medians) of the proposal "
+        "(`pipeline.symmetry.scoring.true_kind`); pose 'lying': views of an object not "
+        "standing on its base or top. Chamfer distances in mm (medians) of the completions "
+        "by VC's vertical plane, the axis (of any direction when one was a candidate, else "
+        "the vertical fit), the best plane of any orientation, and the kind VC chose by "
+        "evidence; 'axis wins' the share of views whose axis completion is closer to the "
+        "truth than the vertical plane's. Angle errors (deg, medians) of the proposal "
         "against the nearest true symmetry: 'level' choosing between the vertical plane and "
-        "axis alone, 'chosen' with planes of any orientation.",
+        "the vertical axis alone, 'chosen' with planes and axes of any orientation.",
         "",
-        "| part | true kind | views | lying | axis chosen | leaning plane chosen "
+        "| part | true kind | pose | views | axis chosen | leaning plane chosen "
         "| Chamfer vertical plane | Chamfer axis | Chamfer any plane | Chamfer chosen "
         "| axis wins | angle error: level / chosen |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in done:
         row["chamfer_chosen_mm"] = row.get(f"chamfer_{row['chosen_kind']}_mm")
-    groups: dict[tuple[str, str], list[dict]] = {}
+    groups: dict[tuple[str, str, str], list[dict]] = {}
     for row in done:
-        groups.setdefault((row["part"], row["true_kind"]), []).append(row)
-    for (part, kind), group in sorted(groups.items()):
+        pose = "lying" if row.get("rest_keeps_vertical") is False else "upright"
+        groups.setdefault((row["part"], row["true_kind"], pose), []).append(row)
+    for (part, kind, pose), group in sorted(groups.items()):
         n = len(group)
         wins = sum(
             row.get("chamfer_axis_mm", math.inf) < row["chamfer_vertical-plane_mm"] for row in group
         )
         lines.append(
-            f"| {part} | {kind} | {n} "
-            f"| {sum(row.get('rest_keeps_vertical') is False for row in group)} "
+            f"| {part} | {kind} | {pose} | {n} "
             f"| {_count(group, 'axis')}/{n} | {_count(group, 'plane')}/{n} "
             f"| {_median(group, 'chamfer_vertical-plane_mm')} "
             f"| {_median(group, 'chamfer_axis_mm')} | {_median(group, 'chamfer_plane_mm')} "

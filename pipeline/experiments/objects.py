@@ -343,9 +343,9 @@ def kind_lines(rows: Sequence[Mapping[str, Any]]) -> list[str]:
         "",
         "## By the kind of symmetry as the object lies",
         "",
-        "The object's true kind in its rest pose (`axis`: a body of revolution standing; "
-        "`vertical-plane`: a vertical mirror plane, or an axis lying; `plane`: only mirror "
-        "planes that lean); 'lying': trials whose rest pose did not stand the object on its "
+        "The object's true kind in its rest pose (`axis`: a body of revolution, standing or "
+        "lying; `vertical-plane`: a vertical mirror plane; `plane`: only mirror planes that "
+        "lean); 'lying': trials whose rest pose did not stand the object on its "
         "base or top. Angle error: the selected stage's plane against the nearest true "
         "symmetry (median, deg). Scans: the tune half (even positions in name order) and the "
         "check half (odd).",

@@ -109,18 +109,14 @@ def true_kind(truths: Sequence[Symmetry]) -> str:
     """Which kind of symmetry (:data:`pipeline.types.SYMMETRY_KINDS`) describes an object as
     it lies, frame R (z up), the most constrained first, or ``"none"``.
 
-    ``"axis"``: a body of revolution standing on its base or top (a true axis within
-    :data:`LEVEL_DEG` of vertical), or a sphere. ``"vertical-plane"``: a true mirror plane
-    within :data:`LEVEL_DEG` of vertical, or any other true axis (the plane through it and
-    the vertical is a mirror plane: a can on its side). ``"plane"``: only mirror planes
-    that are not vertical (a box resting on an edge). ``"none"``: no true symmetry.
+    ``"axis"``: a body of revolution in any pose (a true axis of any direction: a can
+    standing or on its side), or a sphere. ``"vertical-plane"``: a true mirror plane within
+    :data:`LEVEL_DEG` of vertical. ``"plane"``: only mirror planes that are not vertical (a
+    box resting on an edge). ``"none"``: no true symmetry.
     """
     level = math.sin(math.radians(LEVEL_DEG))
-    if round_centre(truths) is not None or any(
-        not truth.is_plane and abs(truth.direction[2]) >= math.cos(math.radians(LEVEL_DEG))
-        for truth in truths
-    ):
+    if any(not truth.is_plane for truth in truths):
         return "axis"
-    if any(not truth.is_plane or abs(truth.direction[2]) <= level for truth in truths):
+    if any(abs(truth.direction[2]) <= level for truth in truths):
         return "vertical-plane"
     return "plane" if truths else "none"

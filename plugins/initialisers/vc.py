@@ -49,7 +49,10 @@ class VcInitialiser(SymmetryInitialiser):
     With ``kind = "evidence"`` VC also fits a vertical rotation axis to the view and proposes
     it when the view supports it at least as well as the best plane
     (:func:`pipeline.symmetry.kinds.choose_kind`); the plane it hands the estimator then
-    passes through the axis, facing the camera. An axis refuted by a part off it (a mug's
+    passes through the axis, facing the camera. When the vertical axis is not chosen, an
+    axis of any direction (a body of revolution lying on its side) is proposed when the
+    view supports it as well, less ``tilt_margin``; the plane handed on is then the
+    vertical one through it. An axis refuted by a part off it (a mug's
     handle) proposes the plane through the axis and that part instead of the best plane,
     when the camera accepts it as well. It also searches mirror planes of any orientation
     and proposes a leaning one when the view supports it better by more than
@@ -107,8 +110,8 @@ class VcInitialiser(SymmetryInitialiser):
         kind: Literal["vertical-plane", "evidence"] = param(
             "vertical-plane",
             "the kind of symmetry proposed: 'vertical-plane' (the paper's) or 'evidence' "
-            "(the vertical plane or a vertical rotation axis, whichever the view supports: "
-            "docs/symmetry.md)",
+            "(the vertical plane, a rotation axis of any direction or a leaning plane, "
+            "whichever the view supports: docs/symmetry.md)",
         )
         max_profile_rms_m: float = param(
             0.003,
@@ -128,6 +131,15 @@ class VcInitialiser(SymmetryInitialiser):
             "kind = 'evidence': how much smaller a share of points in seen free space or "
             "below the table a leaning mirror plane's completion must have than the level "
             "choice's to be chosen (the penalty for its third parameter); 1: never",
+            at_least=0.0,
+            at_most=1.0,
+        )
+        tilt_margin: float = param(
+            0.0,
+            "kind = 'evidence': the penalty for a rotation axis' two further parameters when "
+            "it is not vertical (a body of revolution lying on its side): it is chosen when "
+            "its sweep's share of points in seen free space or below the table is at most "
+            "the level choice's plus kind_margin minus this; 1: vertical axes only",
             at_least=0.0,
             at_most=1.0,
         )
