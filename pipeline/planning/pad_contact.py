@@ -214,42 +214,42 @@ def pad_coverages(
     point_inside = np.abs(z - taxels.row_z[point_row]) <= half
     at_rows, point_row = at_rows.compress(point_inside), point_row.compress(point_inside)
     starts = np.sum(origins_m[:, :2] * laterals, axis=1)
-    u = laterals @ points_robot[at_rows, :2].T - starts[:, None]
+    # Selections by ``take`` (of rows: ``axis=0``): the same elements as an index array's,
+    # several times faster for rows of a 2-D array.
+    u = laterals @ points_robot[:, :2].take(at_rows, axis=0).T - starts[:, None]
     # ``np.nonzero`` of the (Q, N) mask, row by row, from its flat indices.
-    query, index = np.divmod(
-        np.flatnonzero((u >= taxels.col_u.min() - half) & (u <= taxels.col_u.max() + half)),
-        u.shape[1],
-    )
+    flat = np.flatnonzero((u >= taxels.col_u.min() - half) & (u <= taxels.col_u.max() + half))
+    query, index = np.divmod(flat, u.shape[1])
     if len(query) == 0:
         return [None] * len(origins_m)
-    u = u[query, index]
-    source = at_rows[index]
+    u = u.take(flat)
+    source = at_rows.take(index)
     cols = len(taxels.col_u)
     per_pad = len(taxels.row_z) * cols
     col = np.clip(np.round((u - taxels.col_u[0]) / taxels.pitch_m).astype(int), 0, cols - 1)
-    kept = points_robot[source]
+    kept = points_robot.take(source, axis=0)
     # Each pad's taxels numbered apart: taxel // per_pad is the pad.
-    taxel = query * per_pad + (point_row[index] * cols + col)
-    # Depths along each pad's motion as one pad alone computes them (the same rounding).
-    bounds = np.searchsorted(query, np.arange(len(origins_m) + 1))
+    taxel = query * per_pad + (point_row.take(index) * cols + col)
+    # Depths along each pad's motion as one pad alone computes them (the same rounding:
+    # the offsets from the pads' origins element by element, one product per pad).
+    bounds = np.searchsorted(query, np.arange(len(origins_m) + 1)).tolist()
+    offsets = kept - origins_m.take(query, axis=0)
     depth = np.concatenate(
         [
-            (kept[start:end] - origin) @ direction
-            for origin, direction, start, end in zip(
-                origins_m, directions, bounds[:-1], bounds[1:], strict=True
-            )
+            offsets[start:end] @ direction
+            for direction, start, end in zip(directions, bounds[:-1], bounds[1:], strict=True)
         ]
     )
     # Each taxel's layer, before sorting: the sort then orders that layer alone.
     nearest = np.full(len(origins_m) * per_pad, np.inf)
     np.minimum.at(nearest, taxel, depth)
-    layer = depth <= nearest[taxel] + LAYER_M
+    layer = depth <= nearest.take(taxel) + LAYER_M
     taxel, depth, source = taxel.compress(layer), depth.compress(layer), source.compress(layer)
     # By taxel, and by depth within one.
     by_taxel = lexsort_pair(depth, taxel, len(nearest))
     # The points' indices follow the sort; the points themselves are taken for the
     # contacts alone.
-    taxel, depth, source = taxel[by_taxel], depth[by_taxel], source[by_taxel]
+    taxel, depth, source = taxel.take(by_taxel), depth.take(by_taxel), source.take(by_taxel)
     first, counts = _runs(taxel)  # every taxel keeps its nearest point
     seen = taxel[first]
     local = seen % per_pad
@@ -276,7 +276,7 @@ def pad_coverages(
     # The points of the touching taxels, every pad's gathered at once: each pad's run
     # follows the one before, so a contact's points are a slice of them.
     under_touching = np.repeat(touches, counts)
-    touched = points_robot[source[under_touching]]
+    touched = points_robot.take(source.compress(under_touching), axis=0)
     touched_ends = np.cumsum(np.add.reduceat(np.where(touches, counts, 0), pad_first)).tolist()
     contacts: list[PadContact | None] = [None] * len(origins_m)
     # Python numbers for the loop: an array's elements one at a time cost more.
