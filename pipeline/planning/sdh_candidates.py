@@ -527,11 +527,18 @@ def _closing_collides(
     )
     for hits, reason in ((kinematics.closing_hits, CLOSING_HIT), (distal, DISTAL_HIT)):
         for (t, d), angles in zip(corridors, alphas, strict=True):
-            # Each angle's count of hit points (a sum: ``count_nonzero`` along an axis
-            # copies its input first).
-            if angles and np.any(hits(t, d, angles, s.touch_tolerance_m).sum(axis=1) >= MIN_HITS):
+            if angles and _any_angle_hits(hits(t, d, angles, s.touch_tolerance_m)):
                 return reason
     return None
+
+
+def _any_angle_hits(hits: np.ndarray) -> bool:
+    """Whether any angle's row of ``hits`` (``(K, N)``) holds :data:`MIN_HITS` points:
+    a single angle's counted over the whole array, several angles' by a sum
+    (``count_nonzero`` along an axis copies its input first)."""
+    if len(hits) == 1:
+        return np.count_nonzero(hits) >= MIN_HITS
+    return bool(np.any(hits.sum(axis=1) >= MIN_HITS))
 
 
 @functools.lru_cache(maxsize=16)
@@ -723,5 +730,5 @@ def _top_edge_above_pad(
     )
     if np.count_nonzero(side) < MIN_HITS:
         return False  # the side ends below the pad's top row: the pad reaches over it
-    top = percentile(points[side, 2], 98.0)
+    top = percentile(points[:, 2].compress(side), 98.0)
     return top < joint_m
