@@ -18,6 +18,12 @@ come from stopping early or from an easy start. The dense / structured
 ratio compares Stages 1-2 (the filter itself, the only part the covariance model changes)
 in the same process.
 
+``--baseline DIR`` times another source tree beside this one (e.g. main: ``git archive main |
+tar -x -C DIR``): every row is estimated in turn in a fresh process importing DIR's
+``pipeline`` and ``plugins`` and in one importing this tree's, and ``x base`` is this tree's
+processor time over the baseline's (on a busy machine the ratio of processor times measured
+in turn says more than either wall time).
+
 Input: the visible half of a 40 mm radius, 100 mm tall cylinder, sampled uniformly, grasped
 by 6 x 14 taxel pads (the taxels within 0.6 mm of the surface touch); ``iekf`` plugin
 defaults. Starts: ``easy``, two opposed pads, a 3 mm / 1.7 deg bias and an 8 mm / 4.6 deg
@@ -42,10 +48,12 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from summary import record  # noqa: E402
 
+import pipeline  # noqa: E402
 from pipeline.estimation.dense import DenseCovariance  # noqa: E402
 from pipeline.estimation.geometry import apply_bias  # noqa: E402
 from pipeline.estimation.iekf import fuse  # noqa: E402
@@ -173,6 +181,7 @@ def estimate_row(n_points: int, start: Start, repeats: int) -> dict:
         "status": "/".join(stage.status for stage in result.stages[1:]),
         "active": result.stages[-1].active_points,
         "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9,
+        "tree": str(Path(pipeline.__file__).resolve().parents[1]),
     }
 
 
@@ -193,17 +202,38 @@ def filter_seconds(dense: bool, repeats: int) -> tuple[float, list[int]]:
     return float(np.median(times)), [outcome.iterations for outcome in outcomes]
 
 
-def in_fresh_process(n_points: int, start: str) -> dict:
+def in_fresh_process(n_points: int, start: str, tree: Path | None = None) -> dict:
+    """One row (:func:`estimate_row`) in a new process, importing ``tree``'s ``pipeline`` and
+    ``plugins`` when given (this tree's otherwise)."""
     command = [sys.executable, __file__, "--points", str(n_points), "--start", start]
-    done = subprocess.run(command, check=True, capture_output=True, text=True)
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    environment = dict(os.environ)
+    if tree is not None:
+        environment["PYTHONPATH"] = os.pathsep.join(
+            [str(tree), *filter(None, [environment.get("PYTHONPATH")])]
+        )
+    done = subprocess.run(command, check=True, capture_output=True, text=True, env=environment)
+    row = json.loads(done.stdout.strip().splitlines()[-1])
+    if tree is not None and Path(row["tree"]) != tree:
+        raise SystemExit(f"estimator.py: error: --baseline {tree}: the row ran {row['tree']}")
+    return row
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, help="(internal) one row, as JSON")
     parser.add_argument("--start", choices=sorted(STARTS), help="(internal) its start")
+    parser.add_argument(
+        "--baseline",
+        metavar="DIR",
+        type=Path,
+        help="a source tree (with pipeline/ and plugins/) to time beside this one, row by row",
+    )
     args = parser.parse_args()
+    baseline = None
+    if args.baseline is not None:
+        baseline = args.baseline.resolve()
+        if not (baseline / "pipeline" / "__init__.py").is_file():
+            parser.error(f"--baseline {args.baseline}: no pipeline/__init__.py there")
     if args.points:
         start = STARTS[args.start or "easy"]
         print(json.dumps(estimate_row(args.points, start, REPEATS.get(args.points, 3))))
@@ -216,12 +246,15 @@ def main() -> None:
         f"{'S0 / S1 / S2 s':>20} {'iters':>6} {'s/iter':>7} {'x easy':>6} {'|A|':>6} "
         f"{'peak GB':>8}  status"
     )
+    if baseline is not None:
+        header += f"  {'base cpu s':>10} {'iters':>6} {'x base':>6}"
     print(header)
     print("-" * len(header))
     rows: dict[str, list[dict]] = {}
     for name in STARTS:
         for n_points in SIZES:
             target = TARGETS_S.get(n_points)
+            base = None if baseline is None else in_fresh_process(n_points, name, baseline)
             row = in_fresh_process(n_points, name)
             rows.setdefault(name, []).append(row)
             easy = rows["easy"][len(rows[name]) - 1]
@@ -234,6 +267,13 @@ def main() -> None:
                 f"{row['cpu_s']:>6.3f} {stages:>20} {iterations:>6} "
                 f"{row['per_iteration_s']:>7.4f} {ratio:>6.2f} {row['active']:>6} "
                 f"{row['peak_gb']:>8.2f}  {row['status']}"
+                + (
+                    ""
+                    if base is None
+                    else f"  {base['cpu_s']:>10.3f} "
+                    f"{'+'.join(str(i) for i in base['iterations']):>6} "
+                    f"{row['cpu_s'] / base['cpu_s']:>6.2f}"
+                )
             )
             record(
                 f"estimator, {name}, Stages 0-2 with set-up, N = {n_points:,}, one thread "

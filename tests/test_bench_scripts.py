@@ -161,3 +161,21 @@ def test_planner_check_differences_by_hand():
         "[('/a: length 1 vs 2', nan)]",
         "[(': keys', nan)]",
     ]
+
+
+@pytest.mark.slow
+def test_the_evaluation_benchmark_records_a_trial_and_scores_it_again_alike():
+    out = run_in_bench(
+        """
+        import evaluation
+        inputs = evaluation.recorded_inputs("default")
+        seconds, results, _ = evaluation.measure(inputs, 1, False)
+        again = evaluation.evaluate(inputs)
+        found = evaluation.differences(*map(evaluation.plain, (results, again)))
+        print(len(inputs["stages"]), seconds[0] > 0, found)
+        results[0][0][0]["iou"] += 1e-12
+        found = evaluation.differences(*map(evaluation.plain, (results, again)))
+        print([where for where, _ in found])
+        """
+    )
+    assert out.split("\n")[:2] == ["3 True []", "['/iou']"]

@@ -80,6 +80,20 @@ def test_voxel_moments_from_given_coordinates_and_label_ranks_are_the_same():
     assert len(np.unique(plain.label)) == 6
 
 
+@pytest.mark.parametrize("edge_m", [0.02, 0.002])
+def test_labelled_voxels_are_the_cells_split_by_label_in_order(edge_m):
+    # 0.02 m: few enough cells x labels to key them directly; 0.002 m: keyed through the
+    # ranks of the occupied cells. Either way the voxels are the (cell, label) pairs in
+    # lexicographic order.
+    points = _cylinder_cloud(2000, seed=3)
+    labels = np.random.default_rng(3).integers(-1, 5, len(points))
+    moments = voxel_moments(points, np.full(3, edge_m), labels)
+    cells = np.floor(points / edge_m).astype(np.int64)
+    _, expected = np.unique(np.column_stack([cells, labels]), axis=0, return_inverse=True)
+    np.testing.assert_array_equal(moments.voxel_of_point, expected.ravel())
+    np.testing.assert_array_equal(moments.label[moments.voxel_of_point], labels)
+
+
 def test_voxel_edges_keep_every_gate_wider_than_the_ratio():
     rng = np.random.default_rng(2)
     _, covariances = _gates(rng, 20, np.array([0.012, 0.006, 0.0025]))

@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from pipeline.metrics import MeshSurface, mesh_occupancy
-from pipeline.metrics.mesh_queries import grid_crossings, ray_crossings
+from pipeline.metrics.mesh_queries import _crossings, grid_crossings, ray_crossings
 
 
 def _segment(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -113,6 +113,36 @@ def test_lines_through_shared_corners_and_edges_cross_once_per_side():
         # Through the centre line the crossings are the two opposite corners.
         centre = line == 4 * 9 + 4
         np.testing.assert_allclose(np.sort(height[centre]), [-0.04, 0.04], atol=1e-15)
+
+
+def _every_pair(triangles, axis, low, pitch, counts):
+    """:func:`grid_crossings` by testing every triangle against every line of the grid."""
+    i, j = (a.reshape(-1) for a in np.meshgrid(*map(np.arange, counts), indexing="ij"))
+    owner = np.repeat(np.arange(len(triangles)), len(i))
+    points = np.column_stack([low[0] + pitch * i, low[1] + pitch * j])
+    pair, height = _crossings(triangles, owner, axis, np.tile(points, (len(triangles), 1)))
+    return np.tile(i * counts[1] + j, len(triangles))[pair], height
+
+
+@pytest.mark.parametrize("shape", ["cylinder", "sphere"])
+def test_lines_found_per_row_are_those_of_every_pair(shape):
+    """The lines each triangle is tested against (its span along each row) miss no
+    crossing: the same crossings, in the same order, as every triangle against every line,
+    with grid lines through the cylinder's cap centres, rims and corners."""
+    if shape == "cylinder":  # fans whose long thin triangles cross the grid's diagonals
+        mesh = trimesh.creation.cylinder(radius=0.03, height=0.04, sections=32)
+    else:
+        mesh = trimesh.creation.icosphere(subdivisions=2, radius=0.03)
+        turn = trimesh.transformations.random_rotation_matrix(np.random.default_rng(4).random(3))
+        mesh.apply_transform(turn)
+    triangles = np.asarray(mesh.triangles)
+    for axis in range(3):
+        low, counts = np.array([-0.03, -0.03]), (25, 25)
+        expected = _every_pair(triangles, axis, low, 0.0025, counts)
+        found = grid_crossings(triangles, axis, low, 0.0025, counts)
+        assert len(found[0]) > 100
+        np.testing.assert_array_equal(found[0], expected[0])
+        np.testing.assert_array_equal(found[1], expected[1])
 
 
 def test_rays_from_points_count_crossings_ahead_of_them_only():

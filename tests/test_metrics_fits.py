@@ -14,6 +14,7 @@ from pipeline.metrics import (
     fit_line_irls,
     plane_after_bias,
 )
+from pipeline.metrics.fits import _median
 from pipeline.types import Bias, SymmetryPlane
 
 
@@ -85,6 +86,15 @@ def test_irls_exact_line_and_bad_input():
     np.testing.assert_allclose(fit.distances(np.array([[3.0, 0.0]])) ** 2, [4.0], atol=1e-12)
     with pytest.raises(ValueError, match="distinct"):
         fit_line_irls(np.zeros((5, 2)))
+
+
+@pytest.mark.parametrize("count", [7, 8, 2000])
+def test_robust_line_median_is_numpys_bit_for_bit(count):
+    """The fits' median from one partition (rows of candidates, or one residual vector)
+    against numpy's, odd and even counts, with repeated values."""
+    values = np.round(np.random.default_rng(count).normal(size=(30, count)), 2) ** 2
+    assert np.array_equal(_median(values), np.median(values, axis=-1))
+    assert np.array_equal(_median(values[3]), np.median(values[3]))
 
 
 def _box_outline(rng, thickness, half_width, angle_back_rad, n=400):

@@ -108,6 +108,41 @@ def test_dbscan_matches_open3d_partition():
     assert set(largest) <= set(range(sizes[0])) and len(largest) > 0.9 * sizes[0]
 
 
+def _dbscan_by_definition(points: np.ndarray, eps_m: float, min_points: int) -> np.ndarray:
+    """DBSCAN as :func:`dbscan_labels` defines it, from the full distance matrix."""
+    near = np.linalg.norm(points[:, None] - points[None], axis=2) <= eps_m
+    core = near.sum(axis=1) >= min_points
+    labels = np.full(len(points), -1)
+    count = 0
+    for start in np.flatnonzero(core):  # components numbered by their first core point
+        if labels[start] >= 0:
+            continue
+        labels[start], frontier = count, [start]
+        while frontier:
+            reached = np.flatnonzero(near[frontier.pop()] & core & (labels < 0))
+            labels[reached] = count
+            frontier.extend(reached)
+        count += 1
+    distance = np.linalg.norm(points[:, None] - points[core][None], axis=2)
+    for i in np.flatnonzero(~core):
+        if core.any() and distance[i].min() <= eps_m:
+            labels[i] = labels[np.flatnonzero(core)[np.argmin(distance[i])]]
+    return labels
+
+
+@pytest.mark.parametrize("min_points", [1, 4, 10])
+def test_dbscan_matches_its_definition_with_repeated_points(min_points):
+    """Core points, components, their numbering and each border point's nearest core point
+    as a dense distance matrix gives them, on a cloud with repeated points (a point's
+    neighbours count its copies)."""
+    rng = np.random.default_rng(min_points)
+    points = np.round(rng.normal(0.0, 0.02, size=(300, 3)), 3)
+    points[::7] = points[1::7][: len(points[::7])]
+    np.testing.assert_array_equal(
+        dbscan_labels(points, 0.008, min_points), _dbscan_by_definition(points, 0.008, min_points)
+    )
+
+
 def test_euclidean_clustering_links_chains():
     chain = np.column_stack([np.arange(10) * 0.009, np.zeros(10), np.zeros(10)])
     far = chain + np.array([1.0, 0.0, 0.0])

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from pipeline.estimation.indexsets import ranks, unique_inverse
+from pipeline.estimation.indexsets import DENSE_RANGE_FACTOR, ranks, unique_inverse
 
 #: chi-square quantile, 3 degrees of freedom, 95 % (paper eq. 9).
 GATE_CHI2_3DOF_95 = 7.815
@@ -75,7 +75,9 @@ class VoxelMoments:
         units = self.size_m if units_m is None else units_m
         key = tuple(float(u) for u in units)
         if key not in self._trees:
-            self._trees[key] = cKDTree(self.centroid / units)
+            self._trees[key] = cKDTree(
+                self.centroid / units, balanced_tree=False, compact_nodes=False
+            )
         return self._trees[key]
 
 
@@ -100,29 +102,38 @@ def voxel_moments(
     if coordinates is None:
         coordinates = np.ascontiguousarray(np.asarray(points_m, dtype=float).T)
     columns = [np.floor(coordinates[k] / size_m[k]).astype(np.int64) for k in range(3)]
-    columns = [column - column.min() for column in columns]
-    extent = tuple(int(column.max(initial=0)) + 1 for column in columns)
-    _, voxel_of_point, count = unique_inverse(np.ravel_multi_index(columns, extent))
-    label = np.zeros(len(count), dtype=np.int64)
+    extent = []
+    for column in columns:
+        column -= column.min()
+        extent.append(int(column.max(initial=0)) + 1)
+    # The cells' keys in C order (np.ravel_multi_index's, without its checks).
+    keys = columns[0] * (extent[1] * extent[2])
+    keys += columns[1] * extent[2]
+    keys += columns[2]
+    label = None
     if labels is not None:
-        # Split each cell by label: (cell, label) pairs, ordered by cell, then label, and
-        # keyed by their ranks (a range of cells x labels present, not of the whole grid).
+        # Split each cell by label: (cell, label) pairs, ordered by cell, then label. Keyed
+        # directly when the range of cells x labels is small enough to count, else by the
+        # ranks of the occupied cells (a range of cells present x labels, not of the grid).
         values, label_rank = ranks(labels) if label_ranks is None else label_ranks
-        pairs, voxel_of_point, count = unique_inverse(voxel_of_point * len(values) + label_rank)
+        if extent[0] * extent[1] * extent[2] * len(values) > DENSE_RANGE_FACTOR * len(keys):
+            _, keys, _ = unique_inverse(keys)
+        pairs, voxel_of_point, count = unique_inverse(keys * len(values) + label_rank)
         label = values[pairs % len(values)]
+    else:
+        _, voxel_of_point, count = unique_inverse(keys)
     voxels = len(count)
-    centroid = (
-        np.stack(
-            [
-                np.bincount(voxel_of_point, weights=column, minlength=voxels)
-                for column in coordinates
-            ],
-            axis=1,
-        )
-        / count[:, None]
+    if label is None:
+        label = np.zeros(voxels, dtype=np.int64)
+    # Centroids and scatters stored column by column ((V, 3) and (V, 3, 3) views of
+    # (3, V) and (3, 3, V) arrays): the Gaussian sums gather them one entry at a time.
+    centroid = np.stack(
+        [np.bincount(voxel_of_point, weights=column, minlength=voxels) for column in coordinates]
     )
+    centroid /= count
+    centroid = centroid.T
     offsets = [coordinates[k] - centroid[:, k].take(voxel_of_point) for k in range(3)]
-    scatter = np.empty((voxels, 3, 3))
+    scatter = np.empty((3, 3, voxels)).transpose(2, 0, 1)
     for i in range(3):
         for j in range(i, 3):
             column = np.bincount(voxel_of_point, weights=offsets[i] * offsets[j], minlength=voxels)
@@ -231,19 +242,23 @@ def gaussian_sums(
     count = len(centres)
     pairs = _candidate_pairs(moments, centres, covariances)
     taxel, voxel = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
-    # Whitened offsets y = L^-1 (c - t): D2 = |y|^2 and C^-1 (c - t) = L^-T y.
+    # Whitened offsets y = L^-1 (c - t): D2 = |y|^2 and C^-1 (c - t) = L^-T y. The centres'
+    # entries as contiguous (T,) arrays (gathered pair by pair); the pairs inside the gates
+    # (and the filter) kept by their indices (a boolean mask per array costs several times
+    # as much when it keeps a random share of the pairs).
     lower = np.linalg.inv(np.linalg.cholesky(covariances))
-    l00, l10, l11, l20, l21, l22 = (lower[:, i, j] for i, j in _LOWER)
-    u = [moments.centroid[:, k].take(voxel) - centres[:, k].take(taxel) for k in range(3)]
+    l00, l10, l11, l20, l21, l22 = (np.ascontiguousarray(lower[:, i, j]) for i, j in _LOWER)
+    centre_columns = np.ascontiguousarray(centres.T)
+    u = [moments.centroid[:, k].take(voxel) - centre_columns[k].take(taxel) for k in range(3)]
     y0 = l00.take(taxel) * u[0]
     y1 = l10.take(taxel) * u[0] + l11.take(taxel) * u[1]
     y2 = l20.take(taxel) * u[0] + l21.take(taxel) * u[1] + l22.take(taxel) * u[2]
     d2 = y0 * y0 + y1 * y1 + y2 * y2
-    inside = d2 < GATE_CHI2_3DOF_95
-    taxel, voxel, d2, y0, y1, y2 = (v[inside] for v in (taxel, voxel, d2, y0, y1, y2))
+    inside = np.flatnonzero(d2 < GATE_CHI2_3DOF_95)
+    taxel, voxel, d2, y0, y1, y2 = (v.take(inside) for v in (taxel, voxel, d2, y0, y1, y2))
     if allowed is not None:
-        keep = allowed(taxel, voxel)
-        taxel, voxel, d2, y0, y1, y2 = (v[keep] for v in (taxel, voxel, d2, y0, y1, y2))
+        keep = np.flatnonzero(allowed(taxel, voxel))
+        taxel, voxel, d2, y0, y1, y2 = (v.take(keep) for v in (taxel, voxel, d2, y0, y1, y2))
     a0 = l00.take(taxel) * y0 + l10.take(taxel) * y1 + l20.take(taxel) * y2
     a1 = l11.take(taxel) * y1 + l21.take(taxel) * y2
     a2 = l22.take(taxel) * y2

@@ -25,6 +25,7 @@ def _mahalanobis_nearest(
     count: int,
     displacement_m: float,
     bound: np.ndarray | None = None,
+    first: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The ``count`` points with the smallest Mahalanobis distance to each centre, exactly.
 
@@ -37,6 +38,8 @@ def _mahalanobis_nearest(
             point: a centre stops searching once nothing closer than its bound can remain,
             and its entries with ``D2 >= bound`` are then not guaranteed (they are reported,
             but a closer point may exist). None finds every centre's ``count`` exactly.
+        first: the first round's Euclidean query, ``(M, k)`` distances and points for
+            ``k = min(N, 4 count)`` (:func:`euclidean_nearest`), when the caller has made it.
 
     Returns:
         ``(M, count)`` point indices and their squared Mahalanobis distances, best first.
@@ -51,9 +54,10 @@ def _mahalanobis_nearest(
     todo = np.arange(n_centres)
     k = min(n_points, 4 * count)
     while todo.size:
-        distances, neighbours = index.tree.query(centres_pre[todo], k=k)
-        distances = distances.reshape(len(todo), k)
-        neighbours = neighbours.reshape(len(todo), k)
+        if first is None:
+            distances, neighbours = euclidean_nearest(index, centres_pre[todo], k)
+        else:
+            (distances, neighbours), first = first, None
         offsets = points[neighbours] - centres_pre[todo][:, None, :]
         d2 = np.einsum("tki,tij,tkj->tk", offsets, inverse[todo], offsets)
         order = np.argsort(d2, axis=1)[:, :count]
@@ -66,6 +70,15 @@ def _mahalanobis_nearest(
         todo = todo[~done]
         k = min(n_points, 4 * k)
     return best_index, best_d2
+
+
+def euclidean_nearest(
+    index: PointIndex, centres: np.ndarray, k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` Euclidean nearest reference points of each of ``centres`` ((M, 3)): ``(M, k)``
+    distances and point indices, nearest first."""
+    distances, neighbours = index.tree.query(centres, k=k)
+    return distances.reshape(len(centres), k), neighbours.reshape(len(centres), k)
 
 
 def vector_median(candidates: np.ndarray) -> np.ndarray:
@@ -100,16 +113,19 @@ def alternative_centres(
         linear = side_linear_part(g, back)
         covariance_pre = np.einsum("ji,mjk,kl->mil", linear, covariance, linear)
         frames.append((back, invert_side(taxels_m, g, pivot_m, back), covariance_pre))
-    first = []
+    # Each side's Euclidean five nearest are the first of the 4 x 5 nearest that the search
+    # of each side queries first: one query per side serves both (a query far from the
+    # cloud, a taxel's other side, costs as much as the rest of the search).
+    queried, five = [], []
     for _, centres_pre, covariance_pre in frames:
-        _, neighbours = index.tree.query(centres_pre, k=count)
-        offsets = points[neighbours.reshape(len(centres_pre), count)] - centres_pre[:, None, :]
-        first.append(np.einsum("tki,tij,tkj->tk", offsets, np.linalg.inv(covariance_pre), offsets))
-    bound = np.sort(np.concatenate(first, axis=1), axis=1)[:, count - 1]
+        queried.append(euclidean_nearest(index, centres_pre, min(len(points), 4 * count)))
+        offsets = points[queried[-1][1][:, :count]] - centres_pre[:, None, :]
+        five.append(np.einsum("tki,tij,tkj->tk", offsets, np.linalg.inv(covariance_pre), offsets))
+    bound = np.sort(np.concatenate(five, axis=1), axis=1)[:, count - 1]
     images, distances = [], []
-    for back, centres_pre, covariance_pre in frames:
+    for (back, centres_pre, covariance_pre), query in zip(frames, queried, strict=True):
         nearest, d2 = _mahalanobis_nearest(
-            index, points, centres_pre, covariance_pre, count, displacement_m, bound
+            index, points, centres_pre, covariance_pre, count, displacement_m, bound, query
         )
         images.append(apply_side(points[nearest.ravel()], g, pivot_m, back).reshape(*d2.shape, 3))
         distances.append(d2)

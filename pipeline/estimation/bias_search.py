@@ -44,6 +44,7 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from pipeline.estimation.geometry import normal_derivatives, state_normal
+from pipeline.estimation.indexsets import union
 from pipeline.geometry.poses import rotation_z
 
 if TYPE_CHECKING:
@@ -166,7 +167,9 @@ def truncated_squared_distances(
     padded = np.asarray(shape) + 2 * radius
     strides = np.array([padded[1] * padded[2], padded[2], 1])
     steps = offsets[farthest_first] @ strides
-    marked = np.unique((cells + radius) @ strides)
+    # The marked cells' keys column by column (numpy multiplies integer matrices without
+    # BLAS) and their sorted distinct values over the key range, not by a sort.
+    marked = union(sum((cells[:, k] + radius) * int(strides[k]) for k in range(3)))
     nearest = np.full(int(np.prod(padded)), np.inf)
     for step, value in zip(steps, squared[farthest_first].astype(np.float64), strict=True):
         nearest[marked + step] = value

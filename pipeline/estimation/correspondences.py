@@ -485,8 +485,7 @@ def _side_weights(
         if len(moments.count) <= AGGREGATE_FRACTION * len(points):
             allowed = None
             if bands is not None:
-                labels = np.unique(moments.label, return_inverse=True)
-                allowed = _compatible_pairs(labels, bands[1])
+                allowed = _compatible_pairs(ranks(moments.label), bands[1])
             mass, weighted_sum, inside = gaussian_sums(
                 moments, centres_pre, covariance_pre, normaliser, allowed
             )

@@ -24,6 +24,12 @@ def grid_crossings(
     ``i * counts[1] + j`` and the crossing's coordinate along ``axis`` (m), unordered.
     Triangles parallel to the axis are never crossed (their neighbours are).
 
+    Each triangle is tested against the lines of its bounding rectangle; along each row
+    ``i`` of a triangle whose rectangle holds more than :data:`_FEW_LINES` lines, only
+    against those within a pitch of the span its edges give the second coordinate there
+    (a long thin triangle across the grid's diagonal, such as a fan of a cylinder's cap,
+    covers a few of its rectangle's hundreds of lines).
+
     Args:
         triangles: ``(F, 3, 3)`` the corners of each triangle (m).
         axis: 0, 1 or 2.
@@ -33,19 +39,55 @@ def grid_crossings(
     """
     across = [k for k in range(3) if k != axis]
     u, v = triangles[:, :, across[0]], triangles[:, :, across[1]]
-    # The grid lines inside each triangle's bounding rectangle.
-    first_i = np.clip(np.ceil((u.min(axis=1) - low[0]) / pitch), 0, counts[0]).astype(np.int64)
-    last_i = np.clip(np.floor((u.max(axis=1) - low[0]) / pitch), -1, counts[0] - 1)
+    # The grid lines inside each triangle's bounding rectangle, row by row.
+    u_low, u_high = u.min(axis=1), u.max(axis=1)
+    first_i = np.clip(np.ceil((u_low - low[0]) / pitch), 0, counts[0]).astype(np.int64)
+    last_i = np.clip(np.floor((u_high - low[0]) / pitch), -1, counts[0] - 1).astype(np.int64)
     first_j = np.clip(np.ceil((v.min(axis=1) - low[1]) / pitch), 0, counts[1]).astype(np.int64)
     last_j = np.clip(np.floor((v.max(axis=1) - low[1]) / pitch), -1, counts[1] - 1)
-    width_i = np.maximum(last_i.astype(np.int64) - first_i + 1, 0)
+    width_i = np.maximum(last_i - first_i + 1, 0)
     width_j = np.maximum(last_j.astype(np.int64) - first_j + 1, 0)
-    owner, offset = _ragged(np.zeros(len(triangles), dtype=np.int64), width_i * width_j)
-    i = first_i[owner] + offset // width_j[owner]
-    j = first_j[owner] + offset % width_j[owner]
+    owner, i = _ragged(first_i, width_i)
+    row_first, row_last = first_j[owner], last_j[owner].astype(np.int64)
+    # Along the rows of large triangles: the triangle's span in v at the row's u (clamped
+    # to the triangle's span in u against rounding), widened by a pitch each side.
+    large = np.flatnonzero((width_i * width_j > _FEW_LINES)[owner])
+    if len(large):
+        k = owner[large]
+        row_u = np.clip(low[0] + pitch * i[large], u_low[k], u_high[k])
+        v_low, v_high = _row_span(u[k], v[k], row_u)
+        row_first[large] = np.maximum(row_first[large], np.ceil((v_low - low[1]) / pitch - 1.0))
+        row_last[large] = np.minimum(row_last[large], np.floor((v_high - low[1]) / pitch + 1.0))
+    row, j = _ragged(row_first, np.maximum(row_last - row_first + 1, 0))
+    owner, i = owner[row], i[row]
     points = np.column_stack([low[0] + pitch * i, low[1] + pitch * j])
-    line, height = _crossings(triangles[owner], axis, points)
+    line, height = _crossings(triangles, owner, axis, points)
     return (i * counts[1] + j)[line], height
+
+
+#: A triangle whose bounding rectangle holds at most this many grid lines is tested against
+#: all of them (finding its span along each row would cost more than the tests it saves).
+_FEW_LINES = 8
+
+
+def _row_span(u: np.ndarray, v: np.ndarray, row_u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The least and greatest ``v`` where the line ``u = row_u[k]`` meets triangle ``k``'s
+    edges (``u``, ``v``: ``(K, 3)`` its corners); an edge along the line gives both its
+    ends."""
+    v_low = np.full(len(row_u), np.inf)
+    v_high = np.full(len(row_u), -np.inf)
+    for start, end in ((0, 1), (1, 2), (2, 0)):
+        u0, u1, v0, v1 = u[:, start], u[:, end], v[:, start], v[:, end]
+        meets = (np.minimum(u0, u1) <= row_u) & (row_u <= np.maximum(u0, u1))
+        span = u1 - u0
+        t = np.clip(np.divide(row_u - u0, span, out=np.zeros_like(span), where=span != 0.0), 0, 1)
+        at = v0 + t * (v1 - v0)
+        along = span == 0.0
+        v_low = np.where(meets, np.minimum(v_low, np.where(along, np.minimum(v0, v1), at)), v_low)
+        v_high = np.where(
+            meets, np.maximum(v_high, np.where(along, np.maximum(v0, v1), at)), v_high
+        )
+    return v_low, v_high
 
 
 def ray_crossings(
@@ -66,7 +108,7 @@ def ray_crossings(
         v <= triangles[owner, :, across[1]].max(axis=1)
     )
     owner, ray = owner[near], ray[near]
-    hits, height = _crossings(triangles[owner], axis, starts[ray][:, across])
+    hits, height = _crossings(triangles, owner, axis, starts[ray][:, across])
     ahead = height > starts[ray[hits], axis]
     return ray[hits][ahead], height[ahead]
 
@@ -80,46 +122,54 @@ def _ragged(first: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def _crossings(
-    triangles: np.ndarray, axis: int, points: np.ndarray
+    triangles: np.ndarray, owner: np.ndarray, axis: int, points: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Which of the pairs (triangle ``k``, the line through ``points[k]`` (the two other
-    coordinates) along ``axis``) cross, and where: the indices of the crossing pairs and
-    their coordinates along ``axis``."""
+    """Which of the pairs (triangle ``owner[k]``, the line through ``points[k]`` (the two
+    other coordinates) along ``axis``) cross, and where: the indices of the crossing pairs
+    and their coordinates along ``axis``."""
     across = [k for k in range(3) if k != axis]
     u, v, w = (triangles[:, :, k] for k in (*across, axis))
-    weights = []
-    for start, end in ((1, 2), (2, 0), (0, 1)):
-        weights.append(_edge_side(u[:, start], v[:, start], u[:, end], v[:, end], points))
-    area = weights[0][0] + weights[1][0] + weights[2][0]
+    # What depends on a triangle's edges alone: once for each triangle a pair has.
+    taken = np.zeros(len(triangles), dtype=bool)
+    taken[owner] = True
+    row = (np.cumsum(taken) - 1)[owner]
+    edges = _edges(u[taken], v[taken])
+    (start_u, start_v, du, dv, flip), tie = (np.take(a, row, axis=-1) for a in edges)
+    weights = [
+        (du[e] * (points[:, 1] - start_v[e]) - dv[e] * (points[:, 0] - start_u[e])) * flip[e]
+        for e in range(3)
+    ]
+    area = weights[0] + weights[1] + weights[2]
     # Facing the other way: the same tests mirrored (an edge's tie then goes to the other
     # side, as the edge runs the other way round this triangle).
     sign = np.sign(area)
     inside = sign != 0.0
-    for value, tie in weights:
+    for value, edge_tie in zip(weights, tie, strict=True):
         value = value * sign
-        inside &= (value > 0.0) | ((value == 0.0) & (tie == (sign > 0.0)))
+        inside &= (value > 0.0) | ((value == 0.0) & (edge_tie == (sign > 0.0)))
     hits = np.flatnonzero(inside)
-    (e0, _), (e1, _), (e2, _) = weights
-    height = (e0[hits] * w[hits, 0] + e1[hits] * w[hits, 1] + e2[hits] * w[hits, 2]) / area[hits]
+    e0, e1, e2 = (value[hits] for value in weights)
+    at = w[owner[hits]]
+    height = (e0 * at[:, 0] + e1 * at[:, 1] + e2 * at[:, 2]) / area[hits]
     return hits, height
 
 
-def _edge_side(
-    u0: np.ndarray, v0: np.ndarray, u1: np.ndarray, v1: np.ndarray, points: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Twice the signed area of triangle (edge start, edge end, point) in the plane across
-    the axis, and whether a point on the edge counts as inside for a triangle that goes
-    round counter-clockwise.
+def _edges(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The edges opposite each corner of every triangle (corners ``(F, 3)`` ``u``, ``v``
+    across the axis), ``(5, 3, F)``: each edge's start ``u``, ``v``, its run ``du``,
+    ``dv`` and a sign, and ``(3, F)`` whether a point on the edge counts as inside for a
+    triangle that goes round counter-clockwise.
 
-    The area is computed from the edge's endpoints in a fixed order (the lesser first), so
+    Twice the signed area of triangle (edge start, edge end, point ``p``) is
+    ``sign (du (p_v - v) - dv (p_u - u))``: the edge is taken from its lesser endpoint, so
     the two triangles sharing an edge get exactly opposite numbers; the tie goes to the
     triangle for which the edge runs downward in ``v`` (or, level, towards lesser ``u``),
     which is exactly one of the two.
     """
+    u0, v0 = u[:, [1, 2, 0]].T, v[:, [1, 2, 0]].T
+    u1, v1 = u[:, [2, 0, 1]].T, v[:, [2, 0, 1]].T
     swap = (u0 > u1) | ((u0 == u1) & (v0 > v1))
-    au, av = np.where(swap, u1, u0), np.where(swap, v1, v0)
-    bu, bv = np.where(swap, u0, u1), np.where(swap, v0, v1)
-    area = (bu - au) * (points[:, 1] - av) - (bv - av) * (points[:, 0] - au)
-    area = np.where(swap, -area, area)
+    start_u, start_v = np.where(swap, u1, u0), np.where(swap, v1, v0)
+    du, dv = np.where(swap, u0, u1) - start_u, np.where(swap, v0, v1) - start_v
     tie = (v1 < v0) | ((v1 == v0) & (u1 < u0))
-    return area, tie
+    return np.stack([start_u, start_v, du, dv, np.where(swap, -1.0, 1.0)]), tie

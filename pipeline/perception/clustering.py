@@ -41,14 +41,18 @@ def dbscan_labels(points: np.ndarray, eps_m: float, min_points: int) -> np.ndarr
 
     points = np.asarray(points, dtype=np.float64)
     labels = np.full(len(points), -1, dtype=np.int64)
-    tree = cKDTree(points)
-    core = np.flatnonzero(tree.query_ball_point(points, eps_m, return_length=True) >= min_points)
+    # Every pair within eps_m once (one dual-tree search, cheaper than counting each
+    # point's ball): a point's neighbours are its pairs and itself, and the core points'
+    # links are the pairs of two core points.
+    pairs = cKDTree(points).query_pairs(eps_m, output_type="ndarray").reshape(-1, 2)
+    is_core = np.bincount(pairs.ravel(), minlength=len(points)) + 1 >= min_points
+    core = np.flatnonzero(is_core)
     if len(core) == 0:
         return labels
-    core_tree = cKDTree(points[core])
-    pairs = core_tree.query_pairs(eps_m, output_type="ndarray")
+    position = np.cumsum(is_core) - 1  # a core point's index among the core points
+    links = position[pairs[is_core[pairs].all(axis=1)]]
     graph = coo_matrix(
-        (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])),
+        (np.ones(len(links), dtype=np.int8), (links[:, 0], links[:, 1])),
         shape=(len(core), len(core)),
     )
     _, component = connected_components(graph, directed=False)
@@ -57,9 +61,9 @@ def dbscan_labels(points: np.ndarray, eps_m: float, min_points: int) -> np.ndarr
     rank = np.empty(len(first), dtype=np.int64)
     rank[np.argsort(first)] = np.arange(len(first))
     labels[core] = rank[component]
-    others = np.setdiff1d(np.arange(len(points)), core, assume_unique=True)
+    others = np.flatnonzero(~is_core)
     if len(others):
-        distance, nearest = core_tree.query(points[others])
+        distance, nearest = cKDTree(points[core]).query(points[others])
         border = distance <= eps_m
         labels[others[border]] = labels[core[nearest[border]]]
     return labels

@@ -195,6 +195,8 @@ def measure_table(
     viewpoint_robot: np.ndarray,
     table: TablePlane,
     band_m: float,
+    *,
+    ranges_m: np.ndarray | None = None,
 ) -> TableFit:
     """Refit ``table`` to the points within ``band_m`` of it and measure their scatter by
     distance from the camera; then set the band about the refitted plane to
@@ -213,12 +215,16 @@ def measure_table(
         viewpoint_robot: ``(3,)`` camera position, robot frame.
         table: the plane to start from.
         band_m: first half-width of the band of table points about ``table`` (m).
+        ranges_m: ``(N,)`` each point's distance from ``viewpoint_robot`` (m), when the
+            caller has them (computed here otherwise).
 
     Raises:
         ValueError: fewer than :data:`MIN_TABLE_POINTS` points lie on the table.
     """
     points = np.asarray(points_robot, dtype=np.float64)
-    distance = np.linalg.norm(points - np.asarray(viewpoint_robot, dtype=np.float64), axis=1)
+    distance = ranges_m
+    if distance is None:
+        distance = np.linalg.norm(points - np.asarray(viewpoint_robot, dtype=np.float64), axis=1)
     band = np.full(len(points), float(band_m))
     normal, offset = np.asarray(table.normal, dtype=np.float64), float(table.offset_m)
     previous = None
@@ -232,16 +238,18 @@ def measure_table(
                 f"{int(on_table.sum())} points lie within {band_m * 1000:.1f} mm of the table "
                 f"(< {MIN_TABLE_POINTS})"
             )
-        normal, offset = plane_through(points[on_table])
-        residual = points[on_table] @ normal - offset
+        table_points = points[on_table]
+        normal, offset = plane_through(table_points)
+        residual = table_points @ normal - offset
         ranges = distance[on_table]
         bins = max(1, min(TABLE_RANGE_BINS, len(ranges) // MIN_TABLE_POINTS))
         edges = np.quantile(ranges, np.linspace(0.0, 1.0, bins + 1))
         which = np.clip(np.searchsorted(edges, ranges, side="right") - 1, 0, bins - 1)
         centres, sigmas = np.empty(bins), np.empty(bins)
         for b in range(bins):
-            r = residual[which == b]
-            centres[b] = np.median(ranges[which == b])
+            in_bin = which == b
+            r = residual[in_bin]
+            centres[b] = np.median(ranges[in_bin])
             sigmas[b] = 1.4826 * np.median(np.abs(r - np.median(r)))
         fit = TableFit(TablePlane(normal, float(offset)), centres, sigmas, int(on_table.sum()))
         band = np.maximum(band_m, TABLE_BAND_SIGMAS * fit.sigma_at(distance))

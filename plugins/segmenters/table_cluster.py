@@ -174,9 +174,14 @@ class TableCluster(Segmenter):
                 f"were {cut_text}-{p.max_height_m * 1000:.0f} mm above the table, in "
                 f"{result.clusters} clusters"
             )
-        depth = observation.depth_m[pixels[:, 0], pixels[:, 1]].astype(np.float64)
         k = observation.intrinsics
-        pixel_area_m2 = depth**2 / (k.fx * k.fy)
+
+        def area_m2(indices: np.ndarray) -> float:
+            """The surface the points ``indices`` show the camera (m^2): each pixel's
+            footprint at its depth."""
+            depth = observation.depth_m[pixels[indices, 0], pixels[indices, 1]]
+            return float((depth.astype(np.float64) ** 2 / (k.fx * k.fy)).sum())
+
         viewpoint = observation.T_robot_camera[:3, 3]
         return tuple(
             PointCloud(
@@ -188,7 +193,7 @@ class TableCluster(Segmenter):
             )
             for rank, indices in enumerate(result.objects)
             if len(indices) >= p.min_object_points
-            and (rank == 0 or pixel_area_m2[indices].sum() >= p.min_object_area_m2)
+            and (rank == 0 or area_m2(indices) >= p.min_object_area_m2)
         )
 
     def _cut(
@@ -200,14 +205,15 @@ class TableCluster(Segmenter):
         if p.cut == "fixed":
             return table, p.min_height_m, f"{p.min_height_m * 1000:.0f}"
         viewpoint = observation.T_robot_camera[:3, 3]
+        ranges = np.linalg.norm(points - viewpoint, axis=1)
         try:
-            fit = measure_table(points, viewpoint, table, p.ransac_inlier_m)
+            fit = measure_table(points, viewpoint, table, p.ransac_inlier_m, ranges_m=ranges)
         except ValueError as error:
             raise StageFailure(
                 f"segmenter 'table-cluster': cannot measure the table ({error}); "
                 "cut = 'fixed' cuts at min_height_m instead"
             ) from error
-        scatter = fit.sigma_at(np.linalg.norm(points - viewpoint, axis=1))
+        scatter = fit.sigma_at(ranges)
         cut = np.maximum(p.cut_sigmas * scatter, p.min_cut_m)
         return fit.plane, cut, f"{cut.min() * 1000:.1f}..{cut.max() * 1000:.1f}"
 
