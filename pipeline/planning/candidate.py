@@ -112,7 +112,7 @@ class CandidateCloud:
         self.visible = visible
         self.completed = completed
         self._by_height = {
-            seen: points[np.argsort(points[:, 2], kind="stable")]
+            seen: points.take(np.argsort(points[:, 2], kind="stable"), axis=0)
             for seen, points in ((True, visible), (False, completed))
         }
         self._slabs: dict[tuple[bool, float, float], np.ndarray] = {}
@@ -126,7 +126,9 @@ class CandidateCloud:
         key = (visible, low_m, high_m)
         if key not in self._slabs:
             points = self.visible if visible else self.completed
-            self._slabs[key] = points[(points[:, 2] >= low_m) & (points[:, 2] <= high_m)]
+            self._slabs[key] = points.compress(
+                (points[:, 2] >= low_m) & (points[:, 2] <= high_m), axis=0
+            )
         return self._slabs[key]
 
     def band(self, height_m: float, half_m: float) -> np.ndarray:
@@ -134,7 +136,7 @@ class CandidateCloud:
         key = (height_m, half_m)
         if key not in self._bands:
             z = self.completed[:, 2]
-            self._bands[key] = self.completed[np.abs(z - height_m) <= half_m]
+            self._bands[key] = self.completed.compress(np.abs(z - height_m) <= half_m, axis=0)
         return self._bands[key]
 
     def above(self, z_m: float, *, visible: bool = False) -> np.ndarray:

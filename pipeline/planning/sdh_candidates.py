@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -278,11 +279,12 @@ def _checked(
     """The checks of :func:`sdh_candidate` after the fingers' contacts are found (a pad
     may stop ``beyond_m`` past ``centre_m``; ``distal_pad``: :meth:`SdhHand.distal_pad_m`),
     and the feasible candidate's score and plan."""
-    angle_rad, height_m, taxels = hand.angle_rad, hand.height_m, hand.taxels
+    angle_rad, height_m = hand.angle_rad, hand.height_m
     x_hand, palm_xy, in_band = hand.x_hand, hand.palm_xy, hand.in_band
     bases, facings, contacts, alphas = hand.bases, hand.facings, hand.contacts, hand.alphas
     k = sdh.kinematics
-    along = np.column_stack([facings, np.zeros(len(facings))])
+    along = np.zeros((len(facings), 3))
+    along[:, :2] = facings
     if not all(
         contact.stops_before(centre_m + beyond_m * facing, facing)
         for contact, facing in zip(contacts, along, strict=True)
@@ -333,7 +335,7 @@ def _checked(
     coverages = tuple(c.quality for c in contacts)
     tipping = (height_m - s.table_height_m) / cloud.footprint_half_m(x_hand)
     score = candidate_score(coverages, angle_rad, tipping, s.tipping_weight)
-    pad_top, joint = _pad_top_and_joint(k, taxels)
+    pad_top, joint = _pad_top_and_joint(k, hand.taxels)
     above_pads = cloud.above(pad_top)
     if any(
         _top_edge_above_pad(
@@ -449,8 +451,7 @@ def _clear_preshape(
     # Points deeper below the palm than any profile reaches, or beside every profile's
     # grid, are never hit.
     deepest, t_low, t_high = _profile_bounds(kinematics, s.descent_clearance_m)
-    corridors = []
-    for t, d in _corridors(
+    corridors = _corridors(
         cloud,
         palm_z - deepest - _MARGIN_M,
         False,
@@ -458,9 +459,8 @@ def _clear_preshape(
         facings,
         palm_z,
         kinematics.finger_half_width_m + s.descent_clearance_m,
-    ):
-        within = (t >= t_low) & (t <= t_high)
-        corridors.append((t.compress(within), d.compress(within)))
+        lambda t, _: (t >= t_low) & (t <= t_high),
+    )
     # The corridors run from the deepest point up (``cloud.above``'s order): their last
     # points are the shallowest below the palm, the first any pre-shape sweeps. A pre-shape
     # that sweeps MIN_HITS of those is blocked whatever the rest; of the others, in order,
@@ -490,7 +490,8 @@ def _closing_corridors(
     joint than any part of the finger reaches at any angle: what :func:`_closing_collides`
     tests. Only seen points count: the mirrored ones are where the plane guesses the back,
     too uncertain to veto a grasp on."""
-    corridors = _corridors(
+    reach = _closing_reach_m(kinematics, s.touch_tolerance_m) + _MARGIN_M
+    return _corridors(
         cloud,
         z_m,
         True,
@@ -498,13 +499,8 @@ def _closing_corridors(
         facings,
         palm_z,
         kinematics.finger_half_width_m + s.touch_tolerance_m,
+        lambda t, d: t * t + (d - kinematics.knuckle_depth_m) ** 2 <= reach * reach,
     )
-    reach = _closing_reach_m(kinematics, s.touch_tolerance_m) + _MARGIN_M
-    near = []
-    for t, d in corridors:
-        kept = t * t + (d - kinematics.knuckle_depth_m) ** 2 <= reach * reach
-        near.append((t.compress(kept), d.compress(kept)))
-    return near
 
 
 def _closing_collides(
@@ -531,13 +527,21 @@ def _closing_collides(
     )
     for hits, reason in ((kinematics.closing_hits, CLOSING_HIT), (distal, DISTAL_HIT)):
         for (t, d), angles in zip(corridors, alphas, strict=True):
-            if angles and np.any(
-                np.count_nonzero(hits(t, d, angles, s.touch_tolerance_m), axis=1) >= MIN_HITS
-            ):
+            if angles and _any_angle_hits(hits(t, d, angles, s.touch_tolerance_m)):
                 return reason
     return None
 
 
+def _any_angle_hits(hits: np.ndarray) -> bool:
+    """Whether any angle's row of ``hits`` (``(K, N)``) holds :data:`MIN_HITS` points:
+    a single angle's counted over the whole array, several angles' by a sum
+    (``count_nonzero`` along an axis copies its input first)."""
+    if len(hits) == 1:
+        return np.count_nonzero(hits) >= MIN_HITS
+    return bool(np.any(hits.sum(axis=1) >= MIN_HITS))
+
+
+@functools.lru_cache(maxsize=16)
 def _closing_reach_m(kinematics: FingerKinematics, clearance_m: float) -> float:
     """The farthest from the proximal joint a point inside the finger, grown by
     ``clearance_m`` (:meth:`FingerKinematics.closing_hits`,
@@ -562,17 +566,19 @@ def _corridors(
     facings: np.ndarray,
     palm_z: float,
     half_width_m: float,
+    keep: Callable[[np.ndarray, np.ndarray], np.ndarray],
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """For each finger (base and facing, ``(F, 2)`` each), the points of
     ``cloud.above(z_m, visible=visible)`` within ``half_width_m`` of the line along its
-    facing through its base: their distance ``t`` along the facing from the base and their
-    depth ``d`` below the palm at ``palm_z`` (m), in the order of those points.
+    facing through its base that ``keep`` keeps (given every point's ``t`` and ``d``, a
+    mask): their distance ``t`` along the facing from the base and their depth ``d``
+    below the palm at ``palm_z`` (m), in the order of those points.
 
     The closing check's (``visible``) offsets come from the products a closing
     direction's candidates share (:meth:`CandidateCloud.along_above`): most candidates
     reach that check. The pre-shape search, on the completed cloud, which few reach,
     takes its own."""
-    normals = np.column_stack([-facings[:, 1], facings[:, 0]])
+    normals = facings[:, ::-1] * _TURN_LEFT
     points = cloud.above(z_m, visible=visible)
     # Every finger's offsets, ``(F, N)``.
     if visible:
@@ -586,11 +592,14 @@ def _corridors(
     depth = palm_z - points[:, 2]
     corridors = []
     for t, offset in zip(along, across, strict=True):
-        near = offset <= half_width_m
+        # One selection for both tests: the points are selected once.
+        near = (offset <= half_width_m) & keep(t, depth)
         corridors.append((t.compress(near), depth.compress(near)))
     return corridors
 
 
+#: A horizontal unit ``(x, y)``, reversed and multiplied by this, turned 90 deg to its left.
+_TURN_LEFT = np.array([-1.0, 1.0])
 #: Resolution of the finger profiles the pre-shape search compares the cloud with (m).
 _PROFILE_STEP_M = 0.001
 #: Pre-shapes the search compares the cloud's shallowest points with at once: most are
@@ -721,5 +730,5 @@ def _top_edge_above_pad(
     )
     if np.count_nonzero(side) < MIN_HITS:
         return False  # the side ends below the pad's top row: the pad reaches over it
-    top = percentile(points[side, 2], 98.0)
+    top = percentile(points[:, 2].compress(side), 98.0)
     return top < joint_m
