@@ -288,23 +288,16 @@ def test_a_box_wider_than_the_jaws_is_refused_with_its_widths():
     ("width_mm", "front_mm"),
     [
         (40.0, 7.5),  # room 25, less the 10 mm back margin: half of 15 each side
-        (35.0, 10.0),  # room enough: the jaw clearance
+        (30.0, 10.0),  # room enough: the jaw clearance
         (51.0, 7.0),  # no room for the margin: the 14 mm split evenly
-        (30.0, 12.5),  # the back 10 mm past the centre: 32.5 - 30 + 10
-        (17.0, 24.0),  # narrower than twice the margin: centred, (65 - 17) / 2
-        (6.0, 29.5),  # centred, (65 - 6) / 2
+        (6.0, 30.5),  # back jaw reaches at most 32.5 - 4 mm: the front stands back
     ],
 )
 def test_front_jaw_gap_by_hand(width_mm, front_mm):
     gap = front_jaw_gap(0.065, width_mm / 1e3, 0.004, 0.01, 0.01)
     assert gap == pytest.approx(front_mm / 1e3)
     back_mm = 65.0 - width_mm - front_mm
-    assert min(14.0, (65.0 - width_mm) / 2) - 1e-9 <= back_mm
-    # Each jaw closes to the centre at most: both faces lie past it by the margin, or by
-    # half the width when the object is narrower than twice the margin.
-    past_centre_mm = min(10.0, width_mm / 2.0) - 1e-9
-    assert width_mm + front_mm - 32.5 >= past_centre_mm
-    assert 32.5 - front_mm >= past_centre_mm
+    assert min(14.0, (65.0 - width_mm) / 2) - 1e-9 <= back_mm <= 32.5 - 4.0 + 1e-9
 
 
 def test_front_jaw_gap_refuses_an_object_that_leaves_no_clearance():

@@ -116,16 +116,10 @@ def front_jaw_gap(
     thinner than the object) and the front gap is ``jaw_clearance_m``, or half of what is
     left when less is. An object too wide for the margin is still grasped, the room split
     evenly between the jaws: neither lands on it when the model is off either way by less
-    than half the room.
-
-    Both jaws close towards the hand's centre, each at most half the aperture, so the back
-    jaw touches only a back that lies past the centre. The model's back may be off by the
-    same margin the other way, and the cloud by the camera's calibration error: before a
-    narrow object the front gap grows until the back lies ``back_margin_m`` past the
-    centre, or, on an object narrower than twice that, until the centre lies midway
-    between its faces (each jaw then reaches half the width into the object). Placed by
-    the front alone, with the back a few millimetres past the centre, the back jaw closed
-    on nothing on a box 17 mm thick: contact on one side only.
+    than half the room. Both jaws close towards the hand's centre, each at most half the
+    aperture, so before a narrow object the front gap grows until the back jaw still
+    reaches the back (placed by the front alone it would close on nothing: contact on one
+    side only).
     """
     room_m = aperture_m - width_m
     if room_m < 2.0 * descent_m:
@@ -134,7 +128,7 @@ def front_jaw_gap(
         gap_m = min(jaw_clearance_m, (room_m - back_margin_m) / 2.0)
     else:
         gap_m = room_m / 2.0
-    reach_m = aperture_m / 2.0 - min(back_margin_m, width_m / 2.0)
+    reach_m = aperture_m / 2.0 - descent_m
     return max(gap_m, room_m - reach_m)
 
 
