@@ -15,6 +15,7 @@ from pipeline.symmetry.kinds import (
     plane_through_axis,
     plane_through_part,
     sweep,
+    swept_share,
 )
 from pipeline.synthetic import box_object, cylinder_object, synthetic_observation
 from pipeline.types import Symmetry, SymmetryPlane
@@ -125,6 +126,18 @@ def test_choose_kind_scores_a_misplaced_axis_by_free_space():
     # The same view swept about an axis moved 5 cm toward the camera lands in free space.
     moved = Symmetry("axis", [0.0, 0.0, 1.0], choice.symmetry.point_m - [0.05, 0.0, 0.0])
     assert free_space_share(sweep(cloud.points, moved), observation, 0.01) > 0.2
+
+
+def test_the_swept_share_checks_the_same_points_as_the_whole_sweep():
+    observation, cloud = view(cylinder_object(0.0265, 0.12), (0.6, 0.05, 0.0), seed=4)
+    rng = np.random.default_rng(3)
+    for points in (cloud.points, cloud.points[:250]):  # subsampled sweep, and all of it
+        for _ in range(4):
+            direction = rng.normal(size=3)
+            axis = Symmetry("axis", direction / np.linalg.norm(direction), points.mean(axis=0))
+            table_z = float(rng.uniform(-0.01, 0.03))
+            whole = free_space_share(sweep(points, axis), observation, 0.005, table_z)
+            assert swept_share(points, axis, observation, 0.005, table_z) == whole
 
 
 def test_the_plane_through_the_axis_and_a_handle_off_it():
